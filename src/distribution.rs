@@ -1,0 +1,108 @@
+//! Piecewise-constant 1-D distribution: sample an index with probability ∝ weight.
+
+#[derive(Clone, Debug, Default)]
+pub struct Distribution1D {
+    cdf: Vec<f32>,
+    pmf: Vec<f32>,
+    total: f64,
+}
+
+impl Distribution1D {
+    /// Weights must be finite and ≥ 0; non-finite or negative weights count as 0.
+    pub fn new(weights: &[f32]) -> Self {
+        let mut total = 0.0f64;
+        let w: Vec<f64> = weights
+            .iter()
+            .map(|&x| {
+                if x.is_finite() && x > 0.0 {
+                    x as f64
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        for x in &w {
+            total += x;
+        }
+        let mut cdf = Vec::with_capacity(w.len());
+        let mut pmf = Vec::with_capacity(w.len());
+        let mut acc = 0.0f64;
+        for x in &w {
+            acc += x;
+            cdf.push(if total > 0.0 {
+                (acc / total) as f32
+            } else {
+                0.0
+            });
+            pmf.push(if total > 0.0 { (x / total) as f32 } else { 0.0 });
+        }
+        if let Some(last) = cdf.last_mut() {
+            if total > 0.0 {
+                *last = 1.0;
+            }
+        }
+        Distribution1D { cdf, pmf, total }
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.total <= 0.0
+    }
+    pub fn len(&self) -> usize {
+        self.pmf.len()
+    }
+    pub fn total(&self) -> f64 {
+        self.total
+    }
+
+    /// Returns (index, probability of that index).
+    #[inline]
+    pub fn sample(&self, u: f32) -> Option<(usize, f32)> {
+        if self.is_empty() {
+            return None;
+        }
+        let i = self
+            .cdf
+            .partition_point(|&c| c <= u)
+            .min(self.cdf.len() - 1);
+        // skip zero-probability entries that partition_point may land on at the end
+        let mut j = i;
+        while self.pmf[j] == 0.0 && j > 0 {
+            j -= 1;
+        }
+        Some((j, self.pmf[j]))
+    }
+
+    #[inline]
+    pub fn pmf(&self, i: usize) -> f32 {
+        self.pmf.get(i).copied().unwrap_or(0.0)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn frequencies_match_pmf() {
+        let d = Distribution1D::new(&[1.0, 0.0, 3.0, 4.0, f32::NAN]);
+        let mut counts = [0usize; 5];
+        let n = 100_000;
+        for k in 0..n {
+            let u = (k as f32 + 0.5) / n as f32;
+            let (i, p) = d.sample(u).unwrap();
+            assert!((p - d.pmf(i)).abs() < 1e-7);
+            counts[i] += 1;
+        }
+        assert_eq!(counts[1], 0);
+        assert_eq!(counts[4], 0);
+        for (i, &c) in counts.iter().enumerate() {
+            assert!((c as f32 / n as f32 - d.pmf(i)).abs() < 1e-3);
+        }
+    }
+
+    #[test]
+    fn empty_distribution_samples_nothing() {
+        assert!(Distribution1D::new(&[]).sample(0.3).is_none());
+        assert!(Distribution1D::new(&[0.0, 0.0]).sample(0.3).is_none());
+    }
+}

@@ -1,0 +1,139 @@
+//! Film: per-pixel accumulation in f64 with per-pixel sample counts, and the images it
+//! resolves to. Non-finite samples never reach it: they are counted and dropped.
+
+use crate::math::{is_finite_spectrum, Spectrum};
+use glam::Vec3;
+
+/// A float image, rows from the top, `channels` interleaved.
+#[derive(Clone, Debug)]
+pub struct Image {
+    pub width: usize,
+    pub height: usize,
+    pub channels: usize,
+    pub data: Vec<f32>,
+}
+
+impl Image {
+    pub fn new(width: usize, height: usize, channels: usize) -> Image {
+        Image {
+            width,
+            height,
+            channels,
+            data: vec![0.0; width * height * channels],
+        }
+    }
+    pub fn mean(&self) -> Vec<f64> {
+        let mut m = vec![0.0f64; self.channels];
+        for px in self.data.chunks(self.channels) {
+            for (a, &b) in m.iter_mut().zip(px) {
+                *a += b as f64;
+            }
+        }
+        let n = (self.width * self.height).max(1) as f64;
+        m.iter().map(|x| x / n).collect()
+    }
+}
+
+/// Accumulators for one row of pixels; rows are owned by one thread at a time, so no locks.
+#[derive(Clone, Debug)]
+pub struct FilmRow {
+    pub color: Vec<[f64; 3]>,
+    pub albedo: Vec<[f64; 3]>,
+    pub normal: Vec<[f64; 3]>,
+    pub count: Vec<u32>,
+    pub invalid: u64,
+}
+
+impl FilmRow {
+    pub fn new(width: usize) -> FilmRow {
+        FilmRow {
+            color: vec![[0.0; 3]; width],
+            albedo: vec![[0.0; 3]; width],
+            normal: vec![[0.0; 3]; width],
+            count: vec![0; width],
+            invalid: 0,
+        }
+    }
+
+    /// Adds one sample; a NaN/Inf radiance is counted and replaced by black (the sample
+    /// still counts, so the estimator stays an average over all samples drawn).
+    #[inline]
+    pub fn add(&mut self, x: usize, radiance: Spectrum, albedo: Spectrum, normal: Vec3) {
+        let c = if is_finite_spectrum(radiance) {
+            radiance
+        } else {
+            self.invalid += 1;
+            Spectrum::ZERO
+        };
+        let acc = |a: &mut [f64; 3], v: Vec3| {
+            if is_finite_spectrum(v) {
+                a[0] += v.x as f64;
+                a[1] += v.y as f64;
+                a[2] += v.z as f64;
+            }
+        };
+        acc(&mut self.color[x], c);
+        acc(&mut self.albedo[x], albedo);
+        acc(&mut self.normal[x], normal);
+        self.count[x] += 1;
+    }
+}
+
+/// The whole film: one `FilmRow` per image row.
+#[derive(Clone, Debug)]
+pub struct Film {
+    pub width: usize,
+    pub height: usize,
+    pub rows: Vec<FilmRow>,
+}
+
+impl Film {
+    pub fn new(width: usize, height: usize) -> Film {
+        Film {
+            width,
+            height,
+            rows: vec![FilmRow::new(width); height],
+        }
+    }
+
+    pub fn invalid_samples(&self) -> u64 {
+        self.rows.iter().map(|r| r.invalid).sum()
+    }
+
+    pub fn sample_count_range(&self) -> (u32, u32) {
+        let mut lo = u32::MAX;
+        let mut hi = 0;
+        for r in &self.rows {
+            for &c in &r.count {
+                lo = lo.min(c);
+                hi = hi.max(c);
+            }
+        }
+        (if lo == u32::MAX { 0 } else { lo }, hi)
+    }
+
+    fn resolve(&self, pick: impl Fn(&FilmRow) -> &Vec<[f64; 3]>) -> Image {
+        let mut img = Image::new(self.width, self.height, 3);
+        for (y, row) in self.rows.iter().enumerate() {
+            let acc = pick(row);
+            for x in 0..self.width {
+                let n = row.count[x].max(1) as f64;
+                for c in 0..3 {
+                    img.data[(y * self.width + x) * 3 + c] = (acc[x][c] / n) as f32;
+                }
+            }
+        }
+        img
+    }
+
+    /// Mean radiance per pixel.
+    pub fn color(&self) -> Image {
+        self.resolve(|r| &r.color)
+    }
+    pub fn albedo(&self) -> Image {
+        self.resolve(|r| &r.albedo)
+    }
+    pub fn normal(&self) -> Image {
+        self.resolve(|r| &r.normal)
+    }
+}

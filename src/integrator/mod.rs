@@ -1,0 +1,200 @@
+//! Integrators decide which paths to build and where their contributions go; path
+//! construction itself lives in path.rs. This module holds what they share: settings,
+//! halting, progress and cancellation, and the output.
+
+pub mod pt;
+
+use crate::error::RenderError;
+use crate::film::Image;
+use crate::path::PathSettings;
+use crate::scene::Scene;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::time::{Duration, Instant};
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Method {
+    Pt,
+    Gdpt,
+    Pssmlt,
+    Gdpssmlt,
+}
+
+impl Method {
+    pub fn parse(s: &str) -> Result<Method, RenderError> {
+        match s.to_ascii_lowercase().as_str() {
+            "pt" => Ok(Method::Pt),
+            "gdpt" => Ok(Method::Gdpt),
+            "pssmlt" => Ok(Method::Pssmlt),
+            "gdpssmlt" => Ok(Method::Gdpssmlt),
+            other => Err(RenderError::Settings(format!(
+                "unknown method '{other}' (expected pt, gdpt, pssmlt or gdpssmlt)"
+            ))),
+        }
+    }
+    pub fn name(&self) -> &'static str {
+        match self {
+            Method::Pt => "pt",
+            Method::Gdpt => "gdpt",
+            Method::Pssmlt => "pssmlt",
+            Method::Gdpssmlt => "gdpssmlt",
+        }
+    }
+}
+
+#[derive(Clone, Debug)]
+pub struct RenderSettings {
+    pub method: Method,
+    /// Samples per pixel (path tracing) or mutations per pixel (Metropolis).
+    pub spp: u32,
+    /// Wall-clock limit in seconds; 0 = none. The render halts on whichever comes first.
+    pub time_limit: f64,
+    pub path: PathSettings,
+    pub seed: u64,
+    /// Worker threads; 0 = all cores.
+    pub threads: usize,
+}
+
+impl Default for RenderSettings {
+    fn default() -> Self {
+        RenderSettings {
+            method: Method::Pt,
+            spp: 16,
+            time_limit: 0.0,
+            path: PathSettings::default(),
+            seed: 0,
+            threads: 0,
+        }
+    }
+}
+
+impl RenderSettings {
+    pub fn validate(&self) -> Result<(), RenderError> {
+        if self.spp == 0 {
+            return Err(RenderError::Settings("samples must be at least 1".into()));
+        }
+        if !self.time_limit.is_finite() || self.time_limit < 0.0 {
+            return Err(RenderError::Settings(
+                "time limit must be a finite number of seconds ≥ 0".into(),
+            ));
+        }
+        if self.path.max_bounces > 1024 {
+            return Err(RenderError::Settings(
+                "max bounces must be at most 1024".into(),
+            ));
+        }
+        if self.threads > 1024 {
+            return Err(RenderError::Settings("threads must be at most 1024".into()));
+        }
+        Ok(())
+    }
+}
+
+/// Shared between the render and whoever watches it (the Python binding polls it).
+pub struct RenderControl {
+    cancel: AtomicBool,
+    pub work_done: AtomicU64,
+    pub work_total: AtomicU64,
+    start: Instant,
+    time_limit: Option<Duration>,
+}
+
+impl RenderControl {
+    pub fn new(time_limit: f64) -> RenderControl {
+        RenderControl {
+            cancel: AtomicBool::new(false),
+            work_done: AtomicU64::new(0),
+            work_total: AtomicU64::new(1),
+            start: Instant::now(),
+            time_limit: if time_limit > 0.0 {
+                Some(Duration::from_secs_f64(time_limit))
+            } else {
+                None
+            },
+        }
+    }
+    pub fn cancel(&self) {
+        self.cancel.store(true, Ordering::Relaxed);
+    }
+    pub fn is_cancelled(&self) -> bool {
+        self.cancel.load(Ordering::Relaxed)
+    }
+    pub fn out_of_time(&self) -> bool {
+        self.time_limit.is_some_and(|t| self.start.elapsed() >= t)
+    }
+    /// Stop now: cancelled by the user or out of time.
+    #[inline]
+    pub fn should_stop(&self) -> bool {
+        self.is_cancelled() || self.out_of_time()
+    }
+    pub fn elapsed(&self) -> f64 {
+        self.start.elapsed().as_secs_f64()
+    }
+    /// Fraction of the halt condition reached (samples or time, whichever is further).
+    pub fn progress(&self) -> f64 {
+        let by_work = self.work_done.load(Ordering::Relaxed) as f64
+            / self.work_total.load(Ordering::Relaxed).max(1) as f64;
+        let by_time = self.time_limit.map_or(0.0, |t| {
+            self.start.elapsed().as_secs_f64() / t.as_secs_f64()
+        });
+        by_work.max(by_time).min(1.0)
+    }
+}
+
+#[derive(Clone, Debug, Default)]
+pub struct RenderStats {
+    pub method: &'static str,
+    pub elapsed: f64,
+    pub spp_min: u32,
+    pub spp_max: u32,
+    pub invalid_samples: u64,
+    pub cancelled: bool,
+    pub warnings: Vec<String>,
+}
+
+/// Named images: "Combined" first, then passes.
+pub struct RenderOutput {
+    pub layers: Vec<(String, Image)>,
+    pub stats: RenderStats,
+}
+
+impl RenderOutput {
+    pub fn layer(&self, name: &str) -> Option<&Image> {
+        self.layers.iter().find(|(n, _)| n == name).map(|(_, i)| i)
+    }
+}
+
+/// Renders `scene` with the chosen method on a thread pool of the requested size.
+pub fn render(
+    scene: &Scene,
+    settings: &RenderSettings,
+    control: &RenderControl,
+) -> Result<RenderOutput, RenderError> {
+    settings.validate()?;
+    let mut builder = rayon::ThreadPoolBuilder::new();
+    if settings.threads > 0 {
+        builder = builder.num_threads(settings.threads);
+    }
+    let pool = builder
+        .build()
+        .map_err(|e| RenderError::Settings(format!("thread pool: {e}")))?;
+    let mut warnings = scene.report.warnings.clone();
+    if !settings.path.nee {
+        let delta = scene.delta_lights();
+        if !delta.is_empty() {
+            warnings.push(format!(
+                "naive path tracing (NEE off) cannot hit point lights without radius or suns without angle; they add nothing: {}",
+                delta.join(", ")
+            ));
+        }
+    }
+    let mut out = pool.install(|| match settings.method {
+        Method::Pt => Ok(pt::render(scene, settings, control)),
+        m => Err(RenderError::Settings(format!(
+            "method '{}' is not available in this build yet",
+            m.name()
+        ))),
+    })?;
+    out.stats.warnings.splice(0..0, warnings);
+    out.stats.cancelled = control.is_cancelled();
+    Ok(out)
+}

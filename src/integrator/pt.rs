@@ -1,0 +1,87 @@
+//! Path tracing (Kajiya 1986): independent paths per pixel, box-filtered (one pixel wide, as
+//! Cycles with a box filter of width 1). Rows are rendered in parallel; each row owns its
+//! film row, and each sample's random stream depends only on (seed, pixel, sample index),
+//! so the image is the same for any thread count.
+
+use super::{RenderControl, RenderOutput, RenderSettings, RenderStats};
+use crate::film::{Film, FilmRow};
+use crate::path::{trace_path, Path};
+use crate::sampler::{IndependentSampler, Sampler};
+use crate::scene::Scene;
+use glam::Vec2;
+use rayon::prelude::*;
+use std::sync::atomic::Ordering;
+
+/// The sample stream of one (pixel, sample) pair.
+#[inline]
+pub fn pixel_sampler(seed: u64, pixel: usize, sample: u32) -> IndependentSampler {
+    IndependentSampler::new(seed, ((pixel as u64) << 32) | sample as u64)
+}
+
+/// Renders samples [from, to) of every pixel of one row.
+fn render_row(
+    scene: &Scene,
+    settings: &RenderSettings,
+    control: &RenderControl,
+    y: usize,
+    row: &mut FilmRow,
+    from: u32,
+    to: u32,
+) {
+    let w = row.count.len();
+    let mut path = Path::default();
+    for x in 0..w {
+        for s in from..to {
+            let mut sampler = pixel_sampler(settings.seed, y * w + x, s);
+            let raster = Vec2::new(x as f32, y as f32) + sampler.next_2d();
+            let c = trace_path(scene, &settings.path, raster, &mut sampler, Some(&mut path));
+            row.add(x, c.radiance, c.albedo, c.normal);
+        }
+    }
+    control
+        .work_done
+        .fetch_add(w as u64 * (to - from) as u64, Ordering::Relaxed);
+    let _ = control;
+}
+
+pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl) -> RenderOutput {
+    let (w, h) = (scene.camera.width as usize, scene.camera.height as usize);
+    let mut film = Film::new(w, h);
+    control
+        .work_total
+        .store(w as u64 * h as u64 * settings.spp as u64, Ordering::Relaxed);
+    // Passes over the whole image, growing so that each takes a fraction of a second:
+    // the halt checks, progress and intermediate results stay responsive.
+    let mut done = 0u32;
+    let mut batch = 1u32;
+    while done < settings.spp && !control.should_stop() {
+        let to = (done + batch).min(settings.spp);
+        let t0 = std::time::Instant::now();
+        film.rows.par_iter_mut().enumerate().for_each(|(y, row)| {
+            if !control.should_stop() {
+                render_row(scene, settings, control, y, row, done, to);
+            }
+        });
+        done = to;
+        let dt = t0.elapsed().as_secs_f64();
+        if dt < 0.1 {
+            batch = (batch * 2).min(64);
+        }
+    }
+    let (spp_min, spp_max) = film.sample_count_range();
+    RenderOutput {
+        layers: vec![
+            ("Combined".into(), film.color()),
+            ("Denoising Albedo".into(), film.albedo()),
+            ("Denoising Normal".into(), film.normal()),
+        ],
+        stats: RenderStats {
+            method: "pt",
+            elapsed: control.elapsed(),
+            spp_min,
+            spp_max,
+            invalid_samples: film.invalid_samples(),
+            ..Default::default()
+        },
+    }
+}

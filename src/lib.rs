@@ -1,0 +1,24 @@
+//! GDMLT core: gradient-domain primary-sample-space Metropolis light transport.
+//!
+//! Data flow: scene arrays (`scene::SceneDesc`) → `scene::Scene` → `integrator` (built on
+//! `path`, the one path builder) → `film` → output (`output`: EXR/PNG) and the Python
+//! binding (`python`, behind the `python` feature).
+
+pub mod accel;
+pub mod bsdf;
+pub mod distribution;
+pub mod error;
+pub mod film;
+pub mod integrator;
+pub mod math;
+pub mod output;
+pub mod path;
+pub mod sampler;
+pub mod scene;
+
+#[cfg(feature = "python")]
+mod python;
+
+pub use error::{RenderError, SceneError};
+pub use integrator::{render, Method, RenderControl, RenderOutput, RenderSettings};
+pub use scene::{Scene, SceneDesc};

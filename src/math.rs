@@ -1,0 +1,160 @@
+//! Small geometric helpers shared by every module: spectra, shading frames, warps.
+
+use glam::{Vec2, Vec3};
+use std::f32::consts::PI;
+
+/// RGB radiance / throughput. Linear Rec.709 primaries, as Blender's scene-linear space.
+pub type Spectrum = Vec3;
+
+/// Rec.709 luminance (the target-function norm of ALGORITHM.md §3).
+#[inline]
+pub fn luminance(c: Spectrum) -> f32 {
+    0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z
+}
+
+/// Luminance of per-channel absolute values: a negative channel never cancels a positive one.
+#[inline]
+pub fn abs_luminance(c: Spectrum) -> f32 {
+    luminance(c.abs())
+}
+
+#[inline]
+pub fn is_finite_spectrum(c: Spectrum) -> bool {
+    c.x.is_finite() && c.y.is_finite() && c.z.is_finite()
+}
+
+/// An orthonormal frame around a normal: local z is the normal.
+#[derive(Clone, Copy, Debug)]
+pub struct Frame {
+    pub s: Vec3,
+    pub t: Vec3,
+    pub n: Vec3,
+}
+
+impl Frame {
+    /// Duff et al. 2017, "Building an Orthonormal Basis, Revisited".
+    pub fn from_normal(n: Vec3) -> Frame {
+        let sign = 1.0f32.copysign(n.z);
+        let a = -1.0 / (sign + n.z);
+        let b = n.x * n.y * a;
+        let s = Vec3::new(1.0 + sign * n.x * n.x * a, sign * b, -sign * n.x);
+        let t = Vec3::new(b, sign + n.y * n.y * a, -n.y);
+        Frame { s, t, n }
+    }
+    #[inline]
+    pub fn to_local(&self, v: Vec3) -> Vec3 {
+        Vec3::new(v.dot(self.s), v.dot(self.t), v.dot(self.n))
+    }
+    #[inline]
+    pub fn to_world(&self, v: Vec3) -> Vec3 {
+        self.s * v.x + self.t * v.y + self.n * v.z
+    }
+}
+
+/// Concentric square → disk map (Shirley & Chiu 1997), unit disk.
+pub fn square_to_disk_concentric(u: Vec2) -> Vec2 {
+    let o = 2.0 * u - Vec2::ONE;
+    if o.x == 0.0 && o.y == 0.0 {
+        return Vec2::ZERO;
+    }
+    let (r, theta) = if o.x.abs() > o.y.abs() {
+        (o.x, (PI / 4.0) * (o.y / o.x))
+    } else {
+        (o.y, PI / 2.0 - (PI / 4.0) * (o.x / o.y))
+    };
+    Vec2::new(r * theta.cos(), r * theta.sin())
+}
+
+/// Cosine-weighted hemisphere around +z (Malley's method); pdf = cosθ/π.
+pub fn square_to_cosine_hemisphere(u: Vec2) -> Vec3 {
+    let d = square_to_disk_concentric(u);
+    let z = (1.0 - d.length_squared()).max(0.0).sqrt();
+    Vec3::new(d.x, d.y, z)
+}
+
+#[inline]
+pub fn cosine_hemisphere_pdf(cos_theta: f32) -> f32 {
+    cos_theta.max(0.0) / PI
+}
+
+/// Uniform direction on the unit sphere; pdf = 1/(4π).
+pub fn square_to_uniform_sphere(u: Vec2) -> Vec3 {
+    let z = 1.0 - 2.0 * u.x;
+    let r = (1.0 - z * z).max(0.0).sqrt();
+    let phi = 2.0 * PI * u.y;
+    Vec3::new(r * phi.cos(), r * phi.sin(), z)
+}
+
+/// Uniform direction inside a cone of half-angle acos(cos_max) around +z; pdf = 1/(2π(1−cos_max)).
+pub fn square_to_uniform_cone(u: Vec2, cos_max: f32) -> Vec3 {
+    let cos_t = 1.0 - u.x * (1.0 - cos_max);
+    let sin_t = (1.0 - cos_t * cos_t).max(0.0).sqrt();
+    let phi = 2.0 * PI * u.y;
+    Vec3::new(sin_t * phi.cos(), sin_t * phi.sin(), cos_t)
+}
+
+/// Uniform barycentrics on a triangle (Heitz 2019 low-distortion map would do too).
+pub fn square_to_triangle(u: Vec2) -> (f32, f32) {
+    let su = u.x.sqrt();
+    (1.0 - su, u.y * su)
+}
+
+/// Converts an area-measure pdf at `p` (normal `n`) seen from `from` into solid angle.
+#[inline]
+pub fn area_to_solid_angle(pdf_area: f32, dist2: f32, cos_at_light: f32) -> f32 {
+    if cos_at_light <= 0.0 {
+        0.0
+    } else {
+        pdf_area * dist2 / cos_at_light
+    }
+}
+
+/// Power heuristic with β = 2 (Veach 1997, eq. 9.13).
+#[inline]
+pub fn power_heuristic(a: f32, b: f32) -> f32 {
+    let (a2, b2) = (a * a, b * b);
+    if a2 + b2 == 0.0 || !a2.is_finite() {
+        if a.is_infinite() {
+            1.0
+        } else {
+            0.0
+        }
+    } else {
+        a2 / (a2 + b2)
+    }
+}
+
+/// Offset along the geometric normal that scales with the magnitude of the point, so that
+/// scenes from 1e-4 to 1e5 units do not self-intersect.
+#[inline]
+pub fn ray_epsilon(p: Vec3) -> f32 {
+    1e-4f32.max(p.abs().max_element() * 2e-6)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn frame_is_orthonormal() {
+        for &n in &[
+            Vec3::Z,
+            -Vec3::Z,
+            Vec3::new(0.3, -0.4, 0.866).normalize(),
+            Vec3::X,
+        ] {
+            let f = Frame::from_normal(n);
+            assert!((f.s.dot(f.t)).abs() < 1e-5);
+            assert!((f.s.dot(f.n)).abs() < 1e-5);
+            assert!((f.s.length() - 1.0).abs() < 1e-5);
+            let v = Vec3::new(0.2, 0.5, -0.7);
+            assert!((f.to_world(f.to_local(v)) - v).length() < 1e-5);
+        }
+    }
+
+    #[test]
+    fn power_heuristic_sums_to_one() {
+        let (a, b) = (0.3, 1.7);
+        assert!((power_heuristic(a, b) + power_heuristic(b, a) - 1.0).abs() < 1e-6);
+    }
+}

@@ -1,0 +1,164 @@
+//! Writing images: OpenEXR (linear, 32-bit float, every layer as a channel group in one
+//! part: "R,G,B" for the combined image, "<layer>.R/G/B" for passes) and 8-bit sRGB PNG.
+
+use crate::error::RenderError;
+use crate::film::Image;
+use exr::prelude::{
+    AnyChannel, AnyChannels, Encoding, FlatSamples, Layer, LayerAttributes, SmallVec, WritableImage,
+};
+use std::path::Path;
+
+fn channel_names(layer: &str, channels: usize, first: bool) -> Vec<String> {
+    let suffix: &[&str] = match channels {
+        1 => &["V"],
+        3 => &["R", "G", "B"],
+        4 => &["R", "G", "B", "A"],
+        _ => &["X", "Y", "Z", "W"],
+    };
+    suffix
+        .iter()
+        .take(channels)
+        .map(|s| {
+            if first {
+                s.to_string()
+            } else {
+                format!("{layer}.{s}")
+            }
+        })
+        .collect()
+}
+
+/// Writes named images of equal size into one EXR file. The first image is the main RGB.
+pub fn write_exr(path: &Path, layers: &[(&str, &Image)]) -> Result<(), RenderError> {
+    let Some((_, first)) = layers.first() else {
+        return Err(RenderError::Output("no image to write".into()));
+    };
+    let (w, h) = (first.width, first.height);
+    if w == 0 || h == 0 {
+        return Err(RenderError::Output("image has zero size".into()));
+    }
+    let mut list: Vec<AnyChannel<FlatSamples>> = Vec::new();
+    for (k, (name, img)) in layers.iter().enumerate() {
+        if img.width != w || img.height != h {
+            return Err(RenderError::Output(format!(
+                "layer '{name}' is {}×{}, expected {w}×{h}",
+                img.width, img.height
+            )));
+        }
+        for (c, cname) in channel_names(name, img.channels, k == 0)
+            .into_iter()
+            .enumerate()
+        {
+            let samples: Vec<f32> = img
+                .data
+                .iter()
+                .skip(c)
+                .step_by(img.channels)
+                .copied()
+                .collect();
+            list.push(AnyChannel::new(cname.as_str(), FlatSamples::F32(samples)));
+        }
+    }
+    let layer = Layer::new(
+        (w, h),
+        LayerAttributes::default(),
+        Encoding::SMALL_LOSSLESS,
+        AnyChannels::sort(SmallVec::from_vec(list)),
+    );
+    exr::prelude::Image::from_layer(layer)
+        .write()
+        .to_file(path)
+        .map_err(|e| RenderError::Output(format!("{}: {e}", path.display())))
+}
+
+/// sRGB opto-electronic transfer function (IEC 61966-2-1).
+#[inline]
+pub fn linear_to_srgb(x: f32) -> f32 {
+    let x = if x.is_finite() {
+        x.clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    if x <= 0.003_130_8 {
+        12.92 * x
+    } else {
+        1.055 * x.powf(1.0 / 2.4) - 0.055
+    }
+}
+
+/// Writes an RGB image as an 8-bit sRGB PNG (values clipped to [0, 1], like Blender's
+/// "Standard" view transform).
+pub fn write_png(path: &Path, img: &Image) -> Result<(), RenderError> {
+    if img.channels < 3 || img.width == 0 || img.height == 0 {
+        return Err(RenderError::Output(
+            "PNG needs a non-empty RGB image".into(),
+        ));
+    }
+    let err = |e: &dyn std::fmt::Display| RenderError::Output(format!("{}: {e}", path.display()));
+    let file = std::fs::File::create(path).map_err(|e| err(&e))?;
+    let mut enc = png::Encoder::new(
+        std::io::BufWriter::new(file),
+        img.width as u32,
+        img.height as u32,
+    );
+    enc.set_color(png::ColorType::Rgb);
+    enc.set_depth(png::BitDepth::Eight);
+    enc.set_source_srgb(png::SrgbRenderingIntent::Perceptual);
+    let mut writer = enc.write_header().map_err(|e| err(&e))?;
+    let bytes: Vec<u8> = img
+        .data
+        .chunks(img.channels)
+        .flat_map(|px| (0..3).map(move |c| (linear_to_srgb(px[c]) * 255.0 + 0.5) as u8))
+        .collect();
+    writer.write_image_data(&bytes).map_err(|e| err(&e))?;
+    writer.finish().map_err(|e| err(&e))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use exr::prelude::{read_all_flat_layers_from_file, Text};
+
+    #[test]
+    fn exr_round_trip_is_bit_exact() {
+        let mut a = Image::new(5, 3, 3);
+        for (i, v) in a.data.iter_mut().enumerate() {
+            *v = i as f32 * 0.37 - 1.0;
+        }
+        let mut b = Image::new(5, 3, 3);
+        b.data
+            .iter_mut()
+            .enumerate()
+            .for_each(|(i, v)| *v = (i as f32).sqrt());
+        let dir = std::env::temp_dir().join(format!("gdmlt-exr-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let p = dir.join("t.exr");
+        write_exr(&p, &[("Combined", &a), ("GD Primal", &b)]).unwrap();
+        let img = read_all_flat_layers_from_file(&p).unwrap();
+        let layer = &img.layer_data[0];
+        let find = |name: &str| -> Vec<f32> {
+            let ch = layer
+                .channel_data
+                .list
+                .iter()
+                .find(|c| c.name == Text::from(name))
+                .unwrap();
+            ch.sample_data.values_as_f32().collect()
+        };
+        let r = find("R");
+        let pr = find("GD Primal.G");
+        for i in 0..15 {
+            assert_eq!(r[i].to_bits(), a.data[i * 3].to_bits());
+            assert_eq!(pr[i].to_bits(), b.data[i * 3 + 1].to_bits());
+        }
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
+    #[test]
+    fn srgb_endpoints() {
+        assert_eq!(linear_to_srgb(0.0), 0.0);
+        assert!((linear_to_srgb(1.0) - 1.0).abs() < 1e-6);
+        assert!((linear_to_srgb(0.18) - 0.4614).abs() < 1e-3);
+        assert_eq!(linear_to_srgb(f32::NAN), 0.0);
+    }
+}

@@ -1,0 +1,232 @@
+//! Scenes built in code: the Cornell box (also saved as `examples/cornell.blend` by
+//! tools/make_examples.py from these very arrays) and a closed furnace sphere for tests.
+
+use super::desc::*;
+
+const WHITE: [f32; 3] = [0.725, 0.71, 0.68];
+const RED: [f32; 3] = [0.63, 0.065, 0.05];
+const GREEN: [f32; 3] = [0.14, 0.45, 0.091];
+/// Emitted radiance of the Cornell box's ceiling light (Emission Color × Strength).
+pub const CORNELL_LIGHT: [f32; 3] = [17.0, 12.0, 4.0];
+
+fn quad(name: &str, p: [[f32; 3]; 4], mat: u32) -> MeshDesc {
+    MeshDesc {
+        name: name.into(),
+        positions: p.to_vec(),
+        indices: vec![[0, 1, 2], [0, 2, 3]],
+        corner_normals: vec![],
+        material_ids: vec![mat, mat],
+    }
+}
+
+/// An axis-aligned box rotated by `angle` about +Z around its centre.
+fn block(name: &str, center: [f32; 3], half: [f32; 3], angle: f32, mat: u32) -> MeshDesc {
+    let (s, c) = angle.sin_cos();
+    let mut positions = Vec::new();
+    for k in 0..8 {
+        let l = [
+            if k & 1 != 0 { half[0] } else { -half[0] },
+            if k & 2 != 0 { half[1] } else { -half[1] },
+            if k & 4 != 0 { half[2] } else { -half[2] },
+        ];
+        positions.push([
+            center[0] + c * l[0] - s * l[1],
+            center[1] + s * l[0] + c * l[1],
+            center[2] + l[2],
+        ]);
+    }
+    // faces as quads (outward orientation is irrelevant: surfaces are two-sided)
+    let faces = [
+        [0, 1, 3, 2],
+        [4, 6, 7, 5],
+        [0, 4, 5, 1],
+        [2, 3, 7, 6],
+        [0, 2, 6, 4],
+        [1, 5, 7, 3],
+    ];
+    let mut indices = Vec::new();
+    for f in faces {
+        indices.push([f[0], f[1], f[2]]);
+        indices.push([f[0], f[2], f[3]]);
+    }
+    let n = indices.len();
+    MeshDesc {
+        name: name.into(),
+        positions,
+        indices,
+        corner_normals: vec![],
+        material_ids: vec![mat; n],
+    }
+}
+
+fn material(name: &str, base_color: [f32; 3], emission: [f32; 3]) -> MaterialDesc {
+    MaterialDesc {
+        name: name.into(),
+        base_color,
+        emission,
+        roughness: 1.0,
+        ..Default::default()
+    }
+}
+
+/// Camera at `position` looking along +Y with +Z up (Blender convention: looks down local −Z).
+pub fn camera_looking_along_y(
+    position: [f32; 3],
+    lens: f32,
+    width: u32,
+    height: u32,
+) -> CameraDesc {
+    CameraDesc {
+        to_world: [
+            [1.0, 0.0, 0.0, position[0]],
+            [0.0, 0.0, -1.0, position[1]],
+            [0.0, 1.0, 0.0, position[2]],
+            [0.0, 0.0, 0.0, 1.0],
+        ],
+        lens,
+        sensor_width: 36.0,
+        resolution_x: width,
+        resolution_y: height,
+        clip_start: 0.01,
+        clip_end: 100.0,
+        ..Default::default()
+    }
+}
+
+/// The Cornell box: walls at x, z = ±1, back wall at y = 1, open towards the camera at −y,
+/// lit by an emissive quad just below the ceiling.
+pub fn cornell_box(width: u32, height: u32) -> SceneDesc {
+    let materials = vec![
+        material("White", WHITE, [0.0; 3]),
+        material("Red", RED, [0.0; 3]),
+        material("Green", GREEN, [0.0; 3]),
+        material("Light", [0.0; 3], CORNELL_LIGHT),
+    ];
+    let l = 0.25;
+    let lz = 0.99;
+    let meshes = vec![
+        quad(
+            "Floor",
+            [
+                [-1.0, -1.0, -1.0],
+                [1.0, -1.0, -1.0],
+                [1.0, 1.0, -1.0],
+                [-1.0, 1.0, -1.0],
+            ],
+            0,
+        ),
+        quad(
+            "Ceiling",
+            [
+                [-1.0, -1.0, 1.0],
+                [-1.0, 1.0, 1.0],
+                [1.0, 1.0, 1.0],
+                [1.0, -1.0, 1.0],
+            ],
+            0,
+        ),
+        quad(
+            "BackWall",
+            [
+                [-1.0, 1.0, -1.0],
+                [1.0, 1.0, -1.0],
+                [1.0, 1.0, 1.0],
+                [-1.0, 1.0, 1.0],
+            ],
+            0,
+        ),
+        quad(
+            "LeftWall",
+            [
+                [-1.0, -1.0, -1.0],
+                [-1.0, 1.0, -1.0],
+                [-1.0, 1.0, 1.0],
+                [-1.0, -1.0, 1.0],
+            ],
+            1,
+        ),
+        quad(
+            "RightWall",
+            [
+                [1.0, -1.0, -1.0],
+                [1.0, -1.0, 1.0],
+                [1.0, 1.0, 1.0],
+                [1.0, 1.0, -1.0],
+            ],
+            2,
+        ),
+        quad(
+            "Light",
+            [[-l, -l, lz], [l, -l, lz], [l, l, lz], [-l, l, lz]],
+            3,
+        ),
+        block("ShortBlock", [0.33, -0.3, -0.7], [0.3, 0.3, 0.3], -0.3, 0),
+        block("TallBlock", [-0.35, 0.3, -0.4], [0.3, 0.3, 0.6], 0.3, 0),
+    ];
+    SceneDesc {
+        meshes,
+        materials,
+        lights: vec![],
+        camera: camera_looking_along_y([0.0, -3.4, 0.0], 35.0, width, height),
+        world: [0.0; 3],
+    }
+}
+
+/// A closed UV sphere of radius 1 with uniform albedo and emission, seen from its centre.
+/// Radiance inside is constant: L = Le·Σ_{k=0}^{B+1} ρ^k for B bounces (ρ = albedo).
+pub fn furnace_sphere(albedo: f32, emission: f32, width: u32, height: u32) -> SceneDesc {
+    let (nu, nv) = (48u32, 24u32);
+    let mut positions = Vec::new();
+    for j in 0..=nv {
+        let theta = std::f32::consts::PI * j as f32 / nv as f32;
+        for i in 0..nu {
+            let phi = 2.0 * std::f32::consts::PI * i as f32 / nu as f32;
+            positions.push([
+                theta.sin() * phi.cos(),
+                theta.sin() * phi.sin(),
+                theta.cos(),
+            ]);
+        }
+    }
+    let mut indices = Vec::new();
+    for j in 0..nv {
+        for i in 0..nu {
+            let a = j * nu + i;
+            let b = j * nu + (i + 1) % nu;
+            let c = (j + 1) * nu + i;
+            let d = (j + 1) * nu + (i + 1) % nu;
+            if j > 0 {
+                indices.push([a, b, d]);
+            }
+            if j + 1 < nv {
+                indices.push([a, d, c]);
+            }
+        }
+    }
+    let n = indices.len();
+    let mesh = MeshDesc {
+        name: "Sphere".into(),
+        positions,
+        indices,
+        corner_normals: vec![],
+        material_ids: vec![0; n],
+    };
+    SceneDesc {
+        meshes: vec![mesh],
+        materials: vec![material("Furnace", [albedo; 3], [emission; 3])],
+        lights: vec![],
+        camera: camera_looking_along_y([0.0, 0.0, 0.0], 20.0, width, height),
+        world: [0.0; 3],
+    }
+}
+
+/// Names accepted by `builtin`.
+pub const BUILTIN_SCENES: &[&str] = &["cornell", "furnace"];
+
+pub fn builtin(name: &str, width: u32, height: u32) -> Option<SceneDesc> {
+    match name {
+        "cornell" => Some(cornell_box(width, height)),
+        "furnace" => Some(furnace_sphere(0.8, 1.0, width, height)),
+        _ => None,
+    }
+}

@@ -1,0 +1,289 @@
+//! Blender's camera framing, reproduced exactly (BLENDER.md "Camera"): sensor fit, shift,
+//! resolution percentage, pixel aspect, clipping, orthographic scale and thin-lens depth
+//! of field (aperture radius = lens·1e-3 / (2·fstop), Cycles' convention).
+
+use super::desc::{CameraDesc, Projection, SensorFit};
+use crate::error::SceneError;
+use crate::math::square_to_disk_concentric;
+use glam::{Mat4, Vec2, Vec3, Vec4};
+
+#[derive(Clone, Copy, Debug)]
+pub struct CameraRay {
+    pub origin: Vec3,
+    /// Unit direction.
+    pub dir: Vec3,
+    pub tmin: f32,
+    pub tmax: f32,
+}
+
+#[derive(Clone, Debug)]
+pub struct Camera {
+    to_world: Mat4,
+    projection: Projection,
+    pub width: u32,
+    pub height: u32,
+    ext: Vec2,
+    center: Vec2,
+    clip_start: f32,
+    clip_end: f32,
+    aperture_radius: f32,
+    focus_distance: f32,
+}
+
+fn mat_from_rows(m: &[[f32; 4]; 4]) -> Mat4 {
+    Mat4::from_cols(
+        Vec4::new(m[0][0], m[1][0], m[2][0], m[3][0]),
+        Vec4::new(m[0][1], m[1][1], m[2][1], m[3][1]),
+        Vec4::new(m[0][2], m[1][2], m[2][2], m[3][2]),
+        Vec4::new(m[0][3], m[1][3], m[2][3], m[3][3]),
+    )
+}
+
+pub(crate) fn matrix_from_rows(m: &[[f32; 4]; 4]) -> Mat4 {
+    mat_from_rows(m)
+}
+
+impl Camera {
+    pub fn new(d: &CameraDesc) -> Result<Camera, SceneError> {
+        let err = |s: &str| Err(SceneError::Camera(s.to_string()));
+        if d.to_world.iter().flatten().any(|x| !x.is_finite()) {
+            return err("matrix has NaN or Inf");
+        }
+        let pct = d.resolution_percentage;
+        let width = d.resolution_x * pct / 100;
+        let height = d.resolution_y * pct / 100;
+        if width == 0 || height == 0 {
+            return Err(SceneError::Camera(format!(
+                "image size is {width}×{height} pixels (resolution {}×{} at {pct}%): nothing to render",
+                d.resolution_x, d.resolution_y
+            )));
+        }
+        if width > 65536 || height > 65536 {
+            return err("image larger than 65536 pixels on a side");
+        }
+        let positive = |x: f32| x.is_finite() && x > 0.0;
+        if !positive(d.pixel_aspect_x) || !positive(d.pixel_aspect_y) {
+            return err("pixel aspect must be positive");
+        }
+        let xr = width as f32 * d.pixel_aspect_x;
+        let yr = height as f32 * d.pixel_aspect_y;
+        let fit = match d.sensor_fit {
+            SensorFit::Auto => {
+                if xr >= yr {
+                    SensorFit::Horizontal
+                } else {
+                    SensorFit::Vertical
+                }
+            }
+            f => f,
+        };
+        let sensor = if d.sensor_fit == SensorFit::Vertical {
+            d.sensor_height
+        } else {
+            d.sensor_width
+        };
+        let s = match d.projection {
+            Projection::Perspective => {
+                if !positive(d.lens) || !positive(sensor) {
+                    return err("lens and sensor size must be positive");
+                }
+                sensor / d.lens
+            }
+            Projection::Orthographic => {
+                if !positive(d.ortho_scale) {
+                    return err("orthographic scale must be positive");
+                }
+                d.ortho_scale
+            }
+        };
+        let ext = if fit == SensorFit::Horizontal {
+            Vec2::new(s, s * yr / xr)
+        } else {
+            Vec2::new(s * xr / yr, s)
+        };
+        let center = Vec2::new(d.shift_x * s, d.shift_y * s);
+        // Remove scale from the rotation part (Blender's normalized matrix).
+        let m = mat_from_rows(&d.to_world);
+        let (x, y, z) = (
+            m.x_axis.truncate(),
+            m.y_axis.truncate(),
+            m.z_axis.truncate(),
+        );
+        if x.length() == 0.0 || y.length() == 0.0 || z.length() == 0.0 {
+            return err("matrix is singular");
+        }
+        let to_world = Mat4::from_cols(
+            x.normalize().extend(0.0),
+            y.normalize().extend(0.0),
+            z.normalize().extend(0.0),
+            m.w_axis,
+        );
+        let clip_start = if d.clip_start.is_finite() {
+            d.clip_start.max(0.0)
+        } else {
+            0.0
+        };
+        let clip_end = if d.clip_end.is_finite() && d.clip_end > clip_start {
+            d.clip_end
+        } else {
+            f32::INFINITY
+        };
+        let aperture_radius =
+            if d.projection == Projection::Perspective && d.fstop > 0.0 && d.fstop.is_finite() {
+                d.lens * 1e-3 / (2.0 * d.fstop)
+            } else {
+                0.0
+            };
+        let focus_distance = if d.focus_distance.is_finite() && d.focus_distance > 0.0 {
+            d.focus_distance
+        } else {
+            1.0
+        };
+        Ok(Camera {
+            to_world,
+            projection: d.projection,
+            width,
+            height,
+            ext,
+            center,
+            clip_start,
+            clip_end,
+            aperture_radius,
+            focus_distance,
+        })
+    }
+
+    /// Point on the image plane (x, y at depth 1 for perspective) for a raster position
+    /// with y measured from the top of the image.
+    #[inline]
+    fn plane_point(&self, raster: Vec2) -> Vec2 {
+        let u = raster.x / self.width as f32;
+        let v = 1.0 - raster.y / self.height as f32;
+        Vec2::new(
+            self.center.x + (u - 0.5) * self.ext.x,
+            self.center.y + (v - 0.5) * self.ext.y,
+        )
+    }
+
+    /// Primary ray through `raster` (pixels, origin top-left), lens sample `u_lens`.
+    pub fn generate_ray(&self, raster: Vec2, u_lens: Vec2) -> CameraRay {
+        let q = self.plane_point(raster);
+        let (o_cam, d_cam, axial) = match self.projection {
+            Projection::Perspective => {
+                let d = Vec3::new(q.x, q.y, -1.0);
+                if self.aperture_radius > 0.0 {
+                    let lens = square_to_disk_concentric(u_lens) * self.aperture_radius;
+                    let focus = d * self.focus_distance;
+                    let o = Vec3::new(lens.x, lens.y, 0.0);
+                    let dir = focus - o;
+                    let len = dir.length();
+                    (o, dir / len, -dir.z / len)
+                } else {
+                    let len = d.length();
+                    (Vec3::ZERO, d / len, 1.0 / len)
+                }
+            }
+            Projection::Orthographic => (Vec3::new(q.x, q.y, 0.0), Vec3::NEG_Z, 1.0),
+        };
+        // Clipping distances are measured along the view axis, as in Blender.
+        let origin = self.to_world.transform_point3(o_cam);
+        let dir = self.to_world.transform_vector3(d_cam).normalize();
+        CameraRay {
+            origin,
+            dir,
+            tmin: self.clip_start / axial,
+            tmax: self.clip_end / axial,
+        }
+    }
+
+    /// Raster position (pixels, y from the top) of a world point, if in front of the camera.
+    pub fn project(&self, p: Vec3) -> Option<Vec2> {
+        let pc = self.to_world.inverse().transform_point3(p);
+        let depth = -pc.z;
+        let q = match self.projection {
+            Projection::Perspective => {
+                if depth <= 0.0 {
+                    return None;
+                }
+                Vec2::new(pc.x / depth, pc.y / depth)
+            }
+            Projection::Orthographic => Vec2::new(pc.x, pc.y),
+        };
+        let u = (q.x - self.center.x) / self.ext.x + 0.5;
+        let v = (q.y - self.center.y) / self.ext.y + 0.5;
+        Some(Vec2::new(
+            u * self.width as f32,
+            (1.0 - v) * self.height as f32,
+        ))
+    }
+
+    pub fn position(&self) -> Vec3 {
+        self.to_world.w_axis.truncate()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn look_down_neg_z() -> CameraDesc {
+        CameraDesc {
+            resolution_x: 200,
+            resolution_y: 100,
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn centre_and_edges_of_a_known_frame() {
+        // 50 mm lens, 36 mm sensor, horizontal fit: at depth 1 the frame spans 36/50 = 0.72.
+        let cam = Camera::new(&look_down_neg_z()).unwrap();
+        let c = cam.project(Vec3::new(0.0, 0.0, -3.0)).unwrap();
+        assert!((c - Vec2::new(100.0, 50.0)).length() < 1e-4);
+        let right = cam.project(Vec3::new(0.36 * 3.0, 0.0, -3.0)).unwrap();
+        assert!((right.x - 200.0).abs() < 1e-3, "{right:?}");
+        // vertical extent is 0.72 · 100/200 = 0.36 → top edge at y = 0.18 per unit depth
+        let top = cam.project(Vec3::new(0.0, 0.18 * 2.0, -2.0)).unwrap();
+        assert!(top.y.abs() < 1e-3, "{top:?}");
+    }
+
+    #[test]
+    fn ray_generation_inverts_projection() {
+        let mut d = look_down_neg_z();
+        d.to_world = [
+            [0.0, 0.0, 1.0, 2.0],
+            [1.0, 0.0, 0.0, -1.0],
+            [0.0, 1.0, 0.0, 0.5],
+            [0.0, 0.0, 0.0, 1.0],
+        ];
+        d.shift_x = 0.1;
+        d.shift_y = -0.2;
+        d.sensor_fit = SensorFit::Vertical;
+        d.resolution_percentage = 50;
+        for proj in [Projection::Perspective, Projection::Orthographic] {
+            d.projection = proj;
+            let cam = Camera::new(&d).unwrap();
+            assert_eq!((cam.width, cam.height), (100, 50));
+            for raster in [
+                Vec2::new(0.5, 0.5),
+                Vec2::new(73.2, 12.9),
+                Vec2::new(99.0, 49.0),
+            ] {
+                let r = cam.generate_ray(raster, Vec2::splat(0.5));
+                let p = r.origin + r.dir * 4.0;
+                let back = cam.project(p).unwrap();
+                assert!(
+                    (back - raster).length() < 1e-3,
+                    "{proj:?} {raster:?} -> {back:?}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn zero_size_image_is_an_error() {
+        let mut d = look_down_neg_z();
+        d.resolution_percentage = 0;
+        assert!(Camera::new(&d).is_err());
+    }
+}

@@ -1,0 +1,177 @@
+//! The scene as flat arrays: what the Blender addon, the USD reader and the built-in scenes
+//! hand to the core. `Scene::build` (scene/mod.rs) is the one place that turns it into a
+//! renderable scene, validating everything on the way in.
+
+/// One triangle mesh in world space (instances are flattened by the exporter).
+#[derive(Clone, Debug, Default)]
+pub struct MeshDesc {
+    pub name: String,
+    /// Vertex positions, xyz.
+    pub positions: Vec<[f32; 3]>,
+    /// Triangle vertex indices.
+    pub indices: Vec<[u32; 3]>,
+    /// Optional per-corner shading normals (3 per triangle, in triangle order); empty = flat.
+    pub corner_normals: Vec<[f32; 3]>,
+    /// Per-triangle index into the scene material table (empty = all 0).
+    pub material_ids: Vec<u32>,
+}
+
+/// A material, as the parameters of one uber-material close to Blender's Principled BSDF.
+/// Plain "Diffuse" and "Emission" shaders are special cases of it.
+#[derive(Clone, Debug)]
+pub struct MaterialDesc {
+    pub name: String,
+    pub base_color: [f32; 3],
+    /// Emitted radiance: Emission Color × Emission Strength (two-sided, as in Cycles).
+    pub emission: [f32; 3],
+    pub roughness: f32,
+    pub metallic: f32,
+    pub transmission: f32,
+    pub ior: f32,
+}
+
+impl Default for MaterialDesc {
+    fn default() -> Self {
+        MaterialDesc {
+            name: "default".into(),
+            base_color: [0.8, 0.8, 0.8],
+            emission: [0.0; 3],
+            roughness: 0.5,
+            metallic: 0.0,
+            transmission: 0.0,
+            ior: 1.5,
+        }
+    }
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum AreaShape {
+    Square,
+    Rectangle,
+    Disk,
+    Ellipse,
+}
+
+/// Lights in Blender's terms; radiometric conversion to Cycles' conventions happens in
+/// scene/light.rs.
+#[derive(Clone, Debug)]
+pub enum LightDesc {
+    /// Point light: `power` = Power [W] × colour; soft sphere of `radius` (0 = delta).
+    Point {
+        name: String,
+        position: [f32; 3],
+        radius: f32,
+        power: [f32; 3],
+        visible_camera: bool,
+    },
+    /// Spot light: a point light with a cone around `direction` (Blender: local −Z).
+    Spot {
+        name: String,
+        position: [f32; 3],
+        direction: [f32; 3],
+        radius: f32,
+        power: [f32; 3],
+        spot_size: f32,
+        spot_blend: f32,
+        visible_camera: bool,
+    },
+    /// Area light: `to_world` (row-major 4×4, may carry scale) maps the local light whose
+    /// extent is size_x × size_y in the xy plane and which emits towards local −Z.
+    Area {
+        name: String,
+        to_world: [[f32; 4]; 4],
+        shape: AreaShape,
+        size_x: f32,
+        size_y: f32,
+        power: [f32; 3],
+        normalize: bool,
+        visible_camera: bool,
+    },
+    /// Sun: `direction` points from the scene towards the sun; `irradiance` = Strength × colour
+    /// [W/m²]; `angle` = angular diameter [rad] (0 = delta).
+    Sun {
+        name: String,
+        direction: [f32; 3],
+        irradiance: [f32; 3],
+        angle: f32,
+        visible_camera: bool,
+    },
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Projection {
+    Perspective,
+    Orthographic,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SensorFit {
+    Auto,
+    Horizontal,
+    Vertical,
+}
+
+/// Blender's camera parameters (mm for lens and sensor, scene units elsewhere).
+#[derive(Clone, Debug)]
+pub struct CameraDesc {
+    /// Object matrix_world, row-major; scale is removed.
+    pub to_world: [[f32; 4]; 4],
+    pub projection: Projection,
+    pub lens: f32,
+    pub sensor_width: f32,
+    pub sensor_height: f32,
+    pub sensor_fit: SensorFit,
+    pub ortho_scale: f32,
+    pub shift_x: f32,
+    pub shift_y: f32,
+    pub clip_start: f32,
+    pub clip_end: f32,
+    pub resolution_x: u32,
+    pub resolution_y: u32,
+    pub resolution_percentage: u32,
+    pub pixel_aspect_x: f32,
+    pub pixel_aspect_y: f32,
+    /// Depth of field: f-stop (0 = pinhole) and focus distance along the view axis.
+    pub fstop: f32,
+    pub focus_distance: f32,
+}
+
+impl Default for CameraDesc {
+    fn default() -> Self {
+        CameraDesc {
+            to_world: [
+                [1.0, 0.0, 0.0, 0.0],
+                [0.0, 1.0, 0.0, 0.0],
+                [0.0, 0.0, 1.0, 0.0],
+                [0.0, 0.0, 0.0, 1.0],
+            ],
+            projection: Projection::Perspective,
+            lens: 50.0,
+            sensor_width: 36.0,
+            sensor_height: 24.0,
+            sensor_fit: SensorFit::Auto,
+            ortho_scale: 7.314,
+            shift_x: 0.0,
+            shift_y: 0.0,
+            clip_start: 0.1,
+            clip_end: 1000.0,
+            resolution_x: 64,
+            resolution_y: 64,
+            resolution_percentage: 100,
+            pixel_aspect_x: 1.0,
+            pixel_aspect_y: 1.0,
+            fstop: 0.0,
+            focus_distance: 10.0,
+        }
+    }
+}
+
+#[derive(Clone, Debug, Default)]
+pub struct SceneDesc {
+    pub meshes: Vec<MeshDesc>,
+    pub materials: Vec<MaterialDesc>,
+    pub lights: Vec<LightDesc>,
+    pub camera: CameraDesc,
+    /// World background radiance: Color × Strength.
+    pub world: [f32; 3],
+}

@@ -1,0 +1,593 @@
+//! Lights with Cycles' radiometric conventions (BLENDER.md "Radiance conventions"), their
+//! sampling for next-event estimation, and their intersection by BSDF-sampled rays.
+//!
+//! Analytic lights are transparent: they never occlude, a ray that crosses one picks up its
+//! emission and continues (as in Cycles). Emissive triangles are lights too (two-sided).
+
+use super::desc::{AreaShape, LightDesc};
+use crate::error::SceneError;
+use crate::math::{luminance, square_to_disk_concentric, square_to_uniform_cone, Frame, Spectrum};
+use glam::{Vec2, Vec3};
+use std::f32::consts::PI;
+
+#[derive(Clone, Debug)]
+pub enum LightShape {
+    /// Sphere (radius > 0) or point (radius 0) with optional spot cone.
+    Sphere {
+        center: Vec3,
+        radius: f32,
+        spot: Option<Spot>,
+    },
+    /// Planar emitter: centre, half-axes (world, carrying scale), normal = emitting side.
+    Planar {
+        center: Vec3,
+        axis_u: Vec3,
+        axis_v: Vec3,
+        normal: Vec3,
+        disk: bool,
+        area: f32,
+    },
+    /// Distant light towards `dir` (unit, pointing at the light); `cos_half` of its cone.
+    Distant {
+        dir: Vec3,
+        cos_half: f32,
+        frame: Frame,
+    },
+    /// Emissive triangle `prim` of the scene mesh.
+    Triangle { prim: u32 },
+}
+
+#[derive(Clone, Copy, Debug)]
+pub struct Spot {
+    pub dir: Vec3,
+    pub cos_half: f32,
+    pub smooth: f32,
+}
+
+impl Spot {
+    /// Cycles' spot falloff: smoothstep over the blend region of the cone.
+    #[inline]
+    pub fn attenuation(&self, to_point: Vec3) -> f32 {
+        let c = to_point.dot(self.dir);
+        if c <= self.cos_half {
+            return 0.0;
+        }
+        if self.smooth <= 0.0 {
+            return 1.0;
+        }
+        let t = ((c - self.cos_half) / self.smooth).clamp(0.0, 1.0);
+        t * t * (3.0 - 2.0 * t)
+    }
+}
+
+#[derive(Clone, Debug)]
+pub struct Light {
+    pub name: String,
+    pub shape: LightShape,
+    /// Radiance of the surface; for a delta point light the intensity [W/sr]; for a delta
+    /// sun the irradiance [W/m²].
+    pub emission: Spectrum,
+    pub visible_camera: bool,
+}
+
+/// A point chosen on a light for next-event estimation.
+#[derive(Clone, Copy, Debug)]
+pub struct LightSample {
+    pub p: Vec3,
+    pub n: Vec3,
+    /// Unit direction from the shading point to the light point.
+    pub wi: Vec3,
+    /// Distance to the light point (INFINITY for distant lights).
+    pub dist: f32,
+    /// Radiance arriving along `wi` (delta lights: intensity/d² or irradiance).
+    pub radiance: Spectrum,
+    /// Solid-angle pdf, light selection excluded (delta lights: 1).
+    pub pdf: f32,
+    pub is_delta: bool,
+}
+
+impl Light {
+    pub fn from_desc(d: &LightDesc) -> Result<Light, SceneError> {
+        let v = |a: [f32; 3]| Vec3::from_array(a);
+        let check = |name: &str, ok: bool, what: &str| {
+            if ok {
+                Ok(())
+            } else {
+                Err(SceneError::Light {
+                    light: name.to_string(),
+                    what: what.to_string(),
+                })
+            }
+        };
+        let finite3 = |a: &[f32; 3]| a.iter().all(|x| x.is_finite());
+        match d {
+            LightDesc::Point {
+                name,
+                position,
+                radius,
+                power,
+                visible_camera,
+            } => {
+                check(
+                    name,
+                    finite3(position) && finite3(power) && radius.is_finite(),
+                    "NaN or Inf in position, power or radius",
+                )?;
+                Ok(Self::sphere(
+                    name,
+                    v(*position),
+                    *radius,
+                    v(*power),
+                    None,
+                    *visible_camera,
+                ))
+            }
+            LightDesc::Spot {
+                name,
+                position,
+                direction,
+                radius,
+                power,
+                spot_size,
+                spot_blend,
+                visible_camera,
+            } => {
+                check(
+                    name,
+                    finite3(position) && finite3(direction) && finite3(power),
+                    "NaN or Inf in position, direction or power",
+                )?;
+                check(name, v(*direction).length() > 0.0, "zero direction")?;
+                let cos_half = (spot_size.clamp(0.0, PI) * 0.5).cos();
+                let spot = Spot {
+                    dir: v(*direction).normalize(),
+                    cos_half,
+                    smooth: (1.0 - cos_half) * spot_blend.clamp(0.0, 1.0),
+                };
+                Ok(Self::sphere(
+                    name,
+                    v(*position),
+                    *radius,
+                    v(*power),
+                    Some(spot),
+                    *visible_camera,
+                ))
+            }
+            LightDesc::Area {
+                name,
+                to_world,
+                shape,
+                size_x,
+                size_y,
+                power,
+                normalize,
+                visible_camera,
+            } => {
+                check(
+                    name,
+                    to_world.iter().flatten().all(|x| x.is_finite()) && finite3(power),
+                    "NaN or Inf in matrix or power",
+                )?;
+                let m = super::camera::matrix_from_rows(to_world);
+                let sy = match shape {
+                    AreaShape::Square | AreaShape::Disk => *size_x,
+                    _ => *size_y,
+                };
+                let axis_u = m.transform_vector3(Vec3::X) * (*size_x * 0.5);
+                let axis_v = m.transform_vector3(Vec3::Y) * (sy * 0.5);
+                let normal_raw = m.transform_vector3(Vec3::NEG_Z);
+                let disk = matches!(shape, AreaShape::Disk | AreaShape::Ellipse);
+                let area = 4.0 * axis_u.cross(axis_v).length() * if disk { PI / 4.0 } else { 1.0 };
+                check(
+                    name,
+                    area > 0.0 && area.is_finite() && normal_raw.length() > 0.0,
+                    "zero area",
+                )?;
+                // Emission towards local −Z; orient the normal consistently with the axes.
+                let n_geo = axis_u.cross(axis_v).normalize();
+                let normal = if n_geo.dot(normal_raw) >= 0.0 {
+                    n_geo
+                } else {
+                    -n_geo
+                };
+                let radiance = if *normalize {
+                    v(*power) / (PI * area)
+                } else {
+                    v(*power) / PI
+                };
+                Ok(Light {
+                    name: name.clone(),
+                    shape: LightShape::Planar {
+                        center: m.transform_point3(Vec3::ZERO),
+                        axis_u,
+                        axis_v,
+                        normal,
+                        disk,
+                        area,
+                    },
+                    emission: radiance,
+                    visible_camera: *visible_camera,
+                })
+            }
+            LightDesc::Sun {
+                name,
+                direction,
+                irradiance,
+                angle,
+                visible_camera,
+            } => {
+                check(
+                    name,
+                    finite3(direction) && finite3(irradiance) && angle.is_finite(),
+                    "NaN or Inf in direction, strength or angle",
+                )?;
+                check(name, v(*direction).length() > 0.0, "zero direction")?;
+                let dir = v(*direction).normalize();
+                let half = (angle * 0.5).clamp(0.0, PI * 0.5);
+                let cos_half = half.cos();
+                // A disc of radiance L and half-angle θ gives irradiance L·π·sin²θ at normal incidence.
+                let emission = if half > 1e-4 {
+                    v(*irradiance) / (PI * half.sin().powi(2))
+                } else {
+                    v(*irradiance)
+                };
+                Ok(Light {
+                    name: name.clone(),
+                    shape: LightShape::Distant {
+                        dir,
+                        cos_half: if half > 1e-4 { cos_half } else { 1.0 },
+                        frame: Frame::from_normal(dir),
+                    },
+                    emission,
+                    visible_camera: *visible_camera,
+                })
+            }
+        }
+    }
+
+    fn sphere(
+        name: &str,
+        center: Vec3,
+        radius: f32,
+        power: Vec3,
+        spot: Option<Spot>,
+        visible_camera: bool,
+    ) -> Light {
+        let radius = radius.max(0.0);
+        // Point: intensity P/(4π). Sphere: radiance P/(4π·πr²) (uniform sphere emitter of power P).
+        let emission = if radius > 0.0 {
+            power / (4.0 * PI * PI * radius * radius)
+        } else {
+            power / (4.0 * PI)
+        };
+        Light {
+            name: name.to_string(),
+            shape: LightShape::Sphere {
+                center,
+                radius,
+                spot,
+            },
+            emission,
+            visible_camera,
+        }
+    }
+
+    /// True when no ray can hit the light (point, sun of angle 0).
+    pub fn is_delta(&self) -> bool {
+        match &self.shape {
+            LightShape::Sphere { radius, .. } => *radius == 0.0,
+            LightShape::Distant { cos_half, .. } => *cos_half >= 1.0,
+            _ => false,
+        }
+    }
+
+    /// Approximate emitted power, used only to choose lights for NEE.
+    pub fn power_estimate(&self, scene_radius: f32, tri_area: f32) -> f32 {
+        let l = luminance(self.emission).max(0.0);
+        match &self.shape {
+            LightShape::Sphere { radius, .. } => {
+                if *radius > 0.0 {
+                    l * 4.0 * PI * PI * radius * radius
+                } else {
+                    l * 4.0 * PI
+                }
+            }
+            LightShape::Planar { area, .. } => l * PI * area,
+            LightShape::Distant { cos_half, .. } => {
+                let e = if *cos_half >= 1.0 {
+                    l
+                } else {
+                    l * PI * (1.0 - cos_half * cos_half)
+                };
+                e * PI * scene_radius * scene_radius
+            }
+            LightShape::Triangle { .. } => l * 2.0 * PI * tri_area,
+        }
+    }
+}
+
+/// Samples a point on a sphere of radius r around c, visible from p: uniform in the cone of
+/// directions subtended by the sphere (pbrt-v4 §6.2.4). Returns (point, normal, wi, dist, pdf).
+pub fn sample_sphere_cone(
+    p: Vec3,
+    c: Vec3,
+    r: f32,
+    u: Vec2,
+) -> Option<(Vec3, Vec3, Vec3, f32, f32)> {
+    let to_c = c - p;
+    let d2 = to_c.length_squared();
+    if d2 <= r * r {
+        return None; // inside the light
+    }
+    let d = d2.sqrt();
+    let sin2_max = r * r / d2;
+    let cos_max = (1.0 - sin2_max).max(0.0).sqrt();
+    let frame = Frame::from_normal(to_c / d);
+    let w_local = square_to_uniform_cone(u, cos_max);
+    let wi = frame.to_world(w_local).normalize();
+    let t = ray_sphere(p, wi, c, r)?;
+    let pt = p + wi * t;
+    let pdf = 1.0 / (2.0 * PI * (1.0 - cos_max).max(1e-12));
+    Some((pt, (pt - c).normalize(), wi, t, pdf))
+}
+
+/// Solid-angle pdf of `sample_sphere_cone` (any direction inside the cone).
+pub fn sphere_cone_pdf(p: Vec3, c: Vec3, r: f32) -> f32 {
+    let d2 = (c - p).length_squared();
+    if d2 <= r * r {
+        return 0.0;
+    }
+    let cos_max = (1.0 - r * r / d2).max(0.0).sqrt();
+    1.0 / (2.0 * PI * (1.0 - cos_max).max(1e-12))
+}
+
+/// Nearest positive intersection of a ray with a sphere.
+pub fn ray_sphere(o: Vec3, d: Vec3, c: Vec3, r: f32) -> Option<f32> {
+    let oc = o - c;
+    let b = oc.dot(d);
+    let cc = oc.length_squared() - r * r;
+    let disc = b * b - cc;
+    if disc < 0.0 {
+        return None;
+    }
+    let s = disc.sqrt();
+    // numerically stable roots
+    let q = -b - s.copysign(b);
+    let (t0, t1) = if q != 0.0 { (cc / q, q) } else { (-b, -b) };
+    let (t0, t1) = if t0 <= t1 { (t0, t1) } else { (t1, t0) };
+    if t0 > 0.0 {
+        Some(t0)
+    } else if t1 > 0.0 {
+        Some(t1)
+    } else {
+        None
+    }
+}
+
+impl Light {
+    /// Sample a point for NEE from shading point `p` (non-triangle lights).
+    pub fn sample(&self, p: Vec3, u: Vec2) -> Option<LightSample> {
+        match &self.shape {
+            LightShape::Sphere {
+                center,
+                radius,
+                spot,
+            } => {
+                let (lp, n, wi, dist, pdf, radiance) = if *radius > 0.0 {
+                    let (lp, n, wi, dist, pdf) = sample_sphere_cone(p, *center, *radius, u)?;
+                    (lp, n, wi, dist, pdf, self.emission)
+                } else {
+                    let to = *center - p;
+                    let d2 = to.length_squared();
+                    if d2 == 0.0 {
+                        return None;
+                    }
+                    let dist = d2.sqrt();
+                    (
+                        *center,
+                        -to / dist,
+                        to / dist,
+                        dist,
+                        1.0,
+                        self.emission / d2,
+                    )
+                };
+                let att = spot.map_or(1.0, |s| s.attenuation((p - *center).normalize_or_zero()));
+                if att <= 0.0 {
+                    return None;
+                }
+                Some(LightSample {
+                    p: lp,
+                    n,
+                    wi,
+                    dist,
+                    radiance: radiance * att,
+                    pdf,
+                    is_delta: *radius == 0.0,
+                })
+            }
+            LightShape::Planar {
+                center,
+                axis_u,
+                axis_v,
+                normal,
+                disk,
+                area,
+            } => {
+                let q = if *disk {
+                    square_to_disk_concentric(u)
+                } else {
+                    u * 2.0 - Vec2::ONE
+                };
+                let lp = *center + *axis_u * q.x + *axis_v * q.y;
+                let to = lp - p;
+                let d2 = to.length_squared();
+                if d2 == 0.0 {
+                    return None;
+                }
+                let dist = d2.sqrt();
+                let wi = to / dist;
+                let cos_l = -wi.dot(*normal);
+                if cos_l <= 0.0 {
+                    return None; // behind the one-sided emitter
+                }
+                Some(LightSample {
+                    p: lp,
+                    n: *normal,
+                    wi,
+                    dist,
+                    radiance: self.emission,
+                    pdf: d2 / (cos_l * area),
+                    is_delta: false,
+                })
+            }
+            LightShape::Distant {
+                dir,
+                cos_half,
+                frame,
+            } => {
+                if *cos_half >= 1.0 {
+                    Some(LightSample {
+                        p: p + *dir * 1e30,
+                        n: -*dir,
+                        wi: *dir,
+                        dist: f32::INFINITY,
+                        radiance: self.emission,
+                        pdf: 1.0,
+                        is_delta: true,
+                    })
+                } else {
+                    let wi = frame
+                        .to_world(square_to_uniform_cone(u, *cos_half))
+                        .normalize();
+                    let pdf = 1.0 / (2.0 * PI * (1.0 - cos_half));
+                    Some(LightSample {
+                        p: p + wi * 1e30,
+                        n: -wi,
+                        wi,
+                        dist: f32::INFINITY,
+                        radiance: self.emission,
+                        pdf,
+                        is_delta: false,
+                    })
+                }
+            }
+            LightShape::Triangle { .. } => None, // sampled by the scene, which owns the mesh
+        }
+    }
+
+    /// If a ray (o, d) in [0, tmax) crosses this analytic light's emitting side, the distance
+    /// and the radiance it carries back along −d, with the NEE solid-angle pdf of that point.
+    pub fn intersect(&self, o: Vec3, d: Vec3, tmax: f32) -> Option<(f32, Spectrum, f32)> {
+        match &self.shape {
+            LightShape::Sphere {
+                center,
+                radius,
+                spot,
+            } => {
+                if *radius <= 0.0 {
+                    return None;
+                }
+                let t = ray_sphere(o, d, *center, *radius)?;
+                if t >= tmax {
+                    return None;
+                }
+                let hp = o + d * t;
+                let att = spot.map_or(1.0, |s| s.attenuation((o - *center).normalize_or_zero()));
+                let _ = hp;
+                if att <= 0.0 {
+                    return None;
+                }
+                Some((t, self.emission * att, sphere_cone_pdf(o, *center, *radius)))
+            }
+            LightShape::Planar {
+                center,
+                axis_u,
+                axis_v,
+                normal,
+                disk,
+                area,
+            } => {
+                let denom = d.dot(*normal);
+                if denom >= 0.0 {
+                    return None; // back side or parallel: lights are one-sided
+                }
+                let t = (*center - o).dot(*normal) / denom;
+                if !(t > 0.0 && t < tmax) {
+                    return None;
+                }
+                let hp = o + d * t - *center;
+                let a = hp.dot(*axis_u) / axis_u.length_squared();
+                let b = hp.dot(*axis_v) / axis_v.length_squared();
+                let inside = if *disk {
+                    a * a + b * b <= 1.0
+                } else {
+                    a.abs() <= 1.0 && b.abs() <= 1.0
+                };
+                if !inside {
+                    return None;
+                }
+                let pdf = t * t / (-denom * area);
+                Some((t, self.emission, pdf))
+            }
+            LightShape::Distant { dir, cos_half, .. } => {
+                if *cos_half >= 1.0 || tmax < f32::INFINITY || d.dot(*dir) < *cos_half {
+                    return None;
+                }
+                Some((
+                    f32::INFINITY,
+                    self.emission,
+                    1.0 / (2.0 * PI * (1.0 - cos_half)),
+                ))
+            }
+            LightShape::Triangle { .. } => None,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sphere_cone_sampling_hits_the_sphere_with_its_pdf() {
+        let c = Vec3::new(0.0, 0.0, 5.0);
+        let mut s = crate::sampler::IndependentSampler::new(3, 0);
+        use crate::sampler::Sampler;
+        for _ in 0..1000 {
+            let (pt, n, wi, dist, pdf) =
+                sample_sphere_cone(Vec3::ZERO, c, 1.0, s.next_2d()).unwrap();
+            assert!(((pt - c).length() - 1.0).abs() < 1e-4);
+            assert!(n.dot(-wi) > -1e-4);
+            assert!((pt.length() - dist).abs() < 1e-3);
+            assert!((pdf - sphere_cone_pdf(Vec3::ZERO, c, 1.0)).abs() < 1e-3 * pdf);
+        }
+    }
+
+    #[test]
+    fn area_light_radiance_is_power_over_pi_area() {
+        let d = LightDesc::Area {
+            name: "a".into(),
+            to_world: [
+                [2.0, 0.0, 0.0, 0.0],
+                [0.0, 1.0, 0.0, 0.0],
+                [0.0, 0.0, 1.0, 3.0],
+                [0.0, 0.0, 0.0, 1.0],
+            ],
+            shape: AreaShape::Rectangle,
+            size_x: 1.0,
+            size_y: 0.5,
+            power: [10.0, 10.0, 10.0],
+            normalize: true,
+            visible_camera: false,
+        };
+        let l = Light::from_desc(&d).unwrap();
+        // world area = (1·2)·(0.5·1) = 1
+        assert!((l.emission.x - 10.0 / PI).abs() < 1e-5);
+        // it emits downwards: a ray going up from below hits it, a ray going down does not
+        assert!(l.intersect(Vec3::ZERO, Vec3::Z, f32::INFINITY).is_some());
+        assert!(l
+            .intersect(Vec3::new(0.0, 0.0, 6.0), -Vec3::Z, f32::INFINITY)
+            .is_none());
+    }
+}

@@ -1,0 +1,425 @@
+//! The renderable scene: triangles in a BVH, materials, lights (analytic and emissive
+//! triangles), camera and world. `Scene::build` is the one place a scene is made.
+
+pub mod builtin;
+pub mod camera;
+pub mod desc;
+pub mod light;
+pub mod material;
+
+pub use camera::Camera;
+pub use desc::*;
+pub use light::{Light, LightSample, LightShape};
+pub use material::Material;
+
+use crate::accel::{Accel, TriHit};
+use crate::distribution::Distribution1D;
+use crate::error::SceneError;
+use crate::math::{ray_epsilon, square_to_triangle, Frame, Spectrum};
+use glam::{Vec2, Vec3};
+
+/// A surface point found by a ray.
+#[derive(Clone, Copy, Debug)]
+pub struct SurfaceInteraction {
+    pub p: Vec3,
+    /// Geometric normal, flipped to the side the ray came from.
+    pub ng: Vec3,
+    /// Shading frame (shading normal, also on the ray's side).
+    pub frame: Frame,
+    pub prim: u32,
+    pub material: u32,
+    pub t: f32,
+}
+
+impl SurfaceInteraction {
+    /// Origin for a ray leaving towards `dir`, offset off the surface on that side.
+    #[inline]
+    pub fn spawn_origin(&self, dir: Vec3) -> Vec3 {
+        let eps = ray_epsilon(self.p);
+        if dir.dot(self.ng) >= 0.0 {
+            self.p + self.ng * eps
+        } else {
+            self.p - self.ng * eps
+        }
+    }
+}
+
+/// What the renderer learned while building the scene, for the user.
+#[derive(Clone, Debug, Default)]
+pub struct SceneReport {
+    pub warnings: Vec<String>,
+    pub triangles: usize,
+    pub degenerate_triangles: usize,
+    pub emissive_triangles: usize,
+}
+
+pub struct Scene {
+    pub positions: Vec<[Vec3; 3]>,
+    /// Per-triangle corner normals; `None` when the triangle is flat-shaded.
+    normals: Vec<Option<[Vec3; 3]>>,
+    geo_normals: Vec<Vec3>,
+    areas: Vec<f32>,
+    tri_material: Vec<u32>,
+    pub materials: Vec<Material>,
+    pub lights: Vec<Light>,
+    light_distribution: Distribution1D,
+    /// Light index of each emissive triangle (u32::MAX if not emissive).
+    tri_light: Vec<u32>,
+    /// Non-triangle lights that a ray can hit (spheres, planes, suns with an angle).
+    hittable_lights: Vec<u32>,
+    pub camera: Camera,
+    pub world: Spectrum,
+    accel: Option<Accel>,
+    pub bounds_center: Vec3,
+    pub bounds_radius: f32,
+    pub report: SceneReport,
+}
+
+impl Scene {
+    pub fn build(desc: &SceneDesc) -> Result<Scene, SceneError> {
+        let camera = Camera::new(&desc.camera)?;
+        let mut report = SceneReport::default();
+        let mut materials: Vec<Material> = desc
+            .materials
+            .iter()
+            .map(Material::from_desc)
+            .collect::<Result<_, _>>()?;
+        if materials.is_empty() {
+            materials.push(Material::from_desc(&MaterialDesc::default())?);
+        }
+        if desc.world.iter().any(|x| !x.is_finite() || *x < 0.0) {
+            return Err(SceneError::World(
+                "background colour × strength must be finite and ≥ 0".into(),
+            ));
+        }
+        let mut positions = Vec::new();
+        let mut normals = Vec::new();
+        let mut tri_material = Vec::new();
+        for m in &desc.meshes {
+            let bad = |what: String| SceneError::Mesh {
+                mesh: m.name.clone(),
+                what,
+            };
+            if m.indices.is_empty() || m.positions.is_empty() {
+                return Err(bad("is empty (no triangles)".into()));
+            }
+            if let Some((i, _)) = m
+                .positions
+                .iter()
+                .enumerate()
+                .find(|(_, p)| p.iter().any(|x| !x.is_finite()))
+            {
+                return Err(bad(format!("vertex {i} has a NaN or Inf coordinate")));
+            }
+            if !m.corner_normals.is_empty() && m.corner_normals.len() != 3 * m.indices.len() {
+                return Err(bad(format!(
+                    "{} corner normals for {} triangles (need 3 per triangle)",
+                    m.corner_normals.len(),
+                    m.indices.len()
+                )));
+            }
+            if !m.material_ids.is_empty() && m.material_ids.len() != m.indices.len() {
+                return Err(bad(format!(
+                    "{} material ids for {} triangles",
+                    m.material_ids.len(),
+                    m.indices.len()
+                )));
+            }
+            let nv = m.positions.len() as u32;
+            for (t, tri) in m.indices.iter().enumerate() {
+                if let Some(&i) = tri.iter().find(|&&i| i >= nv) {
+                    return Err(bad(format!(
+                        "triangle {t} uses vertex {i} but the mesh has {nv} vertices"
+                    )));
+                }
+                let mat = m.material_ids.get(t).copied().unwrap_or(0);
+                if mat as usize >= materials.len() {
+                    return Err(bad(format!(
+                        "triangle {t} uses material {mat} but there are {}",
+                        materials.len()
+                    )));
+                }
+                let v = tri.map(|i| Vec3::from_array(m.positions[i as usize]));
+                let cross = (v[1] - v[0]).cross(v[2] - v[0]);
+                if !(cross.length_squared() > 0.0) || !cross.is_finite() {
+                    report.degenerate_triangles += 1;
+                    continue; // zero area: can be neither hit nor sampled
+                }
+                let n = if m.corner_normals.is_empty() {
+                    None
+                } else {
+                    let ns = [0, 1, 2].map(|k| Vec3::from_array(m.corner_normals[3 * t + k]));
+                    if ns
+                        .iter()
+                        .all(|n| n.is_finite() && n.length_squared() > 1e-12)
+                    {
+                        Some(ns.map(|n| n.normalize()))
+                    } else {
+                        None // broken normals: fall back to flat shading
+                    }
+                };
+                positions.push(v);
+                normals.push(n);
+                tri_material.push(mat);
+            }
+        }
+        if report.degenerate_triangles > 0 {
+            report.warnings.push(format!(
+                "{} degenerate (zero-area) triangles were skipped",
+                report.degenerate_triangles
+            ));
+        }
+        let geo_normals: Vec<Vec3> = positions
+            .iter()
+            .map(|v| (v[1] - v[0]).cross(v[2] - v[0]).normalize())
+            .collect();
+        let areas: Vec<f32> = positions
+            .iter()
+            .map(|v| 0.5 * (v[1] - v[0]).cross(v[2] - v[0]).length())
+            .collect();
+        report.triangles = positions.len();
+
+        // Bounds (geometry, lights and camera) for sun power estimates and epsilons.
+        let mut lo = Vec3::splat(f32::INFINITY);
+        let mut hi = Vec3::splat(f32::NEG_INFINITY);
+        for v in positions.iter().flatten() {
+            lo = lo.min(*v);
+            hi = hi.max(*v);
+        }
+        lo = lo.min(camera.position());
+        hi = hi.max(camera.position());
+        let bounds_center = (lo + hi) * 0.5;
+        let bounds_radius = ((hi - lo).length() * 0.5).max(1e-3);
+
+        let mut lights: Vec<Light> = desc
+            .lights
+            .iter()
+            .map(Light::from_desc)
+            .collect::<Result<_, _>>()?;
+        let mut tri_light = vec![u32::MAX; positions.len()];
+        for (t, &m) in tri_material.iter().enumerate() {
+            let mat = &materials[m as usize];
+            if mat.is_emissive() {
+                tri_light[t] = lights.len() as u32;
+                lights.push(Light {
+                    name: mat.name.clone(),
+                    shape: LightShape::Triangle { prim: t as u32 },
+                    emission: mat.emission,
+                    visible_camera: true,
+                });
+                report.emissive_triangles += 1;
+            }
+        }
+        let weights: Vec<f32> = lights
+            .iter()
+            .map(|l| {
+                let a = if let LightShape::Triangle { prim } = l.shape {
+                    areas[prim as usize]
+                } else {
+                    0.0
+                };
+                l.power_estimate(bounds_radius, a)
+            })
+            .collect();
+        let light_distribution = Distribution1D::new(&weights);
+        let hittable_lights = lights
+            .iter()
+            .enumerate()
+            .filter(|(_, l)| !l.is_delta() && !matches!(l.shape, LightShape::Triangle { .. }))
+            .map(|(i, _)| i as u32)
+            .collect();
+        let world = Vec3::from_array(desc.world);
+        if light_distribution.is_empty() && world.max_element() <= 0.0 {
+            report.warnings.push("the scene has no light: no emitting material, no light object and a black world; the image is black".into());
+        }
+        let accel = if positions.is_empty() {
+            None
+        } else {
+            Some(Accel::build(&positions))
+        };
+        Ok(Scene {
+            positions,
+            normals,
+            geo_normals,
+            areas,
+            tri_material,
+            materials,
+            lights,
+            light_distribution,
+            tri_light,
+            hittable_lights,
+            camera,
+            world,
+            accel,
+            bounds_center,
+            bounds_radius,
+            report,
+        })
+    }
+
+    pub fn num_triangles(&self) -> usize {
+        self.positions.len()
+    }
+
+    /// Closest surface hit along the ray in (tmin, tmax).
+    #[inline]
+    pub fn intersect(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> Option<TriHit> {
+        self.accel.as_ref()?.closest(o, d, tmin, tmax)
+    }
+
+    /// True when any surface lies along the ray in (tmin, tmax). Lights never occlude.
+    #[inline]
+    pub fn occluded(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> bool {
+        self.accel
+            .as_ref()
+            .is_some_and(|a| a.occluded(o, d, tmin, tmax))
+    }
+
+    /// Visibility between a surface point and a light sample.
+    pub fn visible(&self, si: &SurfaceInteraction, ls: &LightSample) -> bool {
+        let o = si.spawn_origin(ls.wi);
+        let tmax = if ls.dist.is_finite() {
+            (ls.p - o).length() * (1.0 - 1e-4) - ray_epsilon(ls.p)
+        } else {
+            f32::INFINITY
+        };
+        if tmax <= 0.0 {
+            return true;
+        }
+        !self.occluded(o, ls.wi, 0.0, tmax)
+    }
+
+    /// Surface data at a hit, with normals facing the incoming ray direction `d`.
+    pub fn interaction(&self, hit: &TriHit, o: Vec3, d: Vec3) -> SurfaceInteraction {
+        let t = hit.prim as usize;
+        let v = &self.positions[t];
+        let (b1, b2) = (hit.b1, hit.b2);
+        let b0 = 1.0 - b1 - b2;
+        let p = v[0] * b0 + v[1] * b1 + v[2] * b2;
+        let _ = o;
+        let mut ng = self.geo_normals[t];
+        let mut ns = match &self.normals[t] {
+            Some(n) => (n[0] * b0 + n[1] * b1 + n[2] * b2).normalize_or(ng),
+            None => ng,
+        };
+        if ng.dot(d) > 0.0 {
+            ng = -ng;
+        }
+        if ns.dot(ng) < 0.0 {
+            ns = -ns;
+        }
+        SurfaceInteraction {
+            p,
+            ng,
+            frame: Frame::from_normal(ns),
+            prim: hit.prim,
+            material: self.tri_material[t],
+            t: hit.t,
+        }
+    }
+
+    #[inline]
+    pub fn material(&self, si: &SurfaceInteraction) -> &Material {
+        &self.materials[si.material as usize]
+    }
+
+    pub fn has_lights(&self) -> bool {
+        !self.light_distribution.is_empty()
+    }
+
+    /// Chooses a light ∝ power and samples a point on it (NEE). `pdf` of the result
+    /// includes the selection probability.
+    pub fn sample_light(&self, p: Vec3, u_select: f32, u: Vec2) -> Option<(u32, LightSample)> {
+        let (li, pmf) = self.light_distribution.sample(u_select)?;
+        let light = &self.lights[li];
+        let mut ls = match light.shape {
+            LightShape::Triangle { prim } => {
+                let v = &self.positions[prim as usize];
+                let (b1, b2) = square_to_triangle(u);
+                let lp = v[0] * (1.0 - b1 - b2) + v[1] * b1 + v[2] * b2;
+                let to = lp - p;
+                let d2 = to.length_squared();
+                if d2 == 0.0 {
+                    return None;
+                }
+                let dist = d2.sqrt();
+                let wi = to / dist;
+                let n = self.geo_normals[prim as usize];
+                let cos_l = wi.dot(n).abs(); // two-sided emission
+                if cos_l <= 1e-7 {
+                    return None;
+                }
+                LightSample {
+                    p: lp,
+                    n: if wi.dot(n) < 0.0 { n } else { -n },
+                    wi,
+                    dist,
+                    radiance: light.emission,
+                    pdf: d2 / (cos_l * self.areas[prim as usize]),
+                    is_delta: false,
+                }
+            }
+            _ => light.sample(p, u)?,
+        };
+        ls.pdf *= pmf;
+        if !(ls.pdf > 0.0) || !ls.pdf.is_finite() {
+            return None;
+        }
+        Some((li as u32, ls))
+    }
+
+    /// Emitted radiance of the surface at `si` towards the ray origin, and the NEE pdf
+    /// (selection included) with which a light sample from `from` would have chosen it.
+    pub fn surface_emission(
+        &self,
+        si: &SurfaceInteraction,
+        from: Vec3,
+        dir: Vec3,
+    ) -> Option<(Spectrum, f32)> {
+        let li = self.tri_light[si.prim as usize];
+        if li == u32::MAX {
+            return None;
+        }
+        let le = self.lights[li as usize].emission;
+        let cos_l = dir.dot(si.ng).abs();
+        let d2 = (si.p - from).length_squared();
+        let pdf = if cos_l > 0.0 {
+            self.light_distribution.pmf(li as usize) * d2 / (cos_l * self.areas[si.prim as usize])
+        } else {
+            0.0
+        };
+        Some((le, pdf))
+    }
+
+    /// Calls `f(radiance, nee_pdf)` for every analytic light the ray crosses before `tmax`
+    /// (lights are transparent). `camera_ray` skips lights not visible to the camera.
+    #[inline]
+    pub fn for_each_light_crossed(
+        &self,
+        o: Vec3,
+        d: Vec3,
+        tmax: f32,
+        camera_ray: bool,
+        mut f: impl FnMut(Spectrum, f32),
+    ) {
+        for &li in &self.hittable_lights {
+            let light = &self.lights[li as usize];
+            if camera_ray && !light.visible_camera {
+                continue;
+            }
+            if let Some((_, le, pdf)) = light.intersect(o, d, tmax) {
+                f(le, pdf * self.light_distribution.pmf(li as usize));
+            }
+        }
+    }
+
+    /// True when some light is a delta light (point without radius, sun without angle),
+    /// which naive path tracing cannot find.
+    pub fn delta_lights(&self) -> Vec<&str> {
+        self.lights
+            .iter()
+            .filter(|l| l.is_delta())
+            .map(|l| l.name.as_str())
+            .collect()
+    }
+}
