@@ -1,1 +1,538 @@
-// PyO3 binding (next commit)
+//! The only file that knows about Python: `gdmlt._core`. Scenes arrive as dicts of numpy
+//! arrays (see python/gdmlt/scene.py for the layout), renders release the GIL, report
+//! progress to a callback that can cancel, and Rust panics become Python exceptions.
+
+use crate::film::Image;
+use crate::integrator::{self, Method, RenderControl, RenderSettings};
+use crate::path::PathSettings;
+use crate::scene::{
+    self, AreaShape, CameraDesc, LightDesc, MaterialDesc, MeshDesc, Projection, SceneDesc,
+    SensorFit,
+};
+use numpy::{PyArray1, PyArrayMethods, PyReadonlyArrayDyn, PyUntypedArrayMethods};
+use pyo3::exceptions::{PyRuntimeError, PyValueError};
+use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyList};
+use std::sync::Arc;
+use std::time::Duration;
+
+fn verr(msg: impl Into<String>) -> PyErr {
+    PyValueError::new_err(msg.into())
+}
+
+fn get<'py>(d: &Bound<'py, PyDict>, key: &str, ctx: &str) -> PyResult<Bound<'py, PyAny>> {
+    d.get_item(key)?
+        .ok_or_else(|| verr(format!("{ctx}: missing '{key}'")))
+}
+
+fn get_or<'py, T: FromPyObjectOwned<'py>>(
+    d: &Bound<'py, PyDict>,
+    key: &str,
+    default: T,
+    ctx: &str,
+) -> PyResult<T> {
+    match d.get_item(key)? {
+        Some(v) if !v.is_none() => v
+            .extract::<T>()
+            .map_err(|e| verr(format!("{ctx}: '{key}': {}", Into::<PyErr>::into(e)))),
+        _ => Ok(default),
+    }
+}
+
+fn floats(obj: &Bound<'_, PyAny>, cols: usize, what: &str) -> PyResult<Vec<f32>> {
+    let arr: PyReadonlyArrayDyn<f32> = obj
+        .extract()
+        .map_err(|_| verr(format!("{what}: expected a float32 numpy array")))?;
+    let shape = arr.shape();
+    let ok = (cols == 0 && shape.len() == 1)
+        || (shape.len() == 2 && shape[1] == cols)
+        || (shape.len() == 1 && cols > 0 && shape[0] % cols == 0);
+    if !ok {
+        return Err(verr(format!(
+            "{what}: unexpected shape {shape:?} (need N×{cols})"
+        )));
+    }
+    Ok(arr.as_array().iter().copied().collect())
+}
+
+fn uints(obj: &Bound<'_, PyAny>, cols: usize, what: &str) -> PyResult<Vec<u32>> {
+    let arr: PyReadonlyArrayDyn<u32> = obj
+        .extract()
+        .map_err(|_| verr(format!("{what}: expected a uint32 numpy array")))?;
+    let shape = arr.shape();
+    let ok = (cols == 1 && shape.len() == 1)
+        || (shape.len() == 2 && shape[1] == cols)
+        || (shape.len() == 1 && shape[0] % cols == 0);
+    if !ok {
+        return Err(verr(format!(
+            "{what}: unexpected shape {shape:?} (need N×{cols})"
+        )));
+    }
+    Ok(arr.as_array().iter().copied().collect())
+}
+
+fn vec3s(v: Vec<f32>) -> Vec<[f32; 3]> {
+    v.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect()
+}
+
+fn rgb(d: &Bound<'_, PyDict>, key: &str, default: [f32; 3], ctx: &str) -> PyResult<[f32; 3]> {
+    get_or(d, key, default, ctx)
+}
+
+fn matrix(d: &Bound<'_, PyDict>, key: &str, ctx: &str) -> PyResult<[[f32; 4]; 4]> {
+    let v = floats(&get(d, key, ctx)?, 4, &format!("{ctx}: {key}"))?;
+    if v.len() != 16 {
+        return Err(verr(format!("{ctx}: {key} must be 4×4")));
+    }
+    Ok([0, 1, 2, 3].map(|r| [v[4 * r], v[4 * r + 1], v[4 * r + 2], v[4 * r + 3]]))
+}
+
+fn parse_mesh(d: &Bound<'_, PyDict>) -> PyResult<MeshDesc> {
+    let name: String = get_or(d, "name", "mesh".to_string(), "mesh")?;
+    let ctx = format!("mesh '{name}'");
+    let positions = vec3s(floats(
+        &get(d, "positions", &ctx)?,
+        3,
+        &format!("{ctx}: positions"),
+    )?);
+    let idx = uints(&get(d, "indices", &ctx)?, 3, &format!("{ctx}: indices"))?;
+    let indices = idx.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
+    let corner_normals = match d.get_item("normals")? {
+        Some(n) if !n.is_none() => vec3s(floats(&n, 3, &format!("{ctx}: normals"))?),
+        _ => vec![],
+    };
+    let material_ids = match d.get_item("material_ids")? {
+        Some(m) if !m.is_none() => uints(&m, 1, &format!("{ctx}: material_ids"))?,
+        _ => vec![],
+    };
+    Ok(MeshDesc {
+        name,
+        positions,
+        indices,
+        corner_normals,
+        material_ids,
+    })
+}
+
+fn parse_material(d: &Bound<'_, PyDict>) -> PyResult<MaterialDesc> {
+    let name: String = get_or(d, "name", "material".to_string(), "material")?;
+    let ctx = format!("material '{name}'");
+    let def = MaterialDesc::default();
+    Ok(MaterialDesc {
+        base_color: rgb(d, "base_color", def.base_color, &ctx)?,
+        emission: rgb(d, "emission", def.emission, &ctx)?,
+        roughness: get_or(d, "roughness", def.roughness, &ctx)?,
+        metallic: get_or(d, "metallic", def.metallic, &ctx)?,
+        transmission: get_or(d, "transmission", def.transmission, &ctx)?,
+        ior: get_or(d, "ior", def.ior, &ctx)?,
+        name,
+    })
+}
+
+fn parse_light(d: &Bound<'_, PyDict>) -> PyResult<LightDesc> {
+    let name: String = get_or(d, "name", "light".to_string(), "light")?;
+    let ctx = format!("light '{name}'");
+    let kind: String = get_or(d, "type", String::new(), &ctx)?;
+    let visible_camera: bool = get_or(d, "visible_camera", false, &ctx)?;
+    let power = rgb(d, "power", [0.0; 3], &ctx)?;
+    Ok(match kind.to_ascii_uppercase().as_str() {
+        "POINT" => LightDesc::Point {
+            position: rgb(d, "position", [0.0; 3], &ctx)?,
+            radius: get_or(d, "radius", 0.0, &ctx)?,
+            power,
+            visible_camera,
+            name,
+        },
+        "SPOT" => LightDesc::Spot {
+            position: rgb(d, "position", [0.0; 3], &ctx)?,
+            direction: rgb(d, "direction", [0.0, 0.0, -1.0], &ctx)?,
+            radius: get_or(d, "radius", 0.0, &ctx)?,
+            spot_size: get_or(d, "spot_size", std::f32::consts::FRAC_PI_4, &ctx)?,
+            spot_blend: get_or(d, "spot_blend", 0.15, &ctx)?,
+            power,
+            visible_camera,
+            name,
+        },
+        "AREA" => {
+            let shape: String = get_or(d, "shape", "SQUARE".to_string(), &ctx)?;
+            let shape = match shape.to_ascii_uppercase().as_str() {
+                "SQUARE" => AreaShape::Square,
+                "RECTANGLE" => AreaShape::Rectangle,
+                "DISK" => AreaShape::Disk,
+                "ELLIPSE" => AreaShape::Ellipse,
+                s => return Err(verr(format!("{ctx}: unknown area shape '{s}'"))),
+            };
+            let size_x: f32 = get_or(d, "size", 1.0, &ctx)?;
+            LightDesc::Area {
+                to_world: matrix(d, "matrix", &ctx)?,
+                shape,
+                size_x,
+                size_y: get_or(d, "size_y", size_x, &ctx)?,
+                power,
+                normalize: get_or(d, "normalize", true, &ctx)?,
+                visible_camera,
+                name,
+            }
+        }
+        "SUN" => LightDesc::Sun {
+            direction: rgb(d, "direction", [0.0, 0.0, 1.0], &ctx)?,
+            irradiance: rgb(d, "irradiance", [1.0; 3], &ctx)?,
+            angle: get_or(d, "angle", 0.0, &ctx)?,
+            visible_camera,
+            name,
+        },
+        other => {
+            return Err(verr(format!(
+                "{ctx}: unknown light type '{other}' (POINT, SPOT, AREA or SUN)"
+            )))
+        }
+    })
+}
+
+fn parse_camera(d: &Bound<'_, PyDict>) -> PyResult<CameraDesc> {
+    let ctx = "camera";
+    let def = CameraDesc::default();
+    let projection: String = get_or(d, "type", "PERSP".to_string(), ctx)?;
+    let fit: String = get_or(d, "sensor_fit", "AUTO".to_string(), ctx)?;
+    Ok(CameraDesc {
+        to_world: matrix(d, "matrix", ctx)?,
+        projection: match projection.to_ascii_uppercase().as_str() {
+            "PERSP" => Projection::Perspective,
+            "ORTHO" => Projection::Orthographic,
+            p => {
+                return Err(verr(format!(
+                    "camera: unsupported type '{p}' (PERSP or ORTHO)"
+                )))
+            }
+        },
+        sensor_fit: match fit.to_ascii_uppercase().as_str() {
+            "AUTO" => SensorFit::Auto,
+            "HORIZONTAL" => SensorFit::Horizontal,
+            "VERTICAL" => SensorFit::Vertical,
+            f => return Err(verr(format!("camera: unknown sensor fit '{f}'"))),
+        },
+        lens: get_or(d, "lens", def.lens, ctx)?,
+        sensor_width: get_or(d, "sensor_width", def.sensor_width, ctx)?,
+        sensor_height: get_or(d, "sensor_height", def.sensor_height, ctx)?,
+        ortho_scale: get_or(d, "ortho_scale", def.ortho_scale, ctx)?,
+        shift_x: get_or(d, "shift_x", 0.0, ctx)?,
+        shift_y: get_or(d, "shift_y", 0.0, ctx)?,
+        clip_start: get_or(d, "clip_start", def.clip_start, ctx)?,
+        clip_end: get_or(d, "clip_end", def.clip_end, ctx)?,
+        resolution_x: get_or(d, "resolution_x", def.resolution_x, ctx)?,
+        resolution_y: get_or(d, "resolution_y", def.resolution_y, ctx)?,
+        resolution_percentage: get_or(d, "resolution_percentage", 100, ctx)?,
+        pixel_aspect_x: get_or(d, "pixel_aspect_x", 1.0, ctx)?,
+        pixel_aspect_y: get_or(d, "pixel_aspect_y", 1.0, ctx)?,
+        fstop: get_or(d, "fstop", 0.0, ctx)?,
+        focus_distance: get_or(d, "focus_distance", def.focus_distance, ctx)?,
+    })
+}
+
+fn parse_scene(d: &Bound<'_, PyDict>) -> PyResult<SceneDesc> {
+    let list = |key: &str| -> PyResult<Vec<Bound<'_, PyDict>>> {
+        match d.get_item(key)? {
+            Some(l) if !l.is_none() => l
+                .cast::<PyList>()
+                .map_err(|_| verr(format!("scene: '{key}' must be a list")))?
+                .iter()
+                .map(|x| {
+                    x.cast_into::<PyDict>()
+                        .map_err(|_| verr(format!("scene: '{key}' entries must be dicts")))
+                })
+                .collect(),
+            _ => Ok(vec![]),
+        }
+    };
+    Ok(SceneDesc {
+        meshes: list("meshes")?
+            .iter()
+            .map(parse_mesh)
+            .collect::<PyResult<_>>()?,
+        materials: list("materials")?
+            .iter()
+            .map(parse_material)
+            .collect::<PyResult<_>>()?,
+        lights: list("lights")?
+            .iter()
+            .map(parse_light)
+            .collect::<PyResult<_>>()?,
+        camera: parse_camera(
+            &get(d, "camera", "scene")?
+                .cast_into::<PyDict>()
+                .map_err(|_| verr("scene: camera must be a dict"))?,
+        )?,
+        world: get_or(d, "world", [0.0; 3], "scene")?,
+    })
+}
+
+/// A scene ready to render (BVH built). Construct from the dict layout of gdmlt.scene.
+#[pyclass(frozen, module = "gdmlt._core")]
+struct Scene {
+    inner: Arc<scene::Scene>,
+}
+
+#[pymethods]
+impl Scene {
+    #[new]
+    fn new(py: Python<'_>, desc: &Bound<'_, PyDict>) -> PyResult<Self> {
+        let d = parse_scene(desc)?;
+        let built = py.detach(|| std::panic::catch_unwind(|| scene::Scene::build(&d)));
+        match built {
+            Ok(Ok(s)) => Ok(Scene { inner: Arc::new(s) }),
+            Ok(Err(e)) => Err(verr(e.to_string())),
+            Err(_) => Err(PyRuntimeError::new_err(
+                "internal error while building the scene (a bug: please report it)",
+            )),
+        }
+    }
+    #[getter]
+    fn warnings(&self) -> Vec<String> {
+        self.inner.report.warnings.clone()
+    }
+    #[getter]
+    fn triangles(&self) -> usize {
+        self.inner.num_triangles()
+    }
+    #[getter]
+    fn size(&self) -> (u32, u32) {
+        (self.inner.camera.width, self.inner.camera.height)
+    }
+    /// Raster position (x, y from the top, in pixels) of a world point, or None behind the camera.
+    fn project(&self, p: [f32; 3]) -> Option<(f32, f32)> {
+        self.inner
+            .camera
+            .project(glam::Vec3::from_array(p))
+            .map(|v| (v.x, v.y))
+    }
+}
+
+fn image_to_numpy<'py>(py: Python<'py>, img: &Image) -> PyResult<Bound<'py, PyAny>> {
+    let a = PyArray1::from_slice(py, &img.data);
+    Ok(a.reshape([img.height, img.width, img.channels])?.into_any())
+}
+
+fn numpy_to_image(obj: &Bound<'_, PyAny>) -> PyResult<Image> {
+    let arr: PyReadonlyArrayDyn<f32> = obj
+        .extract()
+        .map_err(|_| verr("expected a float32 numpy array of shape (H, W, C)"))?;
+    let s = arr.shape();
+    if s.len() != 3 || s[2] == 0 {
+        return Err(verr(format!(
+            "expected an image of shape (H, W, C), got {s:?}"
+        )));
+    }
+    Ok(Image {
+        height: s[0],
+        width: s[1],
+        channels: s[2],
+        data: arr.as_array().iter().copied().collect(),
+    })
+}
+
+/// Renders a scene. `progress(fraction, elapsed_seconds)` is called about every 50 ms from
+/// the calling thread; if it returns True the render stops and keeps what it has.
+#[pyfunction]
+#[pyo3(signature = (scene, method="pt", spp=16, time_limit=0.0, max_bounces=8, nee=true, seed=0, threads=0, progress=None))]
+#[allow(clippy::too_many_arguments)]
+fn render<'py>(
+    py: Python<'py>,
+    scene: &Scene,
+    method: &str,
+    spp: u32,
+    time_limit: f64,
+    max_bounces: u32,
+    nee: bool,
+    seed: u64,
+    threads: usize,
+    progress: Option<Bound<'py, PyAny>>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let method = Method::parse(method).map_err(|e| verr(e.to_string()))?;
+    let settings = RenderSettings {
+        method,
+        spp,
+        time_limit,
+        path: PathSettings { max_bounces, nee },
+        seed,
+        threads,
+    };
+    settings.validate().map_err(|e| verr(e.to_string()))?;
+    let control = RenderControl::new(time_limit);
+    let sc = self::Scene {
+        inner: scene.inner.clone(),
+    };
+    let progress = progress.map(|p| p.unbind());
+    let mut callback_error: Option<PyErr> = None;
+    let result = py.detach(|| {
+        std::thread::scope(|s| {
+            let worker = s.spawn(|| {
+                std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                    integrator::render(&sc.inner, &settings, &control)
+                }))
+            });
+            while !worker.is_finished() {
+                std::thread::sleep(Duration::from_millis(50));
+                if let Some(cb) = &progress {
+                    Python::attach(|py| {
+                        match cb.call1(py, (control.progress(), control.elapsed())) {
+                            Ok(r) => {
+                                if r.is_truthy(py).unwrap_or(false) {
+                                    control.cancel();
+                                }
+                            }
+                            Err(e) => {
+                                control.cancel();
+                                callback_error.get_or_insert(e);
+                            }
+                        }
+                    });
+                } else if Python::attach(|py| py.check_signals()).is_err() {
+                    control.cancel(); // Ctrl-C in a plain Python session
+                }
+            }
+            worker.join()
+        })
+    });
+    if let Some(e) = callback_error {
+        return Err(e);
+    }
+    let out = match result {
+        Ok(Ok(Ok(out))) => out,
+        Ok(Ok(Err(e))) => return Err(verr(e.to_string())),
+        _ => {
+            return Err(PyRuntimeError::new_err(
+                "internal error during the render (a bug: please report it)",
+            ))
+        }
+    };
+    let dict = PyDict::new(py);
+    let layers = PyDict::new(py);
+    for (name, img) in &out.layers {
+        layers.set_item(name, image_to_numpy(py, img)?)?;
+    }
+    dict.set_item("layers", layers)?;
+    let st = &out.stats;
+    let stats = PyDict::new(py);
+    stats.set_item("method", st.method)?;
+    stats.set_item("elapsed", st.elapsed)?;
+    stats.set_item("spp_min", st.spp_min)?;
+    stats.set_item("spp_max", st.spp_max)?;
+    stats.set_item("invalid_samples", st.invalid_samples)?;
+    stats.set_item("cancelled", st.cancelled)?;
+    stats.set_item("warnings", st.warnings.clone())?;
+    dict.set_item("stats", stats)?;
+    Ok(dict)
+}
+
+fn mat_to_numpy<'py>(py: Python<'py>, m: &[[f32; 4]; 4]) -> PyResult<Bound<'py, PyAny>> {
+    let flat: Vec<f32> = m.iter().flatten().copied().collect();
+    Ok(PyArray1::from_vec(py, flat).reshape([4, 4])?.into_any())
+}
+
+/// The scene dict of a built-in scene ("cornell", "furnace").
+#[pyfunction]
+#[pyo3(signature = (name, width=256, height=256))]
+fn builtin_scene<'py>(
+    py: Python<'py>,
+    name: &str,
+    width: u32,
+    height: u32,
+) -> PyResult<Bound<'py, PyDict>> {
+    let d = scene::builtin::builtin(name, width, height).ok_or_else(|| {
+        verr(format!(
+            "unknown built-in scene '{name}' (known: {})",
+            scene::builtin::BUILTIN_SCENES.join(", ")
+        ))
+    })?;
+    let out = PyDict::new(py);
+    let meshes = PyList::empty(py);
+    for m in &d.meshes {
+        let md = PyDict::new(py);
+        md.set_item("name", &m.name)?;
+        let pos: Vec<f32> = m.positions.iter().flatten().copied().collect();
+        md.set_item(
+            "positions",
+            PyArray1::from_vec(py, pos).reshape([m.positions.len(), 3])?,
+        )?;
+        let idx: Vec<u32> = m.indices.iter().flatten().copied().collect();
+        md.set_item(
+            "indices",
+            PyArray1::from_vec(py, idx).reshape([m.indices.len(), 3])?,
+        )?;
+        md.set_item("material_ids", PyArray1::from_slice(py, &m.material_ids))?;
+        meshes.append(md)?;
+    }
+    out.set_item("meshes", meshes)?;
+    let mats = PyList::empty(py);
+    for m in &d.materials {
+        let md = PyDict::new(py);
+        md.set_item("name", &m.name)?;
+        md.set_item("base_color", m.base_color)?;
+        md.set_item("emission", m.emission)?;
+        md.set_item("roughness", m.roughness)?;
+        md.set_item("metallic", m.metallic)?;
+        md.set_item("transmission", m.transmission)?;
+        md.set_item("ior", m.ior)?;
+        mats.append(md)?;
+    }
+    out.set_item("materials", mats)?;
+    out.set_item("lights", PyList::empty(py))?;
+    let c = &d.camera;
+    let cd = PyDict::new(py);
+    cd.set_item("matrix", mat_to_numpy(py, &c.to_world)?)?;
+    cd.set_item(
+        "type",
+        if c.projection == Projection::Perspective {
+            "PERSP"
+        } else {
+            "ORTHO"
+        },
+    )?;
+    cd.set_item("lens", c.lens)?;
+    cd.set_item("sensor_width", c.sensor_width)?;
+    cd.set_item("sensor_height", c.sensor_height)?;
+    cd.set_item("sensor_fit", "AUTO")?;
+    cd.set_item("clip_start", c.clip_start)?;
+    cd.set_item("clip_end", c.clip_end)?;
+    cd.set_item("resolution_x", c.resolution_x)?;
+    cd.set_item("resolution_y", c.resolution_y)?;
+    out.set_item("camera", cd)?;
+    out.set_item("world", d.world)?;
+    Ok(out)
+}
+
+/// Writes images into one EXR: `layers` is a list of (name, float32 array (H, W, C)); the
+/// first is the main RGB.
+#[pyfunction]
+fn write_exr(
+    py: Python<'_>,
+    path: std::path::PathBuf,
+    layers: Vec<(String, Bound<'_, PyAny>)>,
+) -> PyResult<()> {
+    let imgs: Vec<(String, Image)> = layers
+        .iter()
+        .map(|(n, a)| Ok((n.clone(), numpy_to_image(a)?)))
+        .collect::<PyResult<_>>()?;
+    let refs: Vec<(&str, &Image)> = imgs.iter().map(|(n, i)| (n.as_str(), i)).collect();
+    py.detach(|| crate::output::write_exr(&path, &refs))
+        .map_err(|e| PyRuntimeError::new_err(e.to_string()))
+}
+
+/// Writes an RGB float32 (H, W, 3) linear image as an 8-bit sRGB PNG.
+#[pyfunction]
+fn write_png(path: std::path::PathBuf, image: &Bound<'_, PyAny>) -> PyResult<()> {
+    let img = numpy_to_image(image)?;
+    crate::output::write_png(&path, &img).map_err(|e| PyRuntimeError::new_err(e.to_string()))
+}
+
+#[pymodule]
+fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<Scene>()?;
+    m.add_function(wrap_pyfunction!(render, m)?)?;
+    m.add_function(wrap_pyfunction!(builtin_scene, m)?)?;
+    m.add_function(wrap_pyfunction!(write_exr, m)?)?;
+    m.add_function(wrap_pyfunction!(write_png, m)?)?;
+    m.add("METHODS", vec!["pt", "gdpt", "pssmlt", "gdpssmlt"])?;
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    Ok(())
+}

@@ -1,0 +1,47 @@
+# GDMLT — `make demo` renders the bundled demo scene, `make test` runs every test.
+# Both set everything up first: the Python venv at .venv (bpy, usd-core, numpy, maturin,
+# pytest) and the Rust core built into it with maturin.
+
+PYTHON ?= python3
+VENV   := .venv
+PY     := $(VENV)/bin/python
+STAMP  := $(VENV)/.deps-stamp
+export VIRTUAL_ENV := $(abspath $(VENV))
+export PATH := $(abspath $(VENV))/bin:$(PATH)
+# Keep Blender's user config out of $HOME during demos and tests.
+export BLENDER_USER_RESOURCES := $(abspath out/blender-user)
+
+.PHONY: all setup build demo test test-rust test-python examples clean
+
+all: demo
+
+$(STAMP): requirements-dev.txt
+	@command -v cargo >/dev/null || { echo "cargo (Rust) is required: https://rustup.rs"; exit 1; }
+	$(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --upgrade pip >/dev/null
+	$(PY) -m pip install -r requirements-dev.txt
+	touch $(STAMP)
+
+setup: $(STAMP)
+
+build: $(STAMP)
+	$(VENV)/bin/maturin develop --release --quiet
+
+demo: build
+	@mkdir -p out
+	$(VENV)/bin/gdmlt render examples/cornell.blend -o out/cornell.exr
+
+test: build test-rust test-python
+
+test-rust:
+	cargo test --release
+
+test-python: build
+	$(PY) -m pytest -q tests/python
+
+# Regenerates examples/*.blend from the built-in scene definitions (needs bpy).
+examples: build
+	$(PY) tools/make_examples.py
+
+clean:
+	rm -rf target out $(VENV) python/gdmlt/*.so

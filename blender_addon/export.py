@@ -1,0 +1,251 @@
+"""Evaluated depsgraph → scene arrays (the dict layout that gdmlt.Scene takes).
+
+Geometry is read with foreach_get into numpy (no per-vertex Python objects); instances from
+`depsgraph.object_instances` are flattened into world space, with the triangulated mesh of
+each instanced object read once and reused for its instances (memory grows with the number
+of instanced triangles). Lights follow Cycles' conventions; the conversion to radiance
+happens in the core. Everything unsupported is reported as a warning with a fallback.
+"""
+
+import math
+
+import numpy as np
+
+GEOMETRY_TYPES = {"MESH", "CURVE", "SURFACE", "META", "FONT", "CURVES", "POINTCLOUD", "VOLUME"}
+
+DEFAULT_MATERIAL = {"name": "(default)", "base_color": (0.8, 0.8, 0.8), "emission": (0.0, 0.0, 0.0),
+                    "roughness": 0.5, "metallic": 0.0, "transmission": 0.0, "ior": 1.5}
+
+
+class ExportCancelled(Exception):
+    pass
+
+
+def _input_value(node, name, warnings, what, default=None):
+    """Unlinked input's value; a linked input (texture, etc.) falls back to its default value."""
+    sock = node.inputs.get(name)
+    if sock is None:
+        return default
+    if sock.is_linked:
+        warnings.append(f"{what}: input '{name}' of node '{node.name}' is linked (e.g. a texture); "
+                        f"GDMLT uses its unlinked value instead")
+    v = getattr(sock, "default_value", default)
+    try:
+        return tuple(v)
+    except TypeError:
+        return float(v)
+
+
+def material_params(mat, warnings):
+    """Principled-like parameters of a Blender material (nodes followed from the Cycles output)."""
+    if mat is None:
+        return dict(DEFAULT_MATERIAL)
+    what = f"material '{mat.name}'"
+    out = dict(DEFAULT_MATERIAL, name=mat.name)
+    tree = mat.node_tree
+    node_out = tree.get_output_node("CYCLES") if tree is not None else None
+    if node_out is None:
+        c = tuple(mat.diffuse_color)[:3]
+        out["base_color"] = c
+        return out
+    surface = node_out.inputs.get("Surface")
+    if surface is None or not surface.is_linked:
+        out["base_color"] = (0.0, 0.0, 0.0)  # Cycles renders an unconnected surface black
+        return out
+    node = surface.links[0].from_node
+    t = node.type
+    if t == "BSDF_PRINCIPLED":
+        out["base_color"] = _input_value(node, "Base Color", warnings, what, (0.8, 0.8, 0.8, 1))[:3]
+        out["metallic"] = _input_value(node, "Metallic", warnings, what, 0.0)
+        out["roughness"] = _input_value(node, "Roughness", warnings, what, 0.5)
+        out["ior"] = _input_value(node, "IOR", warnings, what, 1.5)
+        out["transmission"] = _input_value(node, "Transmission Weight", warnings, what, 0.0)
+        col = _input_value(node, "Emission Color", warnings, what, (0, 0, 0, 1))[:3]
+        strength = _input_value(node, "Emission Strength", warnings, what, 0.0)
+        out["emission"] = tuple(c * strength for c in col)
+        if out["metallic"] > 0 or out["transmission"] > 0:
+            warnings.append(f"{what}: metallic and transmission are not rendered yet; only the diffuse part is")
+    elif t == "BSDF_DIFFUSE":
+        out["base_color"] = _input_value(node, "Color", warnings, what, (0.8, 0.8, 0.8, 1))[:3]
+        out["roughness"] = 1.0
+    elif t == "EMISSION":
+        col = _input_value(node, "Color", warnings, what, (1, 1, 1, 1))[:3]
+        strength = _input_value(node, "Strength", warnings, what, 1.0)
+        out["base_color"] = (0.0, 0.0, 0.0)
+        out["emission"] = tuple(c * strength for c in col)
+    else:
+        warnings.append(f"{what}: shader node '{node.name}' ({t}) is not supported; rendered as grey diffuse")
+    return out
+
+
+def _matrix(m):
+    return np.array([list(row) for row in m], dtype=np.float64)
+
+
+def _mesh_local_arrays(ob):
+    """Triangulated mesh of an evaluated object, in object space, or None if it has no faces."""
+    try:
+        me = ob.to_mesh()
+    except RuntimeError:
+        return None
+    if me is None:
+        return None
+    try:
+        me.calc_loop_triangles()
+        nt = len(me.loop_triangles)
+        if nt == 0:
+            return None
+        co = np.empty(len(me.vertices) * 3, np.float32)
+        me.vertices.foreach_get("co", co)
+        tv = np.empty(nt * 3, np.int32)
+        me.loop_triangles.foreach_get("vertices", tv)
+        tl = np.empty(nt * 3, np.int32)
+        me.loop_triangles.foreach_get("loops", tl)
+        mi = np.empty(nt, np.int32)
+        me.loop_triangles.foreach_get("material_index", mi)
+        cn = np.empty(len(me.loops) * 3, np.float32)
+        me.corner_normals.foreach_get("vector", cn)
+        normals = cn.reshape(-1, 3)[tl]  # smooth, flat and custom split normals per corner
+        return co.reshape(-1, 3), tv.reshape(-1, 3), normals, mi
+    finally:
+        ob.to_mesh_clear()
+
+
+def _light(ob, matrix, warnings):
+    light = ob.data
+    name = ob.name
+    scale = 2.0 ** float(getattr(light, "exposure", 0.0))
+    color = np.array(light.color[:3], dtype=np.float64)
+    power = tuple((color * light.energy * scale).tolist())
+    visible = bool(getattr(ob, "visible_camera", False))
+    m = matrix
+    pos = tuple(m[:3, 3].tolist())
+    minus_z = -m[:3, 2]
+    n = np.linalg.norm(minus_z)
+    minus_z = tuple((minus_z / n if n > 0 else np.array([0, 0, -1.0])).tolist())
+    if getattr(light, "use_nodes", False):
+        warnings.append(f"light '{name}': light node trees are ignored; colour × power is used")
+    if light.type == "POINT":
+        return {"type": "POINT", "name": name, "position": pos, "radius": float(light.shadow_soft_size),
+                "power": power, "visible_camera": visible}
+    if light.type == "SPOT":
+        return {"type": "SPOT", "name": name, "position": pos, "direction": minus_z,
+                "radius": float(light.shadow_soft_size), "spot_size": float(light.spot_size),
+                "spot_blend": float(light.spot_blend), "power": power, "visible_camera": visible}
+    if light.type == "AREA":
+        return {"type": "AREA", "name": name, "matrix": m.astype(np.float32), "shape": light.shape,
+                "size": float(light.size), "size_y": float(light.size_y), "power": power,
+                "normalize": bool(getattr(light, "normalize", True)), "visible_camera": visible}
+    if light.type == "SUN":
+        plus_z = tuple((-np.array(minus_z)).tolist())
+        return {"type": "SUN", "name": name, "direction": plus_z,
+                "irradiance": tuple((color * light.energy * scale).tolist()),
+                "angle": float(light.angle), "visible_camera": visible}
+    warnings.append(f"light '{name}': type {light.type} is not supported and was skipped")
+    return None
+
+
+def _world(scene, warnings):
+    world = scene.world
+    if world is None:
+        return (0.0, 0.0, 0.0)
+    tree = world.node_tree
+    node_out = tree.get_output_node("CYCLES") if tree is not None else None
+    if node_out is None:
+        return tuple(world.color[:3])
+    surface = node_out.inputs.get("Surface")
+    if surface is None or not surface.is_linked:
+        return (0.0, 0.0, 0.0)
+    node = surface.links[0].from_node
+    if node.type != "BACKGROUND":
+        warnings.append(f"world '{world.name}': node '{node.name}' ({node.type}) is not supported; world is black")
+        return (0.0, 0.0, 0.0)
+    col = _input_value(node, "Color", warnings, f"world '{world.name}'", (0.05, 0.05, 0.05, 1))[:3]
+    strength = _input_value(node, "Strength", warnings, f"world '{world.name}'", 1.0)
+    return tuple(c * strength for c in col)
+
+
+def camera_dict(scene, cam_ob):
+    cam = cam_ob.data
+    r = scene.render
+    if cam.type not in ("PERSP", "ORTHO"):
+        raise ValueError(f"camera '{cam_ob.name}': {cam.type} cameras are not supported (use Perspective or Orthographic)")
+    d = {
+        "matrix": _matrix(cam_ob.matrix_world).astype(np.float32), "type": cam.type, "lens": cam.lens,
+        "sensor_width": cam.sensor_width, "sensor_height": cam.sensor_height, "sensor_fit": cam.sensor_fit,
+        "ortho_scale": cam.ortho_scale, "shift_x": cam.shift_x, "shift_y": cam.shift_y,
+        "clip_start": cam.clip_start, "clip_end": cam.clip_end,
+        "resolution_x": r.resolution_x, "resolution_y": r.resolution_y,
+        "resolution_percentage": r.resolution_percentage,
+        "pixel_aspect_x": r.pixel_aspect_x, "pixel_aspect_y": r.pixel_aspect_y,
+    }
+    if cam.dof.use_dof:
+        d["fstop"] = cam.dof.aperture_fstop
+        focus = cam.dof.focus_distance
+        if cam.dof.focus_object is not None:
+            m = _matrix(cam_ob.matrix_world)
+            axis = -m[:3, 2] / np.linalg.norm(m[:3, 2])
+            target = np.array(cam.dof.focus_object.matrix_world.translation)
+            focus = float(np.dot(target - m[:3, 3], axis))
+        d["focus_distance"] = focus
+    return d
+
+
+def export_scene(depsgraph, test_break=lambda: False):
+    """Returns (scene dict, warnings). Raises ExportCancelled if test_break() turns true,
+    ValueError for a scene that cannot be rendered (no camera, unsupported camera)."""
+    scene = depsgraph.scene
+    warnings = []
+    if scene.camera is None:
+        raise ValueError("the scene has no active camera")
+    materials = [dict(DEFAULT_MATERIAL)]
+    mat_index = {}
+    meshes, lights = [], []
+    cache = {}
+    for k, inst in enumerate(depsgraph.object_instances):
+        if k % 64 == 0 and test_break():
+            raise ExportCancelled()
+        ob = inst.object
+        if ob.type == "LIGHT":
+            l = _light(ob, _matrix(inst.matrix_world), warnings)
+            if l is not None:
+                lights.append(l)
+            continue
+        if ob.type not in GEOMETRY_TYPES:
+            continue
+        key = (ob.name, ob.data.name if ob.data is not None else "") if inst.is_instance else None
+        arrays = cache.get(key) if key else None
+        if arrays is None:
+            arrays = _mesh_local_arrays(ob)
+            if key:
+                cache[key] = arrays
+        if arrays is None:
+            continue
+        co, tris, normals, mat_local = arrays
+        slot_to_global = []
+        for slot in ob.material_slots:
+            mat = slot.material
+            if mat is None:
+                slot_to_global.append(0)
+                continue
+            if mat.name not in mat_index:
+                mat_index[mat.name] = len(materials)
+                materials.append(material_params(mat, warnings))
+            slot_to_global.append(mat_index[mat.name])
+        table = np.array(slot_to_global or [0], dtype=np.uint32)
+        mat_ids = table[np.clip(mat_local, 0, len(table) - 1)]
+        m = _matrix(inst.matrix_world)
+        pos = (co.astype(np.float64) @ m[:3, :3].T + m[:3, 3]).astype(np.float32)
+        nmat = np.linalg.inv(m[:3, :3]).T if abs(np.linalg.det(m[:3, :3])) > 1e-30 else m[:3, :3]
+        nrm = (normals.astype(np.float64) @ nmat.T).astype(np.float32)
+        name = ob.name if not inst.is_instance else f"{inst.parent.name if inst.parent else ''}/{ob.name}"
+        meshes.append({"name": name, "positions": np.ascontiguousarray(pos),
+                       "indices": np.ascontiguousarray(tris, dtype=np.uint32),
+                       "normals": np.ascontiguousarray(nrm), "material_ids": mat_ids})
+    cam_ob = scene.camera.evaluated_get(depsgraph)
+    desc = {"meshes": meshes, "materials": materials, "lights": lights,
+            "camera": camera_dict(scene, cam_ob), "world": _world(scene, warnings)}
+    # the same warning once
+    seen = set()
+    warnings = [w for w in warnings if not (w in seen or seen.add(w))]
+    return desc, warnings

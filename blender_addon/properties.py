@@ -1,0 +1,34 @@
+"""Render settings at scene.gdmlt. These names are a public interface: scripts drive the
+engine through them (method, samples, time_limit, max_bounces, use_nee, seed, threads)."""
+
+import bpy
+from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty
+
+METHOD_ITEMS = [
+    ("PT", "Path Tracing", "Unidirectional path tracing (Kajiya 1986)"),
+]
+
+
+class GDMLTRenderSettings(bpy.types.PropertyGroup):
+    method: EnumProperty(name="Method", items=METHOD_ITEMS, default="PT",
+                         description="Light transport algorithm")
+    samples: IntProperty(name="Samples", default=64, min=1, soft_max=4096,
+                         description="Samples per pixel (mutations per pixel for Metropolis methods)")
+    time_limit: FloatProperty(name="Time Limit", default=0.0, min=0.0, subtype="TIME_ABSOLUTE", unit="TIME_ABSOLUTE",
+                              description="Stop after this many seconds (0 = no limit); whichever of samples and time comes first")
+    max_bounces: IntProperty(name="Max Bounces", default=8, min=0, max=1024,
+                             description="Total maximum number of bounces, as in Cycles (0 = direct light only)")
+    use_nee: BoolProperty(name="Next Event Estimation", default=True,
+                          description="Sample lights directly with shadow rays (off: lights are found only by hitting them, the paper's naive mode)")
+    seed: IntProperty(name="Seed", default=0, min=0, description="Random seed; the same seed and settings give the same image")
+    threads: IntProperty(name="Threads", default=0, min=0, max=1024, description="Render threads (0 = all cores)")
+
+
+def register():
+    bpy.utils.register_class(GDMLTRenderSettings)
+    bpy.types.Scene.gdmlt = PointerProperty(type=GDMLTRenderSettings)
+
+
+def unregister():
+    del bpy.types.Scene.gdmlt
+    bpy.utils.unregister_class(GDMLTRenderSettings)

@@ -1,0 +1,96 @@
+"""Render Properties panels for GDMLT, and the standard panels it shares with other engines."""
+
+import bpy
+
+
+class GDMLT_PT_sampling(bpy.types.Panel):
+    bl_label = "Sampling"
+    bl_space_type = "PROPERTIES"
+    bl_region_type = "WINDOW"
+    bl_context = "render"
+    COMPAT_ENGINES = {"GDMLT"}
+
+    @classmethod
+    def poll(cls, context):
+        return context.engine in cls.COMPAT_ENGINES
+
+    def draw(self, context):
+        s = context.scene.gdmlt
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        layout.prop(s, "method")
+        col = layout.column(align=True)
+        col.prop(s, "samples")
+        col.prop(s, "time_limit")
+        layout.prop(s, "seed")
+
+
+class GDMLT_PT_light_paths(bpy.types.Panel):
+    bl_label = "Light Paths"
+    bl_space_type = "PROPERTIES"
+    bl_region_type = "WINDOW"
+    bl_context = "render"
+    COMPAT_ENGINES = {"GDMLT"}
+
+    @classmethod
+    def poll(cls, context):
+        return context.engine in cls.COMPAT_ENGINES
+
+    def draw(self, context):
+        s = context.scene.gdmlt
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        layout.prop(s, "max_bounces")
+        layout.prop(s, "use_nee")
+
+
+class GDMLT_PT_performance(bpy.types.Panel):
+    bl_label = "Performance"
+    bl_space_type = "PROPERTIES"
+    bl_region_type = "WINDOW"
+    bl_context = "render"
+    bl_options = {"DEFAULT_CLOSED"}
+    COMPAT_ENGINES = {"GDMLT"}
+
+    @classmethod
+    def poll(cls, context):
+        return context.engine in cls.COMPAT_ENGINES
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        layout.prop(context.scene.gdmlt, "threads")
+
+
+CLASSES = (GDMLT_PT_sampling, GDMLT_PT_light_paths, GDMLT_PT_performance)
+
+# Blender's own panels (dimensions, output, colour management, camera, light, world data)
+# show for an engine only when it is in their COMPAT_ENGINES.
+_SHARED_PANELS = (
+    "RENDER_PT_color_management", "RENDER_PT_format", "RENDER_PT_frame_range", "RENDER_PT_output",
+    "DATA_PT_camera", "DATA_PT_lens", "DATA_PT_camera_dof", "DATA_PT_light", "DATA_PT_EEVEE_light",
+    "DATA_PT_context_light", "WORLD_PT_context_world",
+)
+
+
+def _shared_panels():
+    for name in _SHARED_PANELS:
+        panel = getattr(bpy.types, name, None)
+        if panel is not None and hasattr(panel, "COMPAT_ENGINES"):
+            yield panel
+
+
+def register():
+    for cls in CLASSES:
+        bpy.utils.register_class(cls)
+    for p in _shared_panels():
+        p.COMPAT_ENGINES.add("GDMLT")
+
+
+def unregister():
+    for p in _shared_panels():
+        p.COMPAT_ENGINES.discard("GDMLT")
+    for cls in reversed(CLASSES):
+        bpy.utils.unregister_class(cls)

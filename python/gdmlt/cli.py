@@ -1,0 +1,123 @@
+"""`gdmlt` command line: render a .blend file (through the Blender addon, as Blender would)
+or a built-in scene, headless."""
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+BUILTIN = ("cornell", "furnace")
+
+
+def _positive_int(s):
+    try:
+        v = int(s)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"'{s}' is not an integer")
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"must be at least 1, got {v}")
+    return v
+
+
+def _nonneg_int(s):
+    try:
+        v = int(s)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"'{s}' is not an integer")
+    if v < 0:
+        raise argparse.ArgumentTypeError(f"must be 0 or more, got {v}")
+    return v
+
+
+def _nonneg_float(s):
+    try:
+        v = float(s)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"'{s}' is not a number")
+    if not (v >= 0.0 and v != float("inf")):
+        raise argparse.ArgumentTypeError(f"must be a finite number ≥ 0, got {s}")
+    return v
+
+
+def build_parser():
+    p = argparse.ArgumentParser(prog="gdmlt", description="GDMLT: gradient-domain Metropolis light transport renderer")
+    sub = p.add_subparsers(dest="command", required=True)
+    r = sub.add_parser("render", help="render a .blend file or a built-in scene to EXR (+ PNG)",
+                       description="Render SCENE (a .blend file, or a built-in name: " + ", ".join(BUILTIN) + ") "
+                                   "to OUT.exr (linear 32-bit float) and OUT.png (sRGB). "
+                                   "Options left out keep the .blend file's own GDMLT settings.")
+    r.add_argument("scene", help="path to a .blend file, or a built-in scene name (" + ", ".join(BUILTIN) + ")")
+    r.add_argument("-o", "--output", required=True, help="output EXR path; a PNG is written next to it")
+    r.add_argument("--method", choices=["pt"], type=str.lower, help="light transport method (default: the file's, else pt)")
+    r.add_argument("--spp", type=_positive_int, help="samples per pixel (default: the file's, else 64)")
+    r.add_argument("--time", type=_nonneg_float, dest="time_limit", help="time limit in seconds, 0 = none; halts on whichever of --spp and --time comes first")
+    r.add_argument("--max-bounces", type=_nonneg_int, help="maximum bounces as in Cycles (0 = direct light; default 8)")
+    nee = r.add_mutually_exclusive_group()
+    nee.add_argument("--nee", dest="nee", action="store_true", default=None, help="next-event estimation with MIS (default)")
+    nee.add_argument("--no-nee", dest="nee", action="store_false", help="naive path tracing: lights found only by hitting them")
+    r.add_argument("--seed", type=_nonneg_int, help="random seed (default 0)")
+    r.add_argument("--width", type=_positive_int, help="image width in pixels (overrides the scene)")
+    r.add_argument("--height", type=_positive_int, help="image height in pixels (overrides the scene)")
+    r.add_argument("--threads", type=_nonneg_int, help="render threads, 0 = all cores (default)")
+    r.add_argument("--no-png", action="store_true", help="write only the EXR")
+    return p
+
+
+def _settings(args):
+    return {k: v for k, v in {
+        "method": args.method, "spp": args.spp, "time_limit": args.time_limit, "max_bounces": args.max_bounces,
+        "nee": args.nee, "seed": args.seed, "threads": args.threads}.items() if v is not None}
+
+
+def render_builtin(args, out: Path):
+    import gdmlt
+
+    w, h = args.width or 256, args.height or 256
+    desc = gdmlt.builtin_scene(args.scene, w, h)
+    scene = gdmlt.Scene(desc)
+    opts = {"method": "pt", "spp": 64, "time_limit": 0.0, "max_bounces": 8, "nee": True, "seed": 0, "threads": 0}
+    opts.update(_settings(args))
+    res = gdmlt.render(scene, **opts)
+    layers = res["layers"]
+    gdmlt.write_exr(str(out), [(n, layers[n]) for n in layers])
+    if not args.no_png:
+        gdmlt.write_png(str(out.with_suffix(".png")), layers["Combined"])
+    return res["stats"]
+
+
+def main(argv=None):
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if args.command != "render":
+        parser.error("unknown command")
+    out = Path(args.output)
+    if out.suffix.lower() != ".exr":
+        parser.error(f"output must be an .exr file, got '{out}'")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    try:
+        if args.scene in BUILTIN:
+            stats = render_builtin(args, out)
+        else:
+            path = Path(args.scene)
+            if path.suffix.lower() != ".blend":
+                parser.error(f"'{args.scene}' is neither a .blend file nor a built-in scene ({', '.join(BUILTIN)})")
+            if not path.is_file():
+                print(f"gdmlt: error: file not found: {path}", file=sys.stderr)
+                return 1
+            from .blend import render_blend
+            stats = render_blend(path, out, _settings(args), width=args.width, height=args.height,
+                                 png=not args.no_png)
+    except (ValueError, RuntimeError) as e:
+        print(f"gdmlt: error: {e}", file=sys.stderr)
+        return 1
+    for w in stats.get("warnings", []):
+        print(f"gdmlt: warning: {w}", file=sys.stderr)
+    total = time.perf_counter() - t0
+    print(f"wrote {out}" + ("" if args.no_png else f" and {out.with_suffix('.png')}"))
+    print(f"render {stats.get('elapsed', 0.0):.2f} s ({stats.get('spp_max', '?')} spp), total {total:.2f} s")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
