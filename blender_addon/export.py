@@ -125,13 +125,14 @@ def _light(ob, matrix, warnings):
     minus_z = tuple((minus_z / n if n > 0 else np.array([0, 0, -1.0])).tolist())
     if getattr(light, "use_nodes", False):
         warnings.append(f"light '{name}': light node trees are ignored; colour × power is used")
+    soft = bool(getattr(light, "use_soft_falloff", True))
     if light.type == "POINT":
         return {"type": "POINT", "name": name, "position": pos, "radius": float(light.shadow_soft_size),
-                "power": power, "visible_camera": visible}
+                "soft_falloff": soft, "power": power, "visible_camera": visible}
     if light.type == "SPOT":
         return {"type": "SPOT", "name": name, "position": pos, "direction": minus_z,
                 "radius": float(light.shadow_soft_size), "spot_size": float(light.spot_size),
-                "spot_blend": float(light.spot_blend), "power": power, "visible_camera": visible}
+                "spot_blend": float(light.spot_blend), "soft_falloff": soft, "power": power, "visible_camera": visible}
     if light.type == "AREA":
         return {"type": "AREA", "name": name, "matrix": m.astype(np.float32), "shape": light.shape,
                 "size": float(light.size), "size_y": float(light.size_y), "power": power,

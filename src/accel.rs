@@ -61,39 +61,21 @@ fn intersect(tri: &LeafTri, o: Vec3A, d: Vec3A, tmin: f32, tmax: f32) -> Option<
 impl Accel {
     /// Builds the BVH in parallel (rayon) over the triangles.
     pub fn build(tris: &[[Vec3; 3]]) -> Accel {
-        let obvhs_tris: Vec<Triangle> = tris
-            .iter()
-            .map(|t| Triangle {
-                v0: t[0].into(),
-                v1: t[1].into(),
-                v2: t[2].into(),
-            })
-            .collect();
+        let obvhs_tris: Vec<Triangle> =
+            tris.iter().map(|t| Triangle { v0: t[0].into(), v1: t[1].into(), v2: t[2].into() }).collect();
         // Small scenes build in microseconds with any preset; large ones get the fast preset's
         // build time with most of the quality (measured in the benchmarks).
-        let params = if tris.len() < 200_000 {
-            BvhBuildParams::medium_build()
-        } else {
-            BvhBuildParams::fast_build()
-        };
+        let params = if tris.len() < 200_000 { BvhBuildParams::medium_build() } else { BvhBuildParams::fast_build() };
         let bvh = build_cwbvh_from_tris(&obvhs_tris, params, &mut Duration::default());
         let leaf_prim: Vec<u32> = bvh.primitive_indices.clone();
         let leaf_tris = leaf_prim
             .iter()
             .map(|&i| {
                 let t = &tris[i as usize];
-                LeafTri {
-                    v0: t[0].into(),
-                    e1: (t[1] - t[0]).into(),
-                    e2: (t[2] - t[0]).into(),
-                }
+                LeafTri { v0: t[0].into(), e1: (t[1] - t[0]).into(), e2: (t[2] - t[0]).into() }
             })
             .collect();
-        Accel {
-            bvh,
-            leaf_tris,
-            leaf_prim,
-        }
+        Accel { bvh, leaf_tris, leaf_prim }
     }
 
     #[inline]
@@ -102,25 +84,19 @@ impl Accel {
         let ray = Ray::new(oa, da, tmin, tmax);
         let mut hit = obvhs::ray::RayHit::none();
         let (mut b1, mut b2) = (0.0, 0.0);
-        let found = self.bvh.ray_traverse(ray, &mut hit, |r, id| {
-            match intersect(&self.leaf_tris[id], oa, da, tmin, r.tmax) {
+        let found =
+            self.bvh.ray_traverse(ray, &mut hit, |r, id| match intersect(&self.leaf_tris[id], oa, da, tmin, r.tmax) {
                 Some((t, u, v)) => {
                     b1 = u;
                     b2 = v;
                     t
                 }
                 None => f32::INFINITY,
-            }
-        });
+            });
         if !found {
             return None;
         }
-        Some(TriHit {
-            prim: self.leaf_prim[hit.primitive_id as usize],
-            t: hit.t,
-            b1,
-            b2,
-        })
+        Some(TriHit { prim: self.leaf_prim[hit.primitive_id as usize], t: hit.t, b1, b2 })
     }
 
     #[inline]
@@ -141,11 +117,7 @@ mod tests {
     fn brute_force(tris: &[[Vec3; 3]], o: Vec3, d: Vec3) -> Option<(u32, f32)> {
         let mut best: Option<(u32, f32)> = None;
         for (i, t) in tris.iter().enumerate() {
-            let lt = LeafTri {
-                v0: t[0].into(),
-                e1: (t[1] - t[0]).into(),
-                e2: (t[2] - t[0]).into(),
-            };
+            let lt = LeafTri { v0: t[0].into(), e1: (t[1] - t[0]).into(), e2: (t[2] - t[0]).into() };
             if let Some((tt, _, _)) = intersect(&lt, o.into(), d.into(), 0.0, f32::INFINITY) {
                 if best.is_none_or(|b| tt < b.1) {
                     best = Some((i as u32, tt));
@@ -162,11 +134,7 @@ mod tests {
         let tris: Vec<[Vec3; 3]> = (0..2000)
             .map(|_| {
                 let c = Vec3::new(r(10.0), r(10.0), r(10.0));
-                [
-                    c,
-                    c + Vec3::new(r(1.0), r(1.0), r(1.0)),
-                    c + Vec3::new(r(1.0), r(1.0), r(1.0)),
-                ]
+                [c, c + Vec3::new(r(1.0), r(1.0), r(1.0)), c + Vec3::new(r(1.0), r(1.0), r(1.0))]
             })
             .collect();
         let accel = Accel::build(&tris);
@@ -179,12 +147,7 @@ mod tests {
             match (a, b) {
                 (Some(a), Some(b)) => {
                     hits += 1;
-                    assert!(
-                        (a.t - b.1).abs() <= 1e-4 * b.1.max(1.0),
-                        "t {} vs {}",
-                        a.t,
-                        b.1
-                    );
+                    assert!((a.t - b.1).abs() <= 1e-4 * b.1.max(1.0), "t {} vs {}", a.t, b.1);
                     // the same triangle, unless two triangles are hit at the same distance
                     if a.prim != b.0 {
                         assert!((a.t - b.1).abs() < 1e-5);

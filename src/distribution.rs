@@ -11,16 +11,7 @@ impl Distribution1D {
     /// Weights must be finite and ≥ 0; non-finite or negative weights count as 0.
     pub fn new(weights: &[f32]) -> Self {
         let mut total = 0.0f64;
-        let w: Vec<f64> = weights
-            .iter()
-            .map(|&x| {
-                if x.is_finite() && x > 0.0 {
-                    x as f64
-                } else {
-                    0.0
-                }
-            })
-            .collect();
+        let w: Vec<f64> = weights.iter().map(|&x| if x.is_finite() && x > 0.0 { x as f64 } else { 0.0 }).collect();
         for x in &w {
             total += x;
         }
@@ -29,11 +20,7 @@ impl Distribution1D {
         let mut acc = 0.0f64;
         for x in &w {
             acc += x;
-            cdf.push(if total > 0.0 {
-                (acc / total) as f32
-            } else {
-                0.0
-            });
+            cdf.push(if total > 0.0 { (acc / total) as f32 } else { 0.0 });
             pmf.push(if total > 0.0 { (x / total) as f32 } else { 0.0 });
         }
         if let Some(last) = cdf.last_mut() {
@@ -60,10 +47,7 @@ impl Distribution1D {
         if self.is_empty() {
             return None;
         }
-        let i = self
-            .cdf
-            .partition_point(|&c| c <= u)
-            .min(self.cdf.len() - 1);
+        let i = self.cdf.partition_point(|&c| c <= u).min(self.cdf.len() - 1);
         // skip zero-probability entries that partition_point may land on at the end
         let mut j = i;
         while self.pmf[j] == 0.0 && j > 0 {

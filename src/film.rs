@@ -15,12 +15,7 @@ pub struct Image {
 
 impl Image {
     pub fn new(width: usize, height: usize, channels: usize) -> Image {
-        Image {
-            width,
-            height,
-            channels,
-            data: vec![0.0; width * height * channels],
-        }
+        Image { width, height, channels, data: vec![0.0; width * height * channels] }
     }
     pub fn mean(&self) -> Vec<f64> {
         let mut m = vec![0.0f64; self.channels];
@@ -89,11 +84,7 @@ pub struct Film {
 
 impl Film {
     pub fn new(width: usize, height: usize) -> Film {
-        Film {
-            width,
-            height,
-            rows: vec![FilmRow::new(width); height],
-        }
+        Film { width, height, rows: vec![FilmRow::new(width); height] }
     }
 
     pub fn invalid_samples(&self) -> u64 {

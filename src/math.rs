@@ -137,12 +137,7 @@ mod tests {
 
     #[test]
     fn frame_is_orthonormal() {
-        for &n in &[
-            Vec3::Z,
-            -Vec3::Z,
-            Vec3::new(0.3, -0.4, 0.866).normalize(),
-            Vec3::X,
-        ] {
+        for &n in &[Vec3::Z, -Vec3::Z, Vec3::new(0.3, -0.4, 0.866).normalize(), Vec3::X] {
             let f = Frame::from_normal(n);
             assert!((f.s.dot(f.t)).abs() < 1e-5);
             assert!((f.s.dot(f.n)).abs() < 1e-5);

@@ -3,9 +3,7 @@
 
 use crate::error::RenderError;
 use crate::film::Image;
-use exr::prelude::{
-    AnyChannel, AnyChannels, Encoding, FlatSamples, Layer, LayerAttributes, SmallVec, WritableImage,
-};
+use exr::prelude::{AnyChannel, AnyChannels, Encoding, FlatSamples, Layer, LayerAttributes, SmallVec, WritableImage};
 use std::path::Path;
 
 fn channel_names(layer: &str, channels: usize, first: bool) -> Vec<String> {
@@ -15,17 +13,7 @@ fn channel_names(layer: &str, channels: usize, first: bool) -> Vec<String> {
         4 => &["R", "G", "B", "A"],
         _ => &["X", "Y", "Z", "W"],
     };
-    suffix
-        .iter()
-        .take(channels)
-        .map(|s| {
-            if first {
-                s.to_string()
-            } else {
-                format!("{layer}.{s}")
-            }
-        })
-        .collect()
+    suffix.iter().take(channels).map(|s| if first { s.to_string() } else { format!("{layer}.{s}") }).collect()
 }
 
 /// Writes named images of equal size into one EXR file. The first image is the main RGB.
@@ -45,17 +33,8 @@ pub fn write_exr(path: &Path, layers: &[(&str, &Image)]) -> Result<(), RenderErr
                 img.width, img.height
             )));
         }
-        for (c, cname) in channel_names(name, img.channels, k == 0)
-            .into_iter()
-            .enumerate()
-        {
-            let samples: Vec<f32> = img
-                .data
-                .iter()
-                .skip(c)
-                .step_by(img.channels)
-                .copied()
-                .collect();
+        for (c, cname) in channel_names(name, img.channels, k == 0).into_iter().enumerate() {
+            let samples: Vec<f32> = img.data.iter().skip(c).step_by(img.channels).copied().collect();
             list.push(AnyChannel::new(cname.as_str(), FlatSamples::F32(samples)));
         }
     }
@@ -74,11 +53,7 @@ pub fn write_exr(path: &Path, layers: &[(&str, &Image)]) -> Result<(), RenderErr
 /// sRGB opto-electronic transfer function (IEC 61966-2-1).
 #[inline]
 pub fn linear_to_srgb(x: f32) -> f32 {
-    let x = if x.is_finite() {
-        x.clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
+    let x = if x.is_finite() { x.clamp(0.0, 1.0) } else { 0.0 };
     if x <= 0.003_130_8 {
         12.92 * x
     } else {
@@ -90,17 +65,11 @@ pub fn linear_to_srgb(x: f32) -> f32 {
 /// "Standard" view transform).
 pub fn write_png(path: &Path, img: &Image) -> Result<(), RenderError> {
     if img.channels < 3 || img.width == 0 || img.height == 0 {
-        return Err(RenderError::Output(
-            "PNG needs a non-empty RGB image".into(),
-        ));
+        return Err(RenderError::Output("PNG needs a non-empty RGB image".into()));
     }
     let err = |e: &dyn std::fmt::Display| RenderError::Output(format!("{}: {e}", path.display()));
     let file = std::fs::File::create(path).map_err(|e| err(&e))?;
-    let mut enc = png::Encoder::new(
-        std::io::BufWriter::new(file),
-        img.width as u32,
-        img.height as u32,
-    );
+    let mut enc = png::Encoder::new(std::io::BufWriter::new(file), img.width as u32, img.height as u32);
     enc.set_color(png::ColorType::Rgb);
     enc.set_depth(png::BitDepth::Eight);
     enc.set_source_srgb(png::SrgbRenderingIntent::Perceptual);
@@ -126,10 +95,7 @@ mod tests {
             *v = i as f32 * 0.37 - 1.0;
         }
         let mut b = Image::new(5, 3, 3);
-        b.data
-            .iter_mut()
-            .enumerate()
-            .for_each(|(i, v)| *v = (i as f32).sqrt());
+        b.data.iter_mut().enumerate().for_each(|(i, v)| *v = (i as f32).sqrt());
         let dir = std::env::temp_dir().join(format!("gdmlt-exr-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let p = dir.join("t.exr");
@@ -137,12 +103,7 @@ mod tests {
         let img = read_all_flat_layers_from_file(&p).unwrap();
         let layer = &img.layer_data[0];
         let find = |name: &str| -> Vec<f32> {
-            let ch = layer
-                .channel_data
-                .list
-                .iter()
-                .find(|c| c.name == Text::from(name))
-                .unwrap();
+            let ch = layer.channel_data.list.iter().find(|c| c.name == Text::from(name)).unwrap();
             ch.sample_data.values_as_f32().collect()
         };
         let r = find("R");

@@ -29,10 +29,7 @@ pub struct PathSettings {
 
 impl Default for PathSettings {
     fn default() -> Self {
-        PathSettings {
-            max_bounces: 8,
-            nee: true,
-        }
+        PathSettings { max_bounces: 8, nee: true }
     }
 }
 
@@ -105,9 +102,7 @@ pub fn trace_path<S: Sampler>(
 
         // Analytic lights crossed before the surface (lights are transparent).
         let mut crossed = Spectrum::ZERO;
-        scene.for_each_light_crossed(o, d, t_surface, camera_ray, |le, pdf_light| {
-            crossed += le * mis(pdf_light)
-        });
+        scene.for_each_light_crossed(o, d, t_surface, camera_ray, |le, pdf_light| crossed += le * mis(pdf_light));
         add(&mut out, beta * crossed, camera_ray);
 
         let Some(hit) = hit else {
@@ -154,11 +149,7 @@ pub fn trace_path<S: Sampler>(
                 let wi = si.frame.to_local(ls.wi);
                 let f = bsdf.eval(wo, wi);
                 if f.max_element() > 0.0 && ls.wi.dot(si.ng) > 0.0 && scene.visible(&si, &ls) {
-                    let w = if ls.is_delta {
-                        1.0
-                    } else {
-                        power_heuristic(ls.pdf, bsdf.pdf(wo, wi))
-                    };
+                    let w = if ls.is_delta { 1.0 } else { power_heuristic(ls.pdf, bsdf.pdf(wo, wi)) };
                     add(&mut out, beta * f * ls.radiance * (w / ls.pdf), false);
                 }
             }

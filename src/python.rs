@@ -5,10 +5,7 @@
 use crate::film::Image;
 use crate::integrator::{self, Method, RenderControl, RenderSettings};
 use crate::path::PathSettings;
-use crate::scene::{
-    self, AreaShape, CameraDesc, LightDesc, MaterialDesc, MeshDesc, Projection, SceneDesc,
-    SensorFit,
-};
+use crate::scene::{self, AreaShape, CameraDesc, LightDesc, MaterialDesc, MeshDesc, Projection, SceneDesc, SensorFit};
 use numpy::{PyArray1, PyArrayMethods, PyReadonlyArrayDyn, PyUntypedArrayMethods};
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
@@ -21,52 +18,40 @@ fn verr(msg: impl Into<String>) -> PyErr {
 }
 
 fn get<'py>(d: &Bound<'py, PyDict>, key: &str, ctx: &str) -> PyResult<Bound<'py, PyAny>> {
-    d.get_item(key)?
-        .ok_or_else(|| verr(format!("{ctx}: missing '{key}'")))
+    d.get_item(key)?.ok_or_else(|| verr(format!("{ctx}: missing '{key}'")))
 }
 
-fn get_or<'py, T: FromPyObjectOwned<'py>>(
-    d: &Bound<'py, PyDict>,
-    key: &str,
-    default: T,
-    ctx: &str,
-) -> PyResult<T> {
+fn get_or<'py, T: FromPyObjectOwned<'py>>(d: &Bound<'py, PyDict>, key: &str, default: T, ctx: &str) -> PyResult<T> {
     match d.get_item(key)? {
-        Some(v) if !v.is_none() => v
-            .extract::<T>()
-            .map_err(|e| verr(format!("{ctx}: '{key}': {}", Into::<PyErr>::into(e)))),
+        Some(v) if !v.is_none() => {
+            v.extract::<T>().map_err(|e| verr(format!("{ctx}: '{key}': {}", Into::<PyErr>::into(e))))
+        }
         _ => Ok(default),
     }
 }
 
 fn floats(obj: &Bound<'_, PyAny>, cols: usize, what: &str) -> PyResult<Vec<f32>> {
-    let arr: PyReadonlyArrayDyn<f32> = obj
-        .extract()
-        .map_err(|_| verr(format!("{what}: expected a float32 numpy array")))?;
+    let arr: PyReadonlyArrayDyn<f32> =
+        obj.extract().map_err(|_| verr(format!("{what}: expected a float32 numpy array")))?;
     let shape = arr.shape();
     let ok = (cols == 0 && shape.len() == 1)
         || (shape.len() == 2 && shape[1] == cols)
         || (shape.len() == 1 && cols > 0 && shape[0] % cols == 0);
     if !ok {
-        return Err(verr(format!(
-            "{what}: unexpected shape {shape:?} (need N×{cols})"
-        )));
+        return Err(verr(format!("{what}: unexpected shape {shape:?} (need N×{cols})")));
     }
     Ok(arr.as_array().iter().copied().collect())
 }
 
 fn uints(obj: &Bound<'_, PyAny>, cols: usize, what: &str) -> PyResult<Vec<u32>> {
-    let arr: PyReadonlyArrayDyn<u32> = obj
-        .extract()
-        .map_err(|_| verr(format!("{what}: expected a uint32 numpy array")))?;
+    let arr: PyReadonlyArrayDyn<u32> =
+        obj.extract().map_err(|_| verr(format!("{what}: expected a uint32 numpy array")))?;
     let shape = arr.shape();
     let ok = (cols == 1 && shape.len() == 1)
         || (shape.len() == 2 && shape[1] == cols)
         || (shape.len() == 1 && shape[0] % cols == 0);
     if !ok {
-        return Err(verr(format!(
-            "{what}: unexpected shape {shape:?} (need N×{cols})"
-        )));
+        return Err(verr(format!("{what}: unexpected shape {shape:?} (need N×{cols})")));
     }
     Ok(arr.as_array().iter().copied().collect())
 }
@@ -90,11 +75,7 @@ fn matrix(d: &Bound<'_, PyDict>, key: &str, ctx: &str) -> PyResult<[[f32; 4]; 4]
 fn parse_mesh(d: &Bound<'_, PyDict>) -> PyResult<MeshDesc> {
     let name: String = get_or(d, "name", "mesh".to_string(), "mesh")?;
     let ctx = format!("mesh '{name}'");
-    let positions = vec3s(floats(
-        &get(d, "positions", &ctx)?,
-        3,
-        &format!("{ctx}: positions"),
-    )?);
+    let positions = vec3s(floats(&get(d, "positions", &ctx)?, 3, &format!("{ctx}: positions"))?);
     let idx = uints(&get(d, "indices", &ctx)?, 3, &format!("{ctx}: indices"))?;
     let indices = idx.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
     let corner_normals = match d.get_item("normals")? {
@@ -105,13 +86,7 @@ fn parse_mesh(d: &Bound<'_, PyDict>) -> PyResult<MeshDesc> {
         Some(m) if !m.is_none() => uints(&m, 1, &format!("{ctx}: material_ids"))?,
         _ => vec![],
     };
-    Ok(MeshDesc {
-        name,
-        positions,
-        indices,
-        corner_normals,
-        material_ids,
-    })
+    Ok(MeshDesc { name, positions, indices, corner_normals, material_ids })
 }
 
 fn parse_material(d: &Bound<'_, PyDict>) -> PyResult<MaterialDesc> {
@@ -139,6 +114,7 @@ fn parse_light(d: &Bound<'_, PyDict>) -> PyResult<LightDesc> {
         "POINT" => LightDesc::Point {
             position: rgb(d, "position", [0.0; 3], &ctx)?,
             radius: get_or(d, "radius", 0.0, &ctx)?,
+            soft_falloff: get_or(d, "soft_falloff", true, &ctx)?,
             power,
             visible_camera,
             name,
@@ -149,6 +125,7 @@ fn parse_light(d: &Bound<'_, PyDict>) -> PyResult<LightDesc> {
             radius: get_or(d, "radius", 0.0, &ctx)?,
             spot_size: get_or(d, "spot_size", std::f32::consts::FRAC_PI_4, &ctx)?,
             spot_blend: get_or(d, "spot_blend", 0.15, &ctx)?,
+            soft_falloff: get_or(d, "soft_falloff", true, &ctx)?,
             power,
             visible_camera,
             name,
@@ -181,11 +158,7 @@ fn parse_light(d: &Bound<'_, PyDict>) -> PyResult<LightDesc> {
             visible_camera,
             name,
         },
-        other => {
-            return Err(verr(format!(
-                "{ctx}: unknown light type '{other}' (POINT, SPOT, AREA or SUN)"
-            )))
-        }
+        other => return Err(verr(format!("{ctx}: unknown light type '{other}' (POINT, SPOT, AREA or SUN)"))),
     })
 }
 
@@ -199,11 +172,7 @@ fn parse_camera(d: &Bound<'_, PyDict>) -> PyResult<CameraDesc> {
         projection: match projection.to_ascii_uppercase().as_str() {
             "PERSP" => Projection::Perspective,
             "ORTHO" => Projection::Orthographic,
-            p => {
-                return Err(verr(format!(
-                    "camera: unsupported type '{p}' (PERSP or ORTHO)"
-                )))
-            }
+            p => return Err(verr(format!("camera: unsupported type '{p}' (PERSP or ORTHO)"))),
         },
         sensor_fit: match fit.to_ascii_uppercase().as_str() {
             "AUTO" => SensorFit::Auto,
@@ -236,31 +205,17 @@ fn parse_scene(d: &Bound<'_, PyDict>) -> PyResult<SceneDesc> {
                 .cast::<PyList>()
                 .map_err(|_| verr(format!("scene: '{key}' must be a list")))?
                 .iter()
-                .map(|x| {
-                    x.cast_into::<PyDict>()
-                        .map_err(|_| verr(format!("scene: '{key}' entries must be dicts")))
-                })
+                .map(|x| x.cast_into::<PyDict>().map_err(|_| verr(format!("scene: '{key}' entries must be dicts"))))
                 .collect(),
             _ => Ok(vec![]),
         }
     };
     Ok(SceneDesc {
-        meshes: list("meshes")?
-            .iter()
-            .map(parse_mesh)
-            .collect::<PyResult<_>>()?,
-        materials: list("materials")?
-            .iter()
-            .map(parse_material)
-            .collect::<PyResult<_>>()?,
-        lights: list("lights")?
-            .iter()
-            .map(parse_light)
-            .collect::<PyResult<_>>()?,
+        meshes: list("meshes")?.iter().map(parse_mesh).collect::<PyResult<_>>()?,
+        materials: list("materials")?.iter().map(parse_material).collect::<PyResult<_>>()?,
+        lights: list("lights")?.iter().map(parse_light).collect::<PyResult<_>>()?,
         camera: parse_camera(
-            &get(d, "camera", "scene")?
-                .cast_into::<PyDict>()
-                .map_err(|_| verr("scene: camera must be a dict"))?,
+            &get(d, "camera", "scene")?.cast_into::<PyDict>().map_err(|_| verr("scene: camera must be a dict"))?,
         )?,
         world: get_or(d, "world", [0.0; 3], "scene")?,
     })
@@ -281,9 +236,7 @@ impl Scene {
         match built {
             Ok(Ok(s)) => Ok(Scene { inner: Arc::new(s) }),
             Ok(Err(e)) => Err(verr(e.to_string())),
-            Err(_) => Err(PyRuntimeError::new_err(
-                "internal error while building the scene (a bug: please report it)",
-            )),
+            Err(_) => Err(PyRuntimeError::new_err("internal error while building the scene (a bug: please report it)")),
         }
     }
     #[getter]
@@ -300,10 +253,7 @@ impl Scene {
     }
     /// Raster position (x, y from the top, in pixels) of a world point, or None behind the camera.
     fn project(&self, p: [f32; 3]) -> Option<(f32, f32)> {
-        self.inner
-            .camera
-            .project(glam::Vec3::from_array(p))
-            .map(|v| (v.x, v.y))
+        self.inner.camera.project(glam::Vec3::from_array(p)).map(|v| (v.x, v.y))
     }
 }
 
@@ -313,21 +263,13 @@ fn image_to_numpy<'py>(py: Python<'py>, img: &Image) -> PyResult<Bound<'py, PyAn
 }
 
 fn numpy_to_image(obj: &Bound<'_, PyAny>) -> PyResult<Image> {
-    let arr: PyReadonlyArrayDyn<f32> = obj
-        .extract()
-        .map_err(|_| verr("expected a float32 numpy array of shape (H, W, C)"))?;
+    let arr: PyReadonlyArrayDyn<f32> =
+        obj.extract().map_err(|_| verr("expected a float32 numpy array of shape (H, W, C)"))?;
     let s = arr.shape();
     if s.len() != 3 || s[2] == 0 {
-        return Err(verr(format!(
-            "expected an image of shape (H, W, C), got {s:?}"
-        )));
+        return Err(verr(format!("expected an image of shape (H, W, C), got {s:?}")));
     }
-    Ok(Image {
-        height: s[0],
-        width: s[1],
-        channels: s[2],
-        data: arr.as_array().iter().copied().collect(),
-    })
+    Ok(Image { height: s[0], width: s[1], channels: s[2], data: arr.as_array().iter().copied().collect() })
 }
 
 /// Renders a scene. `progress(fraction, elapsed_seconds)` is called about every 50 ms from
@@ -348,19 +290,10 @@ fn render<'py>(
     progress: Option<Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let method = Method::parse(method).map_err(|e| verr(e.to_string()))?;
-    let settings = RenderSettings {
-        method,
-        spp,
-        time_limit,
-        path: PathSettings { max_bounces, nee },
-        seed,
-        threads,
-    };
+    let settings = RenderSettings { method, spp, time_limit, path: PathSettings { max_bounces, nee }, seed, threads };
     settings.validate().map_err(|e| verr(e.to_string()))?;
     let control = RenderControl::new(time_limit);
-    let sc = self::Scene {
-        inner: scene.inner.clone(),
-    };
+    let sc = self::Scene { inner: scene.inner.clone() };
     let progress = progress.map(|p| p.unbind());
     let mut callback_error: Option<PyErr> = None;
     let result = py.detach(|| {
@@ -373,17 +306,15 @@ fn render<'py>(
             while !worker.is_finished() {
                 std::thread::sleep(Duration::from_millis(50));
                 if let Some(cb) = &progress {
-                    Python::attach(|py| {
-                        match cb.call1(py, (control.progress(), control.elapsed())) {
-                            Ok(r) => {
-                                if r.is_truthy(py).unwrap_or(false) {
-                                    control.cancel();
-                                }
-                            }
-                            Err(e) => {
+                    Python::attach(|py| match cb.call1(py, (control.progress(), control.elapsed())) {
+                        Ok(r) => {
+                            if r.is_truthy(py).unwrap_or(false) {
                                 control.cancel();
-                                callback_error.get_or_insert(e);
                             }
+                        }
+                        Err(e) => {
+                            control.cancel();
+                            callback_error.get_or_insert(e);
                         }
                     });
                 } else if Python::attach(|py| py.check_signals()).is_err() {
@@ -399,11 +330,7 @@ fn render<'py>(
     let out = match result {
         Ok(Ok(Ok(out))) => out,
         Ok(Ok(Err(e))) => return Err(verr(e.to_string())),
-        _ => {
-            return Err(PyRuntimeError::new_err(
-                "internal error during the render (a bug: please report it)",
-            ))
-        }
+        _ => return Err(PyRuntimeError::new_err("internal error during the render (a bug: please report it)")),
     };
     let dict = PyDict::new(py);
     let layers = PyDict::new(py);
@@ -432,17 +359,9 @@ fn mat_to_numpy<'py>(py: Python<'py>, m: &[[f32; 4]; 4]) -> PyResult<Bound<'py, 
 /// The scene dict of a built-in scene ("cornell", "furnace").
 #[pyfunction]
 #[pyo3(signature = (name, width=256, height=256))]
-fn builtin_scene<'py>(
-    py: Python<'py>,
-    name: &str,
-    width: u32,
-    height: u32,
-) -> PyResult<Bound<'py, PyDict>> {
+fn builtin_scene<'py>(py: Python<'py>, name: &str, width: u32, height: u32) -> PyResult<Bound<'py, PyDict>> {
     let d = scene::builtin::builtin(name, width, height).ok_or_else(|| {
-        verr(format!(
-            "unknown built-in scene '{name}' (known: {})",
-            scene::builtin::BUILTIN_SCENES.join(", ")
-        ))
+        verr(format!("unknown built-in scene '{name}' (known: {})", scene::builtin::BUILTIN_SCENES.join(", ")))
     })?;
     let out = PyDict::new(py);
     let meshes = PyList::empty(py);
@@ -450,15 +369,9 @@ fn builtin_scene<'py>(
         let md = PyDict::new(py);
         md.set_item("name", &m.name)?;
         let pos: Vec<f32> = m.positions.iter().flatten().copied().collect();
-        md.set_item(
-            "positions",
-            PyArray1::from_vec(py, pos).reshape([m.positions.len(), 3])?,
-        )?;
+        md.set_item("positions", PyArray1::from_vec(py, pos).reshape([m.positions.len(), 3])?)?;
         let idx: Vec<u32> = m.indices.iter().flatten().copied().collect();
-        md.set_item(
-            "indices",
-            PyArray1::from_vec(py, idx).reshape([m.indices.len(), 3])?,
-        )?;
+        md.set_item("indices", PyArray1::from_vec(py, idx).reshape([m.indices.len(), 3])?)?;
         md.set_item("material_ids", PyArray1::from_slice(py, &m.material_ids))?;
         meshes.append(md)?;
     }
@@ -480,14 +393,7 @@ fn builtin_scene<'py>(
     let c = &d.camera;
     let cd = PyDict::new(py);
     cd.set_item("matrix", mat_to_numpy(py, &c.to_world)?)?;
-    cd.set_item(
-        "type",
-        if c.projection == Projection::Perspective {
-            "PERSP"
-        } else {
-            "ORTHO"
-        },
-    )?;
+    cd.set_item("type", if c.projection == Projection::Perspective { "PERSP" } else { "ORTHO" })?;
     cd.set_item("lens", c.lens)?;
     cd.set_item("sensor_width", c.sensor_width)?;
     cd.set_item("sensor_height", c.sensor_height)?;
@@ -504,18 +410,11 @@ fn builtin_scene<'py>(
 /// Writes images into one EXR: `layers` is a list of (name, float32 array (H, W, C)); the
 /// first is the main RGB.
 #[pyfunction]
-fn write_exr(
-    py: Python<'_>,
-    path: std::path::PathBuf,
-    layers: Vec<(String, Bound<'_, PyAny>)>,
-) -> PyResult<()> {
-    let imgs: Vec<(String, Image)> = layers
-        .iter()
-        .map(|(n, a)| Ok((n.clone(), numpy_to_image(a)?)))
-        .collect::<PyResult<_>>()?;
+fn write_exr(py: Python<'_>, path: std::path::PathBuf, layers: Vec<(String, Bound<'_, PyAny>)>) -> PyResult<()> {
+    let imgs: Vec<(String, Image)> =
+        layers.iter().map(|(n, a)| Ok((n.clone(), numpy_to_image(a)?))).collect::<PyResult<_>>()?;
     let refs: Vec<(&str, &Image)> = imgs.iter().map(|(n, i)| (n.as_str(), i)).collect();
-    py.detach(|| crate::output::write_exr(&path, &refs))
-        .map_err(|e| PyRuntimeError::new_err(e.to_string()))
+    py.detach(|| crate::output::write_exr(&path, &refs)).map_err(|e| PyRuntimeError::new_err(e.to_string()))
 }
 
 /// Writes an RGB float32 (H, W, 3) linear image as an 8-bit sRGB PNG.

@@ -43,9 +43,7 @@ impl IndependentSampler {
     /// whatever the thread count or scheduling.
     pub fn new(seed: u64, stream: u64) -> Self {
         let state = mix64(seed ^ mix64(stream));
-        IndependentSampler {
-            rng: Pcg32::new(state, mix64(stream.wrapping_add(0x5851_F42D))),
-        }
+        IndependentSampler { rng: Pcg32::new(state, mix64(stream.wrapping_add(0x5851_F42D))) }
     }
     #[inline]
     pub fn next_u32(&mut self) -> u32 {

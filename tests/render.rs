@@ -7,14 +7,7 @@ use gdmlt::path::PathSettings;
 use gdmlt::scene::builtin::{cornell_box, furnace_sphere};
 use gdmlt::scene::{Scene, SceneDesc};
 
-fn run(
-    desc: &SceneDesc,
-    spp: u32,
-    nee: bool,
-    max_bounces: u32,
-    seed: u64,
-    threads: usize,
-) -> Image {
+fn run(desc: &SceneDesc, spp: u32, nee: bool, max_bounces: u32, seed: u64, threads: usize) -> Image {
     let scene = Scene::build(desc).expect("scene builds");
     let settings = RenderSettings {
         method: Method::Pt,
@@ -30,13 +23,7 @@ fn run(
 }
 
 fn mean_and_stderr(img: &Image, channel: usize) -> (f64, f64) {
-    let v: Vec<f64> = img
-        .data
-        .iter()
-        .skip(channel)
-        .step_by(3)
-        .map(|&x| x as f64)
-        .collect();
+    let v: Vec<f64> = img.data.iter().skip(channel).step_by(3).map(|&x| x as f64).collect();
     let n = v.len() as f64;
     let m = v.iter().sum::<f64>() / n;
     let var = v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (n - 1.0);
@@ -50,9 +37,7 @@ fn mean_and_stderr(img: &Image, channel: usize) -> (f64, f64) {
 fn furnace_sphere_converges_to_analytic_radiance() {
     for (albedo, bounces) in [(0.8f32, 8u32), (1.0, 3), (0.5, 0)] {
         let desc = furnace_sphere(albedo, 1.0, 24, 24);
-        let expected: f64 = (0..=bounces + 1)
-            .map(|k| (albedo as f64).powi(k as i32))
-            .sum();
+        let expected: f64 = (0..=bounces + 1).map(|k| (albedo as f64).powi(k as i32)).sum();
         for nee in [false, true] {
             let img = run(&desc, 32, nee, bounces, 5, 0);
             let (m, se) = mean_and_stderr(&img, 1);
@@ -98,10 +83,7 @@ fn nee_and_naive_path_tracing_agree_on_cornell_box() {
     assert!(rd < 1.3 * re, "NEE−naive rms {rd} vs naive−naive rms {re}");
     // A bias shows in the mean over blocks: its standard error is ≈ re/sqrt(n).
     let mean_d = d.iter().sum::<f64>() / d.len() as f64;
-    assert!(
-        mean_d.abs() < 4.0 * re / (d.len() as f64).sqrt(),
-        "mean difference {mean_d} (noise rms {re})"
-    );
+    assert!(mean_d.abs() < 4.0 * re / (d.len() as f64).sqrt(), "mean difference {mean_d} (noise rms {re})");
     // the image is not black
     assert!(naive_a.iter().sum::<f64>() / naive_a.len() as f64 > 0.05);
 }
@@ -113,27 +95,16 @@ fn output_is_independent_of_thread_count() {
     let b = run(&desc, 4, true, 4, 9, 2);
     assert_eq!(a.data, b.data);
     let c = run(&desc, 4, true, 4, 10, 2);
-    assert_ne!(
-        a.data, c.data,
-        "a different seed must give a different image"
-    );
+    assert_ne!(a.data, c.data, "a different seed must give a different image");
 }
 
 #[test]
 fn cancel_and_time_limit_stop_the_render() {
     let scene = Scene::build(&cornell_box(64, 64)).unwrap();
-    let settings = RenderSettings {
-        spp: 1_000_000,
-        time_limit: 0.3,
-        ..Default::default()
-    };
+    let settings = RenderSettings { spp: 1_000_000, time_limit: 0.3, ..Default::default() };
     let t = std::time::Instant::now();
     let out = render(&scene, &settings, &RenderControl::new(settings.time_limit)).unwrap();
-    assert!(
-        t.elapsed().as_secs_f64() < 2.0,
-        "time limit ignored: {:?}",
-        t.elapsed()
-    );
+    assert!(t.elapsed().as_secs_f64() < 2.0, "time limit ignored: {:?}", t.elapsed());
     assert!(out.stats.spp_max >= 1 && out.stats.spp_max < 1_000_000);
     let ctl = RenderControl::new(0.0);
     ctl.cancel();
@@ -146,18 +117,11 @@ fn cancel_and_time_limit_stop_the_render() {
 fn bad_input_is_an_error_naming_the_object() {
     let mut desc = cornell_box(8, 8);
     desc.meshes[2].positions[1][0] = f32::NAN;
-    let err = Scene::build(&desc)
-        .err()
-        .expect("NaN vertex must be rejected")
-        .to_string();
+    let err = Scene::build(&desc).err().expect("NaN vertex must be rejected").to_string();
     assert!(err.contains("BackWall") && err.contains("NaN"), "{err}");
     let mut desc = cornell_box(8, 8);
     desc.meshes[0].indices[0][2] = 99;
-    assert!(Scene::build(&desc)
-        .err()
-        .unwrap()
-        .to_string()
-        .contains("Floor"));
+    assert!(Scene::build(&desc).err().unwrap().to_string().contains("Floor"));
     let mut desc = cornell_box(8, 8);
     desc.camera.resolution_x = 0;
     assert!(Scene::build(&desc).is_err());
@@ -170,25 +134,9 @@ fn degenerate_triangles_and_empty_scenes_render_finite() {
     let scene = Scene::build(&desc).unwrap();
     assert_eq!(scene.report.degenerate_triangles, 1);
     assert!(!scene.report.warnings.is_empty());
-    let empty = SceneDesc {
-        camera: desc.camera.clone(),
-        ..Default::default()
-    };
+    let empty = SceneDesc { camera: desc.camera.clone(), ..Default::default() };
     let scene = Scene::build(&empty).unwrap();
     assert!(scene.report.warnings.iter().any(|w| w.contains("no light")));
-    let out = render(
-        &scene,
-        &RenderSettings {
-            spp: 2,
-            ..Default::default()
-        },
-        &RenderControl::new(0.0),
-    )
-    .unwrap();
-    assert!(out
-        .layer("Combined")
-        .unwrap()
-        .data
-        .iter()
-        .all(|&x| x == 0.0));
+    let out = render(&scene, &RenderSettings { spp: 2, ..Default::default() }, &RenderControl::new(0.0)).unwrap();
+    assert!(out.layer("Combined").unwrap().data.iter().all(|&x| x == 0.0));
 }

@@ -38,13 +38,7 @@ impl Lambert {
             return None;
         }
         // f·cos/pdf = (albedo/π)·cos / (cos/π) = albedo
-        Some(BsdfSample {
-            wi,
-            weight: self.albedo,
-            pdf,
-            lobe: LobeKind::Diffuse,
-            eta: 1.0,
-        })
+        Some(BsdfSample { wi, weight: self.albedo, pdf, lobe: LobeKind::Diffuse, eta: 1.0 })
     }
 }
 
@@ -56,33 +50,19 @@ mod tests {
 
     #[test]
     fn lambert_chi2() {
-        let b = Bsdf::Lambert(Lambert {
-            albedo: Spectrum::ONE,
-        });
-        for wo in [
-            Vec3::Z,
-            Vec3::new(0.6, 0.0, 0.8),
-            Vec3::new(-0.3, 0.9, 0.316).normalize(),
-        ] {
+        let b = Bsdf::Lambert(Lambert { albedo: Spectrum::ONE });
+        for wo in [Vec3::Z, Vec3::new(0.6, 0.0, 0.8), Vec3::new(-0.3, 0.9, 0.316).normalize()] {
             chi2_test(&b, wo, 0xC0FFEE);
         }
     }
 
     #[test]
     fn lambert_white_furnace() {
-        let b = Bsdf::Lambert(Lambert {
-            albedo: Spectrum::ONE,
-        });
+        let b = Bsdf::Lambert(Lambert { albedo: Spectrum::ONE });
         for wo in [Vec3::Z, Vec3::new(0.6, 0.0, 0.8)] {
             let (by_sampling, by_quadrature) = white_furnace(&b, wo, 400_000, 11);
-            assert!(
-                (by_sampling - 1.0).abs() < 1e-3,
-                "sampled albedo {by_sampling}"
-            );
-            assert!(
-                (by_quadrature - 1.0).abs() < 1e-2,
-                "integrated albedo {by_quadrature}"
-            );
+            assert!((by_sampling - 1.0).abs() < 1e-3, "sampled albedo {by_sampling}");
+            assert!((by_quadrature - 1.0).abs() < 1e-2, "integrated albedo {by_quadrature}");
         }
     }
 }

@@ -31,11 +31,7 @@ pub fn chi2_test(bsdf: &Bsdf, wo: Vec3, seed: u64) {
             assert!(bs.pdf > 0.0 && bs.weight.is_finite());
             // the pdf that sample reports must equal pdf()
             let p = bsdf.pdf(wo, bs.wi);
-            assert!(
-                (p - bs.pdf).abs() <= 1e-3 * p.max(1e-3),
-                "pdf mismatch {p} vs {}",
-                bs.pdf
-            );
+            assert!((p - bs.pdf).abs() <= 1e-3 * p.max(1e-3), "pdf mismatch {p} vs {}", bs.pdf);
             observed[bin_of(bs.wi)] += 1.0;
         }
     }
@@ -63,10 +59,7 @@ pub fn chi2_test(bsdf: &Bsdf, wo: Vec3, seed: u64) {
         if expected[k] < 5.0 {
             pool_o += observed[k];
             pool_e += expected[k];
-            assert!(
-                expected[k] > 0.0 || observed[k] == 0.0,
-                "sample in a zero-pdf bin {k}"
-            );
+            assert!(expected[k] > 0.0 || observed[k] == 0.0, "sample in a zero-pdf bin {k}");
         } else {
             chi2 += (observed[k] - expected[k]).powi(2) / expected[k];
             dof += 1;
@@ -79,10 +72,7 @@ pub fn chi2_test(bsdf: &Bsdf, wo: Vec3, seed: u64) {
     let dof = (dof.max(2) - 1) as f64;
     let z = 3.09; // one-sided normal quantile for 1e-3
     let q = dof * (1.0 - 2.0 / (9.0 * dof) + z * (2.0 / (9.0 * dof)).sqrt()).powi(3);
-    assert!(
-        chi2 < q,
-        "chi-square {chi2:.1} exceeds {q:.1} (dof {dof}) for wo={wo:?}"
-    );
+    assert!(chi2 < q, "chi-square {chi2:.1} exceeds {q:.1} (dof {dof}) for wo={wo:?}");
 }
 
 /// Directional albedo ∫ f·|cos| dωi two ways: by the BSDF's own sampling and by uniform

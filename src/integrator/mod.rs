@@ -26,9 +26,9 @@ impl Method {
             "gdpt" => Ok(Method::Gdpt),
             "pssmlt" => Ok(Method::Pssmlt),
             "gdpssmlt" => Ok(Method::Gdpssmlt),
-            other => Err(RenderError::Settings(format!(
-                "unknown method '{other}' (expected pt, gdpt, pssmlt or gdpssmlt)"
-            ))),
+            other => {
+                Err(RenderError::Settings(format!("unknown method '{other}' (expected pt, gdpt, pssmlt or gdpssmlt)")))
+            }
         }
     }
     pub fn name(&self) -> &'static str {
@@ -73,14 +73,10 @@ impl RenderSettings {
             return Err(RenderError::Settings("samples must be at least 1".into()));
         }
         if !self.time_limit.is_finite() || self.time_limit < 0.0 {
-            return Err(RenderError::Settings(
-                "time limit must be a finite number of seconds ≥ 0".into(),
-            ));
+            return Err(RenderError::Settings("time limit must be a finite number of seconds ≥ 0".into()));
         }
         if self.path.max_bounces > 1024 {
-            return Err(RenderError::Settings(
-                "max bounces must be at most 1024".into(),
-            ));
+            return Err(RenderError::Settings("max bounces must be at most 1024".into()));
         }
         if self.threads > 1024 {
             return Err(RenderError::Settings("threads must be at most 1024".into()));
@@ -105,11 +101,7 @@ impl RenderControl {
             work_done: AtomicU64::new(0),
             work_total: AtomicU64::new(1),
             start: Instant::now(),
-            time_limit: if time_limit > 0.0 {
-                Some(Duration::from_secs_f64(time_limit))
-            } else {
-                None
-            },
+            time_limit: if time_limit > 0.0 { Some(Duration::from_secs_f64(time_limit)) } else { None },
         }
     }
     pub fn cancel(&self) {
@@ -131,11 +123,9 @@ impl RenderControl {
     }
     /// Fraction of the halt condition reached (samples or time, whichever is further).
     pub fn progress(&self) -> f64 {
-        let by_work = self.work_done.load(Ordering::Relaxed) as f64
-            / self.work_total.load(Ordering::Relaxed).max(1) as f64;
-        let by_time = self.time_limit.map_or(0.0, |t| {
-            self.start.elapsed().as_secs_f64() / t.as_secs_f64()
-        });
+        let by_work =
+            self.work_done.load(Ordering::Relaxed) as f64 / self.work_total.load(Ordering::Relaxed).max(1) as f64;
+        let by_time = self.time_limit.map_or(0.0, |t| self.start.elapsed().as_secs_f64() / t.as_secs_f64());
         by_work.max(by_time).min(1.0)
     }
 }
@@ -164,19 +154,13 @@ impl RenderOutput {
 }
 
 /// Renders `scene` with the chosen method on a thread pool of the requested size.
-pub fn render(
-    scene: &Scene,
-    settings: &RenderSettings,
-    control: &RenderControl,
-) -> Result<RenderOutput, RenderError> {
+pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl) -> Result<RenderOutput, RenderError> {
     settings.validate()?;
     let mut builder = rayon::ThreadPoolBuilder::new();
     if settings.threads > 0 {
         builder = builder.num_threads(settings.threads);
     }
-    let pool = builder
-        .build()
-        .map_err(|e| RenderError::Settings(format!("thread pool: {e}")))?;
+    let pool = builder.build().map_err(|e| RenderError::Settings(format!("thread pool: {e}")))?;
     let mut warnings = scene.report.warnings.clone();
     if !settings.path.nee {
         let delta = scene.delta_lights();
@@ -189,10 +173,7 @@ pub fn render(
     }
     let mut out = pool.install(|| match settings.method {
         Method::Pt => Ok(pt::render(scene, settings, control)),
-        m => Err(RenderError::Settings(format!(
-            "method '{}' is not available in this build yet",
-            m.name()
-        ))),
+        m => Err(RenderError::Settings(format!("method '{}' is not available in this build yet", m.name()))),
     })?;
     out.stats.warnings.splice(0..0, warnings);
     out.stats.cancelled = control.is_cancelled();

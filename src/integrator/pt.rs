@@ -38,18 +38,14 @@ fn render_row(
             row.add(x, c.radiance, c.albedo, c.normal);
         }
     }
-    control
-        .work_done
-        .fetch_add(w as u64 * (to - from) as u64, Ordering::Relaxed);
+    control.work_done.fetch_add(w as u64 * (to - from) as u64, Ordering::Relaxed);
     let _ = control;
 }
 
 pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl) -> RenderOutput {
     let (w, h) = (scene.camera.width as usize, scene.camera.height as usize);
     let mut film = Film::new(w, h);
-    control
-        .work_total
-        .store(w as u64 * h as u64 * settings.spp as u64, Ordering::Relaxed);
+    control.work_total.store(w as u64 * h as u64 * settings.spp as u64, Ordering::Relaxed);
     // Passes over the whole image, growing so that each takes a fraction of a second:
     // the halt checks, progress and intermediate results stay responsive.
     let mut done = 0u32;

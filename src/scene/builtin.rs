@@ -29,53 +29,25 @@ fn block(name: &str, center: [f32; 3], half: [f32; 3], angle: f32, mat: u32) -> 
             if k & 2 != 0 { half[1] } else { -half[1] },
             if k & 4 != 0 { half[2] } else { -half[2] },
         ];
-        positions.push([
-            center[0] + c * l[0] - s * l[1],
-            center[1] + s * l[0] + c * l[1],
-            center[2] + l[2],
-        ]);
+        positions.push([center[0] + c * l[0] - s * l[1], center[1] + s * l[0] + c * l[1], center[2] + l[2]]);
     }
     // faces as quads (outward orientation is irrelevant: surfaces are two-sided)
-    let faces = [
-        [0, 1, 3, 2],
-        [4, 6, 7, 5],
-        [0, 4, 5, 1],
-        [2, 3, 7, 6],
-        [0, 2, 6, 4],
-        [1, 5, 7, 3],
-    ];
+    let faces = [[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]];
     let mut indices = Vec::new();
     for f in faces {
         indices.push([f[0], f[1], f[2]]);
         indices.push([f[0], f[2], f[3]]);
     }
     let n = indices.len();
-    MeshDesc {
-        name: name.into(),
-        positions,
-        indices,
-        corner_normals: vec![],
-        material_ids: vec![mat; n],
-    }
+    MeshDesc { name: name.into(), positions, indices, corner_normals: vec![], material_ids: vec![mat; n] }
 }
 
 fn material(name: &str, base_color: [f32; 3], emission: [f32; 3]) -> MaterialDesc {
-    MaterialDesc {
-        name: name.into(),
-        base_color,
-        emission,
-        roughness: 1.0,
-        ..Default::default()
-    }
+    MaterialDesc { name: name.into(), base_color, emission, roughness: 1.0, ..Default::default() }
 }
 
 /// Camera at `position` looking along +Y with +Z up (Blender convention: looks down local −Z).
-pub fn camera_looking_along_y(
-    position: [f32; 3],
-    lens: f32,
-    width: u32,
-    height: u32,
-) -> CameraDesc {
+pub fn camera_looking_along_y(position: [f32; 3], lens: f32, width: u32, height: u32) -> CameraDesc {
     CameraDesc {
         to_world: [
             [1.0, 0.0, 0.0, position[0]],
@@ -105,61 +77,12 @@ pub fn cornell_box(width: u32, height: u32) -> SceneDesc {
     let l = 0.25;
     let lz = 0.99;
     let meshes = vec![
-        quad(
-            "Floor",
-            [
-                [-1.0, -1.0, -1.0],
-                [1.0, -1.0, -1.0],
-                [1.0, 1.0, -1.0],
-                [-1.0, 1.0, -1.0],
-            ],
-            0,
-        ),
-        quad(
-            "Ceiling",
-            [
-                [-1.0, -1.0, 1.0],
-                [-1.0, 1.0, 1.0],
-                [1.0, 1.0, 1.0],
-                [1.0, -1.0, 1.0],
-            ],
-            0,
-        ),
-        quad(
-            "BackWall",
-            [
-                [-1.0, 1.0, -1.0],
-                [1.0, 1.0, -1.0],
-                [1.0, 1.0, 1.0],
-                [-1.0, 1.0, 1.0],
-            ],
-            0,
-        ),
-        quad(
-            "LeftWall",
-            [
-                [-1.0, -1.0, -1.0],
-                [-1.0, 1.0, -1.0],
-                [-1.0, 1.0, 1.0],
-                [-1.0, -1.0, 1.0],
-            ],
-            1,
-        ),
-        quad(
-            "RightWall",
-            [
-                [1.0, -1.0, -1.0],
-                [1.0, -1.0, 1.0],
-                [1.0, 1.0, 1.0],
-                [1.0, 1.0, -1.0],
-            ],
-            2,
-        ),
-        quad(
-            "Light",
-            [[-l, -l, lz], [l, -l, lz], [l, l, lz], [-l, l, lz]],
-            3,
-        ),
+        quad("Floor", [[-1.0, -1.0, -1.0], [1.0, -1.0, -1.0], [1.0, 1.0, -1.0], [-1.0, 1.0, -1.0]], 0),
+        quad("Ceiling", [[-1.0, -1.0, 1.0], [-1.0, 1.0, 1.0], [1.0, 1.0, 1.0], [1.0, -1.0, 1.0]], 0),
+        quad("BackWall", [[-1.0, 1.0, -1.0], [1.0, 1.0, -1.0], [1.0, 1.0, 1.0], [-1.0, 1.0, 1.0]], 0),
+        quad("LeftWall", [[-1.0, -1.0, -1.0], [-1.0, 1.0, -1.0], [-1.0, 1.0, 1.0], [-1.0, -1.0, 1.0]], 1),
+        quad("RightWall", [[1.0, -1.0, -1.0], [1.0, -1.0, 1.0], [1.0, 1.0, 1.0], [1.0, 1.0, -1.0]], 2),
+        quad("Light", [[-l, -l, lz], [l, -l, lz], [l, l, lz], [-l, l, lz]], 3),
         block("ShortBlock", [0.33, -0.3, -0.7], [0.3, 0.3, 0.3], -0.3, 0),
         block("TallBlock", [-0.35, 0.3, -0.4], [0.3, 0.3, 0.6], 0.3, 0),
     ];
@@ -181,11 +104,7 @@ pub fn furnace_sphere(albedo: f32, emission: f32, width: u32, height: u32) -> Sc
         let theta = std::f32::consts::PI * j as f32 / nv as f32;
         for i in 0..nu {
             let phi = 2.0 * std::f32::consts::PI * i as f32 / nu as f32;
-            positions.push([
-                theta.sin() * phi.cos(),
-                theta.sin() * phi.sin(),
-                theta.cos(),
-            ]);
+            positions.push([theta.sin() * phi.cos(), theta.sin() * phi.sin(), theta.cos()]);
         }
     }
     let mut indices = Vec::new();
@@ -204,13 +123,7 @@ pub fn furnace_sphere(albedo: f32, emission: f32, width: u32, height: u32) -> Sc
         }
     }
     let n = indices.len();
-    let mesh = MeshDesc {
-        name: "Sphere".into(),
-        positions,
-        indices,
-        corner_normals: vec![],
-        material_ids: vec![0; n],
-    };
+    let mesh = MeshDesc { name: "Sphere".into(), positions, indices, corner_normals: vec![], material_ids: vec![0; n] };
     SceneDesc {
         meshes: vec![mesh],
         materials: vec![material("Furnace", [albedo; 3], [emission; 3])],

@@ -77,11 +77,7 @@ impl Camera {
             }
             f => f,
         };
-        let sensor = if d.sensor_fit == SensorFit::Vertical {
-            d.sensor_height
-        } else {
-            d.sensor_width
-        };
+        let sensor = if d.sensor_fit == SensorFit::Vertical { d.sensor_height } else { d.sensor_width };
         let s = match d.projection {
             Projection::Perspective => {
                 if !positive(d.lens) || !positive(sensor) {
@@ -96,49 +92,25 @@ impl Camera {
                 d.ortho_scale
             }
         };
-        let ext = if fit == SensorFit::Horizontal {
-            Vec2::new(s, s * yr / xr)
-        } else {
-            Vec2::new(s * xr / yr, s)
-        };
+        let ext = if fit == SensorFit::Horizontal { Vec2::new(s, s * yr / xr) } else { Vec2::new(s * xr / yr, s) };
         let center = Vec2::new(d.shift_x * s, d.shift_y * s);
         // Remove scale from the rotation part (Blender's normalized matrix).
         let m = mat_from_rows(&d.to_world);
-        let (x, y, z) = (
-            m.x_axis.truncate(),
-            m.y_axis.truncate(),
-            m.z_axis.truncate(),
-        );
+        let (x, y, z) = (m.x_axis.truncate(), m.y_axis.truncate(), m.z_axis.truncate());
         if x.length() == 0.0 || y.length() == 0.0 || z.length() == 0.0 {
             return err("matrix is singular");
         }
-        let to_world = Mat4::from_cols(
-            x.normalize().extend(0.0),
-            y.normalize().extend(0.0),
-            z.normalize().extend(0.0),
-            m.w_axis,
-        );
-        let clip_start = if d.clip_start.is_finite() {
-            d.clip_start.max(0.0)
+        let to_world =
+            Mat4::from_cols(x.normalize().extend(0.0), y.normalize().extend(0.0), z.normalize().extend(0.0), m.w_axis);
+        let clip_start = if d.clip_start.is_finite() { d.clip_start.max(0.0) } else { 0.0 };
+        let clip_end = if d.clip_end.is_finite() && d.clip_end > clip_start { d.clip_end } else { f32::INFINITY };
+        let aperture_radius = if d.projection == Projection::Perspective && d.fstop > 0.0 && d.fstop.is_finite() {
+            d.lens * 1e-3 / (2.0 * d.fstop)
         } else {
             0.0
         };
-        let clip_end = if d.clip_end.is_finite() && d.clip_end > clip_start {
-            d.clip_end
-        } else {
-            f32::INFINITY
-        };
-        let aperture_radius =
-            if d.projection == Projection::Perspective && d.fstop > 0.0 && d.fstop.is_finite() {
-                d.lens * 1e-3 / (2.0 * d.fstop)
-            } else {
-                0.0
-            };
-        let focus_distance = if d.focus_distance.is_finite() && d.focus_distance > 0.0 {
-            d.focus_distance
-        } else {
-            1.0
-        };
+        let focus_distance =
+            if d.focus_distance.is_finite() && d.focus_distance > 0.0 { d.focus_distance } else { 1.0 };
         Ok(Camera {
             to_world,
             projection: d.projection,
@@ -159,10 +131,7 @@ impl Camera {
     fn plane_point(&self, raster: Vec2) -> Vec2 {
         let u = raster.x / self.width as f32;
         let v = 1.0 - raster.y / self.height as f32;
-        Vec2::new(
-            self.center.x + (u - 0.5) * self.ext.x,
-            self.center.y + (v - 0.5) * self.ext.y,
-        )
+        Vec2::new(self.center.x + (u - 0.5) * self.ext.x, self.center.y + (v - 0.5) * self.ext.y)
     }
 
     /// Primary ray through `raster` (pixels, origin top-left), lens sample `u_lens`.
@@ -188,12 +157,7 @@ impl Camera {
         // Clipping distances are measured along the view axis, as in Blender.
         let origin = self.to_world.transform_point3(o_cam);
         let dir = self.to_world.transform_vector3(d_cam).normalize();
-        CameraRay {
-            origin,
-            dir,
-            tmin: self.clip_start / axial,
-            tmax: self.clip_end / axial,
-        }
+        CameraRay { origin, dir, tmin: self.clip_start / axial, tmax: self.clip_end / axial }
     }
 
     /// Raster position (pixels, y from the top) of a world point, if in front of the camera.
@@ -211,10 +175,7 @@ impl Camera {
         };
         let u = (q.x - self.center.x) / self.ext.x + 0.5;
         let v = (q.y - self.center.y) / self.ext.y + 0.5;
-        Some(Vec2::new(
-            u * self.width as f32,
-            (1.0 - v) * self.height as f32,
-        ))
+        Some(Vec2::new(u * self.width as f32, (1.0 - v) * self.height as f32))
     }
 
     pub fn position(&self) -> Vec3 {
@@ -227,11 +188,7 @@ mod tests {
     use super::*;
 
     fn look_down_neg_z() -> CameraDesc {
-        CameraDesc {
-            resolution_x: 200,
-            resolution_y: 100,
-            ..Default::default()
-        }
+        CameraDesc { resolution_x: 200, resolution_y: 100, ..Default::default() }
     }
 
     #[test]
@@ -250,12 +207,7 @@ mod tests {
     #[test]
     fn ray_generation_inverts_projection() {
         let mut d = look_down_neg_z();
-        d.to_world = [
-            [0.0, 0.0, 1.0, 2.0],
-            [1.0, 0.0, 0.0, -1.0],
-            [0.0, 1.0, 0.0, 0.5],
-            [0.0, 0.0, 0.0, 1.0],
-        ];
+        d.to_world = [[0.0, 0.0, 1.0, 2.0], [1.0, 0.0, 0.0, -1.0], [0.0, 1.0, 0.0, 0.5], [0.0, 0.0, 0.0, 1.0]];
         d.shift_x = 0.1;
         d.shift_y = -0.2;
         d.sensor_fit = SensorFit::Vertical;
@@ -264,18 +216,11 @@ mod tests {
             d.projection = proj;
             let cam = Camera::new(&d).unwrap();
             assert_eq!((cam.width, cam.height), (100, 50));
-            for raster in [
-                Vec2::new(0.5, 0.5),
-                Vec2::new(73.2, 12.9),
-                Vec2::new(99.0, 49.0),
-            ] {
+            for raster in [Vec2::new(0.5, 0.5), Vec2::new(73.2, 12.9), Vec2::new(99.0, 49.0)] {
                 let r = cam.generate_ray(raster, Vec2::splat(0.5));
                 let p = r.origin + r.dir * 4.0;
                 let back = cam.project(p).unwrap();
-                assert!(
-                    (back - raster).length() < 1e-3,
-                    "{proj:?} {raster:?} -> {back:?}"
-                );
+                assert!((back - raster).length() < 1e-3, "{proj:?} {raster:?} -> {back:?}");
             }
         }
     }

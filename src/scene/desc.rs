@@ -57,13 +57,8 @@ pub enum AreaShape {
 #[derive(Clone, Debug)]
 pub enum LightDesc {
     /// Point light: `power` = Power [W] × colour; soft sphere of `radius` (0 = delta).
-    Point {
-        name: String,
-        position: [f32; 3],
-        radius: f32,
-        power: [f32; 3],
-        visible_camera: bool,
-    },
+    /// `soft_falloff` is Blender's "Soft Falloff" (on by default, see scene/light.rs).
+    Point { name: String, position: [f32; 3], radius: f32, power: [f32; 3], soft_falloff: bool, visible_camera: bool },
     /// Spot light: a point light with a cone around `direction` (Blender: local −Z).
     Spot {
         name: String,
@@ -73,6 +68,7 @@ pub enum LightDesc {
         power: [f32; 3],
         spot_size: f32,
         spot_blend: f32,
+        soft_falloff: bool,
         visible_camera: bool,
     },
     /// Area light: `to_world` (row-major 4×4, may carry scale) maps the local light whose
@@ -89,13 +85,7 @@ pub enum LightDesc {
     },
     /// Sun: `direction` points from the scene towards the sun; `irradiance` = Strength × colour
     /// [W/m²]; `angle` = angular diameter [rad] (0 = delta).
-    Sun {
-        name: String,
-        direction: [f32; 3],
-        irradiance: [f32; 3],
-        angle: f32,
-        visible_camera: bool,
-    },
+    Sun { name: String, direction: [f32; 3], irradiance: [f32; 3], angle: f32, visible_camera: bool },
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -139,12 +129,7 @@ pub struct CameraDesc {
 impl Default for CameraDesc {
     fn default() -> Self {
         CameraDesc {
-            to_world: [
-                [1.0, 0.0, 0.0, 0.0],
-                [0.0, 1.0, 0.0, 0.0],
-                [0.0, 0.0, 1.0, 0.0],
-                [0.0, 0.0, 0.0, 1.0],
-            ],
+            to_world: [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]],
             projection: Projection::Perspective,
             lens: 50.0,
             sensor_width: 36.0,

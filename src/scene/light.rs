@@ -13,26 +13,16 @@ use std::f32::consts::PI;
 #[derive(Clone, Debug)]
 pub enum LightShape {
     /// Sphere (radius > 0) or point (radius 0) with optional spot cone.
-    Sphere {
-        center: Vec3,
-        radius: f32,
-        spot: Option<Spot>,
-    },
+    /// `soft_falloff`: Cycles' default for point and spot lights since 4.0, which shades
+    /// the sphere like a disc of radius r facing the shading point: irradiance
+    /// π·L·r²/(d²+r²) instead of the sphere's π·L·r²/d² (measured against Cycles 5.0 on
+    /// axis). Implemented as the factor d²/(d²+r²) on the sphere's radiance, applied
+    /// identically to light samples and to rays that hit the sphere, so MIS stays exact.
+    Sphere { center: Vec3, radius: f32, spot: Option<Spot>, soft_falloff: bool },
     /// Planar emitter: centre, half-axes (world, carrying scale), normal = emitting side.
-    Planar {
-        center: Vec3,
-        axis_u: Vec3,
-        axis_v: Vec3,
-        normal: Vec3,
-        disk: bool,
-        area: f32,
-    },
+    Planar { center: Vec3, axis_u: Vec3, axis_v: Vec3, normal: Vec3, disk: bool, area: f32 },
     /// Distant light towards `dir` (unit, pointing at the light); `cos_half` of its cone.
-    Distant {
-        dir: Vec3,
-        cos_half: f32,
-        frame: Frame,
-    },
+    Distant { dir: Vec3, cos_half: f32, frame: Frame },
     /// Emissive triangle `prim` of the scene mesh.
     Triangle { prim: u32 },
 }
@@ -93,34 +83,18 @@ impl Light {
             if ok {
                 Ok(())
             } else {
-                Err(SceneError::Light {
-                    light: name.to_string(),
-                    what: what.to_string(),
-                })
+                Err(SceneError::Light { light: name.to_string(), what: what.to_string() })
             }
         };
         let finite3 = |a: &[f32; 3]| a.iter().all(|x| x.is_finite());
         match d {
-            LightDesc::Point {
-                name,
-                position,
-                radius,
-                power,
-                visible_camera,
-            } => {
+            LightDesc::Point { name, position, radius, power, soft_falloff, visible_camera } => {
                 check(
                     name,
                     finite3(position) && finite3(power) && radius.is_finite(),
                     "NaN or Inf in position, power or radius",
                 )?;
-                Ok(Self::sphere(
-                    name,
-                    v(*position),
-                    *radius,
-                    v(*power),
-                    None,
-                    *visible_camera,
-                ))
+                Ok(Self::sphere(name, v(*position), *radius, v(*power), None, *soft_falloff, *visible_camera))
             }
             LightDesc::Spot {
                 name,
@@ -130,6 +104,7 @@ impl Light {
                 power,
                 spot_size,
                 spot_blend,
+                soft_falloff,
                 visible_camera,
             } => {
                 check(
@@ -144,25 +119,9 @@ impl Light {
                     cos_half,
                     smooth: (1.0 - cos_half) * spot_blend.clamp(0.0, 1.0),
                 };
-                Ok(Self::sphere(
-                    name,
-                    v(*position),
-                    *radius,
-                    v(*power),
-                    Some(spot),
-                    *visible_camera,
-                ))
+                Ok(Self::sphere(name, v(*position), *radius, v(*power), Some(spot), *soft_falloff, *visible_camera))
             }
-            LightDesc::Area {
-                name,
-                to_world,
-                shape,
-                size_x,
-                size_y,
-                power,
-                normalize,
-                visible_camera,
-            } => {
+            LightDesc::Area { name, to_world, shape, size_x, size_y, power, normalize, visible_camera } => {
                 check(
                     name,
                     to_world.iter().flatten().all(|x| x.is_finite()) && finite3(power),
@@ -178,23 +137,11 @@ impl Light {
                 let normal_raw = m.transform_vector3(Vec3::NEG_Z);
                 let disk = matches!(shape, AreaShape::Disk | AreaShape::Ellipse);
                 let area = 4.0 * axis_u.cross(axis_v).length() * if disk { PI / 4.0 } else { 1.0 };
-                check(
-                    name,
-                    area > 0.0 && area.is_finite() && normal_raw.length() > 0.0,
-                    "zero area",
-                )?;
+                check(name, area > 0.0 && area.is_finite() && normal_raw.length() > 0.0, "zero area")?;
                 // Emission towards local −Z; orient the normal consistently with the axes.
                 let n_geo = axis_u.cross(axis_v).normalize();
-                let normal = if n_geo.dot(normal_raw) >= 0.0 {
-                    n_geo
-                } else {
-                    -n_geo
-                };
-                let radiance = if *normalize {
-                    v(*power) / (PI * area)
-                } else {
-                    v(*power) / PI
-                };
+                let normal = if n_geo.dot(normal_raw) >= 0.0 { n_geo } else { -n_geo };
+                let radiance = if *normalize { v(*power) / (PI * area) } else { v(*power) / PI };
                 Ok(Light {
                     name: name.clone(),
                     shape: LightShape::Planar {
@@ -209,13 +156,7 @@ impl Light {
                     visible_camera: *visible_camera,
                 })
             }
-            LightDesc::Sun {
-                name,
-                direction,
-                irradiance,
-                angle,
-                visible_camera,
-            } => {
+            LightDesc::Sun { name, direction, irradiance, angle, visible_camera } => {
                 check(
                     name,
                     finite3(direction) && finite3(irradiance) && angle.is_finite(),
@@ -226,11 +167,7 @@ impl Light {
                 let half = (angle * 0.5).clamp(0.0, PI * 0.5);
                 let cos_half = half.cos();
                 // A disc of radiance L and half-angle θ gives irradiance L·π·sin²θ at normal incidence.
-                let emission = if half > 1e-4 {
-                    v(*irradiance) / (PI * half.sin().powi(2))
-                } else {
-                    v(*irradiance)
-                };
+                let emission = if half > 1e-4 { v(*irradiance) / (PI * half.sin().powi(2)) } else { v(*irradiance) };
                 Ok(Light {
                     name: name.clone(),
                     shape: LightShape::Distant {
@@ -251,22 +188,15 @@ impl Light {
         radius: f32,
         power: Vec3,
         spot: Option<Spot>,
+        soft_falloff: bool,
         visible_camera: bool,
     ) -> Light {
         let radius = radius.max(0.0);
         // Point: intensity P/(4π). Sphere: radiance P/(4π·πr²) (uniform sphere emitter of power P).
-        let emission = if radius > 0.0 {
-            power / (4.0 * PI * PI * radius * radius)
-        } else {
-            power / (4.0 * PI)
-        };
+        let emission = if radius > 0.0 { power / (4.0 * PI * PI * radius * radius) } else { power / (4.0 * PI) };
         Light {
             name: name.to_string(),
-            shape: LightShape::Sphere {
-                center,
-                radius,
-                spot,
-            },
+            shape: LightShape::Sphere { center, radius, spot, soft_falloff },
             emission,
             visible_camera,
         }
@@ -294,11 +224,7 @@ impl Light {
             }
             LightShape::Planar { area, .. } => l * PI * area,
             LightShape::Distant { cos_half, .. } => {
-                let e = if *cos_half >= 1.0 {
-                    l
-                } else {
-                    l * PI * (1.0 - cos_half * cos_half)
-                };
+                let e = if *cos_half >= 1.0 { l } else { l * PI * (1.0 - cos_half * cos_half) };
                 e * PI * scene_radius * scene_radius
             }
             LightShape::Triangle { .. } => l * 2.0 * PI * tri_area,
@@ -306,14 +232,19 @@ impl Light {
     }
 }
 
+/// Cycles' soft falloff of sphere lights seen from `p`: d²/(d²+r²) (1 when off).
+#[inline]
+pub fn soft_falloff_factor(on: bool, p: Vec3, c: Vec3, r: f32) -> f32 {
+    if !on {
+        return 1.0;
+    }
+    let d2 = (c - p).length_squared();
+    d2 / (d2 + r * r)
+}
+
 /// Samples a point on a sphere of radius r around c, visible from p: uniform in the cone of
 /// directions subtended by the sphere (pbrt-v4 §6.2.4). Returns (point, normal, wi, dist, pdf).
-pub fn sample_sphere_cone(
-    p: Vec3,
-    c: Vec3,
-    r: f32,
-    u: Vec2,
-) -> Option<(Vec3, Vec3, Vec3, f32, f32)> {
+pub fn sample_sphere_cone(p: Vec3, c: Vec3, r: f32, u: Vec2) -> Option<(Vec3, Vec3, Vec3, f32, f32)> {
     let to_c = c - p;
     let d2 = to_c.length_squared();
     if d2 <= r * r {
@@ -368,14 +299,10 @@ impl Light {
     /// Sample a point for NEE from shading point `p` (non-triangle lights).
     pub fn sample(&self, p: Vec3, u: Vec2) -> Option<LightSample> {
         match &self.shape {
-            LightShape::Sphere {
-                center,
-                radius,
-                spot,
-            } => {
+            LightShape::Sphere { center, radius, spot, soft_falloff } => {
                 let (lp, n, wi, dist, pdf, radiance) = if *radius > 0.0 {
                     let (lp, n, wi, dist, pdf) = sample_sphere_cone(p, *center, *radius, u)?;
-                    (lp, n, wi, dist, pdf, self.emission)
+                    (lp, n, wi, dist, pdf, self.emission * soft_falloff_factor(*soft_falloff, p, *center, *radius))
                 } else {
                     let to = *center - p;
                     let d2 = to.length_squared();
@@ -383,42 +310,16 @@ impl Light {
                         return None;
                     }
                     let dist = d2.sqrt();
-                    (
-                        *center,
-                        -to / dist,
-                        to / dist,
-                        dist,
-                        1.0,
-                        self.emission / d2,
-                    )
+                    (*center, -to / dist, to / dist, dist, 1.0, self.emission / d2)
                 };
                 let att = spot.map_or(1.0, |s| s.attenuation((p - *center).normalize_or_zero()));
                 if att <= 0.0 {
                     return None;
                 }
-                Some(LightSample {
-                    p: lp,
-                    n,
-                    wi,
-                    dist,
-                    radiance: radiance * att,
-                    pdf,
-                    is_delta: *radius == 0.0,
-                })
+                Some(LightSample { p: lp, n, wi, dist, radiance: radiance * att, pdf, is_delta: *radius == 0.0 })
             }
-            LightShape::Planar {
-                center,
-                axis_u,
-                axis_v,
-                normal,
-                disk,
-                area,
-            } => {
-                let q = if *disk {
-                    square_to_disk_concentric(u)
-                } else {
-                    u * 2.0 - Vec2::ONE
-                };
+            LightShape::Planar { center, axis_u, axis_v, normal, disk, area } => {
+                let q = if *disk { square_to_disk_concentric(u) } else { u * 2.0 - Vec2::ONE };
                 let lp = *center + *axis_u * q.x + *axis_v * q.y;
                 let to = lp - p;
                 let d2 = to.length_squared();
@@ -441,11 +342,7 @@ impl Light {
                     is_delta: false,
                 })
             }
-            LightShape::Distant {
-                dir,
-                cos_half,
-                frame,
-            } => {
+            LightShape::Distant { dir, cos_half, frame } => {
                 if *cos_half >= 1.0 {
                     Some(LightSample {
                         p: p + *dir * 1e30,
@@ -457,9 +354,7 @@ impl Light {
                         is_delta: true,
                     })
                 } else {
-                    let wi = frame
-                        .to_world(square_to_uniform_cone(u, *cos_half))
-                        .normalize();
+                    let wi = frame.to_world(square_to_uniform_cone(u, *cos_half)).normalize();
                     let pdf = 1.0 / (2.0 * PI * (1.0 - cos_half));
                     Some(LightSample {
                         p: p + wi * 1e30,
@@ -480,11 +375,7 @@ impl Light {
     /// and the radiance it carries back along −d, with the NEE solid-angle pdf of that point.
     pub fn intersect(&self, o: Vec3, d: Vec3, tmax: f32) -> Option<(f32, Spectrum, f32)> {
         match &self.shape {
-            LightShape::Sphere {
-                center,
-                radius,
-                spot,
-            } => {
+            LightShape::Sphere { center, radius, spot, soft_falloff } => {
                 if *radius <= 0.0 {
                     return None;
                 }
@@ -498,16 +389,10 @@ impl Light {
                 if att <= 0.0 {
                     return None;
                 }
-                Some((t, self.emission * att, sphere_cone_pdf(o, *center, *radius)))
+                let soft = soft_falloff_factor(*soft_falloff, o, *center, *radius);
+                Some((t, self.emission * (att * soft), sphere_cone_pdf(o, *center, *radius)))
             }
-            LightShape::Planar {
-                center,
-                axis_u,
-                axis_v,
-                normal,
-                disk,
-                area,
-            } => {
+            LightShape::Planar { center, axis_u, axis_v, normal, disk, area } => {
                 let denom = d.dot(*normal);
                 if denom >= 0.0 {
                     return None; // back side or parallel: lights are one-sided
@@ -519,11 +404,7 @@ impl Light {
                 let hp = o + d * t - *center;
                 let a = hp.dot(*axis_u) / axis_u.length_squared();
                 let b = hp.dot(*axis_v) / axis_v.length_squared();
-                let inside = if *disk {
-                    a * a + b * b <= 1.0
-                } else {
-                    a.abs() <= 1.0 && b.abs() <= 1.0
-                };
+                let inside = if *disk { a * a + b * b <= 1.0 } else { a.abs() <= 1.0 && b.abs() <= 1.0 };
                 if !inside {
                     return None;
                 }
@@ -534,11 +415,7 @@ impl Light {
                 if *cos_half >= 1.0 || tmax < f32::INFINITY || d.dot(*dir) < *cos_half {
                     return None;
                 }
-                Some((
-                    f32::INFINITY,
-                    self.emission,
-                    1.0 / (2.0 * PI * (1.0 - cos_half)),
-                ))
+                Some((f32::INFINITY, self.emission, 1.0 / (2.0 * PI * (1.0 - cos_half))))
             }
             LightShape::Triangle { .. } => None,
         }
@@ -555,8 +432,7 @@ mod tests {
         let mut s = crate::sampler::IndependentSampler::new(3, 0);
         use crate::sampler::Sampler;
         for _ in 0..1000 {
-            let (pt, n, wi, dist, pdf) =
-                sample_sphere_cone(Vec3::ZERO, c, 1.0, s.next_2d()).unwrap();
+            let (pt, n, wi, dist, pdf) = sample_sphere_cone(Vec3::ZERO, c, 1.0, s.next_2d()).unwrap();
             assert!(((pt - c).length() - 1.0).abs() < 1e-4);
             assert!(n.dot(-wi) > -1e-4);
             assert!((pt.length() - dist).abs() < 1e-3);
@@ -568,12 +444,7 @@ mod tests {
     fn area_light_radiance_is_power_over_pi_area() {
         let d = LightDesc::Area {
             name: "a".into(),
-            to_world: [
-                [2.0, 0.0, 0.0, 0.0],
-                [0.0, 1.0, 0.0, 0.0],
-                [0.0, 0.0, 1.0, 3.0],
-                [0.0, 0.0, 0.0, 1.0],
-            ],
+            to_world: [[2.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 3.0], [0.0, 0.0, 0.0, 1.0]],
             shape: AreaShape::Rectangle,
             size_x: 1.0,
             size_y: 0.5,
@@ -586,8 +457,6 @@ mod tests {
         assert!((l.emission.x - 10.0 / PI).abs() < 1e-5);
         // it emits downwards: a ray going up from below hits it, a ray going down does not
         assert!(l.intersect(Vec3::ZERO, Vec3::Z, f32::INFINITY).is_some());
-        assert!(l
-            .intersect(Vec3::new(0.0, 0.0, 6.0), -Vec3::Z, f32::INFINITY)
-            .is_none());
+        assert!(l.intersect(Vec3::new(0.0, 0.0, 6.0), -Vec3::Z, f32::INFINITY).is_none());
     }
 }

@@ -21,17 +21,9 @@ pub struct Material {
 
 impl Material {
     pub fn from_desc(d: &MaterialDesc) -> Result<Material, SceneError> {
-        let bad = |what: &str| SceneError::Material {
-            material: d.name.clone(),
-            what: what.to_string(),
-        };
+        let bad = |what: &str| SceneError::Material { material: d.name.clone(), what: what.to_string() };
         let scalars = [d.roughness, d.metallic, d.transmission, d.ior];
-        if d.base_color
-            .iter()
-            .chain(d.emission.iter())
-            .chain(scalars.iter())
-            .any(|x| !x.is_finite())
-        {
+        if d.base_color.iter().chain(d.emission.iter()).chain(scalars.iter()).any(|x| !x.is_finite()) {
             return Err(bad("NaN or Inf parameter"));
         }
         if d.emission.iter().any(|&x| x < 0.0) {

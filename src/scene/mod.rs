@@ -79,36 +79,22 @@ impl Scene {
     pub fn build(desc: &SceneDesc) -> Result<Scene, SceneError> {
         let camera = Camera::new(&desc.camera)?;
         let mut report = SceneReport::default();
-        let mut materials: Vec<Material> = desc
-            .materials
-            .iter()
-            .map(Material::from_desc)
-            .collect::<Result<_, _>>()?;
+        let mut materials: Vec<Material> = desc.materials.iter().map(Material::from_desc).collect::<Result<_, _>>()?;
         if materials.is_empty() {
             materials.push(Material::from_desc(&MaterialDesc::default())?);
         }
         if desc.world.iter().any(|x| !x.is_finite() || *x < 0.0) {
-            return Err(SceneError::World(
-                "background colour × strength must be finite and ≥ 0".into(),
-            ));
+            return Err(SceneError::World("background colour × strength must be finite and ≥ 0".into()));
         }
         let mut positions = Vec::new();
         let mut normals = Vec::new();
         let mut tri_material = Vec::new();
         for m in &desc.meshes {
-            let bad = |what: String| SceneError::Mesh {
-                mesh: m.name.clone(),
-                what,
-            };
+            let bad = |what: String| SceneError::Mesh { mesh: m.name.clone(), what };
             if m.indices.is_empty() || m.positions.is_empty() {
                 return Err(bad("is empty (no triangles)".into()));
             }
-            if let Some((i, _)) = m
-                .positions
-                .iter()
-                .enumerate()
-                .find(|(_, p)| p.iter().any(|x| !x.is_finite()))
-            {
+            if let Some((i, _)) = m.positions.iter().enumerate().find(|(_, p)| p.iter().any(|x| !x.is_finite())) {
                 return Err(bad(format!("vertex {i} has a NaN or Inf coordinate")));
             }
             if !m.corner_normals.is_empty() && m.corner_normals.len() != 3 * m.indices.len() {
@@ -119,25 +105,16 @@ impl Scene {
                 )));
             }
             if !m.material_ids.is_empty() && m.material_ids.len() != m.indices.len() {
-                return Err(bad(format!(
-                    "{} material ids for {} triangles",
-                    m.material_ids.len(),
-                    m.indices.len()
-                )));
+                return Err(bad(format!("{} material ids for {} triangles", m.material_ids.len(), m.indices.len())));
             }
             let nv = m.positions.len() as u32;
             for (t, tri) in m.indices.iter().enumerate() {
                 if let Some(&i) = tri.iter().find(|&&i| i >= nv) {
-                    return Err(bad(format!(
-                        "triangle {t} uses vertex {i} but the mesh has {nv} vertices"
-                    )));
+                    return Err(bad(format!("triangle {t} uses vertex {i} but the mesh has {nv} vertices")));
                 }
                 let mat = m.material_ids.get(t).copied().unwrap_or(0);
                 if mat as usize >= materials.len() {
-                    return Err(bad(format!(
-                        "triangle {t} uses material {mat} but there are {}",
-                        materials.len()
-                    )));
+                    return Err(bad(format!("triangle {t} uses material {mat} but there are {}", materials.len())));
                 }
                 let v = tri.map(|i| Vec3::from_array(m.positions[i as usize]));
                 let cross = (v[1] - v[0]).cross(v[2] - v[0]);
@@ -149,10 +126,7 @@ impl Scene {
                     None
                 } else {
                     let ns = [0, 1, 2].map(|k| Vec3::from_array(m.corner_normals[3 * t + k]));
-                    if ns
-                        .iter()
-                        .all(|n| n.is_finite() && n.length_squared() > 1e-12)
-                    {
+                    if ns.iter().all(|n| n.is_finite() && n.length_squared() > 1e-12) {
                         Some(ns.map(|n| n.normalize()))
                     } else {
                         None // broken normals: fall back to flat shading
@@ -164,19 +138,12 @@ impl Scene {
             }
         }
         if report.degenerate_triangles > 0 {
-            report.warnings.push(format!(
-                "{} degenerate (zero-area) triangles were skipped",
-                report.degenerate_triangles
-            ));
+            report
+                .warnings
+                .push(format!("{} degenerate (zero-area) triangles were skipped", report.degenerate_triangles));
         }
-        let geo_normals: Vec<Vec3> = positions
-            .iter()
-            .map(|v| (v[1] - v[0]).cross(v[2] - v[0]).normalize())
-            .collect();
-        let areas: Vec<f32> = positions
-            .iter()
-            .map(|v| 0.5 * (v[1] - v[0]).cross(v[2] - v[0]).length())
-            .collect();
+        let geo_normals: Vec<Vec3> = positions.iter().map(|v| (v[1] - v[0]).cross(v[2] - v[0]).normalize()).collect();
+        let areas: Vec<f32> = positions.iter().map(|v| 0.5 * (v[1] - v[0]).cross(v[2] - v[0]).length()).collect();
         report.triangles = positions.len();
 
         // Bounds (geometry, lights and camera) for sun power estimates and epsilons.
@@ -191,11 +158,7 @@ impl Scene {
         let bounds_center = (lo + hi) * 0.5;
         let bounds_radius = ((hi - lo).length() * 0.5).max(1e-3);
 
-        let mut lights: Vec<Light> = desc
-            .lights
-            .iter()
-            .map(Light::from_desc)
-            .collect::<Result<_, _>>()?;
+        let mut lights: Vec<Light> = desc.lights.iter().map(Light::from_desc).collect::<Result<_, _>>()?;
         let mut tri_light = vec![u32::MAX; positions.len()];
         for (t, &m) in tri_material.iter().enumerate() {
             let mat = &materials[m as usize];
@@ -213,11 +176,7 @@ impl Scene {
         let weights: Vec<f32> = lights
             .iter()
             .map(|l| {
-                let a = if let LightShape::Triangle { prim } = l.shape {
-                    areas[prim as usize]
-                } else {
-                    0.0
-                };
+                let a = if let LightShape::Triangle { prim } = l.shape { areas[prim as usize] } else { 0.0 };
                 l.power_estimate(bounds_radius, a)
             })
             .collect();
@@ -230,13 +189,12 @@ impl Scene {
             .collect();
         let world = Vec3::from_array(desc.world);
         if light_distribution.is_empty() && world.max_element() <= 0.0 {
-            report.warnings.push("the scene has no light: no emitting material, no light object and a black world; the image is black".into());
+            report.warnings.push(
+                "the scene has no light: no emitting material, no light object and a black world; the image is black"
+                    .into(),
+            );
         }
-        let accel = if positions.is_empty() {
-            None
-        } else {
-            Some(Accel::build(&positions))
-        };
+        let accel = if positions.is_empty() { None } else { Some(Accel::build(&positions)) };
         Ok(Scene {
             positions,
             normals,
@@ -270,19 +228,14 @@ impl Scene {
     /// True when any surface lies along the ray in (tmin, tmax). Lights never occlude.
     #[inline]
     pub fn occluded(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> bool {
-        self.accel
-            .as_ref()
-            .is_some_and(|a| a.occluded(o, d, tmin, tmax))
+        self.accel.as_ref().is_some_and(|a| a.occluded(o, d, tmin, tmax))
     }
 
     /// Visibility between a surface point and a light sample.
     pub fn visible(&self, si: &SurfaceInteraction, ls: &LightSample) -> bool {
         let o = si.spawn_origin(ls.wi);
-        let tmax = if ls.dist.is_finite() {
-            (ls.p - o).length() * (1.0 - 1e-4) - ray_epsilon(ls.p)
-        } else {
-            f32::INFINITY
-        };
+        let tmax =
+            if ls.dist.is_finite() { (ls.p - o).length() * (1.0 - 1e-4) - ray_epsilon(ls.p) } else { f32::INFINITY };
         if tmax <= 0.0 {
             return true;
         }
@@ -370,12 +323,7 @@ impl Scene {
 
     /// Emitted radiance of the surface at `si` towards the ray origin, and the NEE pdf
     /// (selection included) with which a light sample from `from` would have chosen it.
-    pub fn surface_emission(
-        &self,
-        si: &SurfaceInteraction,
-        from: Vec3,
-        dir: Vec3,
-    ) -> Option<(Spectrum, f32)> {
+    pub fn surface_emission(&self, si: &SurfaceInteraction, from: Vec3, dir: Vec3) -> Option<(Spectrum, f32)> {
         let li = self.tri_light[si.prim as usize];
         if li == u32::MAX {
             return None;
@@ -416,10 +364,6 @@ impl Scene {
     /// True when some light is a delta light (point without radius, sun without angle),
     /// which naive path tracing cannot find.
     pub fn delta_lights(&self) -> Vec<&str> {
-        self.lights
-            .iter()
-            .filter(|l| l.is_delta())
-            .map(|l| l.name.as_str())
-            .collect()
+        self.lights.iter().filter(|l| l.is_delta()).map(|l| l.name.as_str()).collect()
     }
 }

@@ -1,0 +1,136 @@
+"""The Python surface of the core, without Blender."""
+
+import subprocess
+import sys
+import threading
+import time
+
+import numpy as np
+import pytest
+
+import gdmlt
+from conftest import ROOT, read_exr
+
+
+def test_builtin_render_is_finite_and_lit():
+    scene = gdmlt.Scene(gdmlt.builtin_scene("cornell", 32, 24))
+    assert scene.size == (32, 24)
+    res = gdmlt.render(scene, spp=4, seed=1)
+    img = res["layers"]["Combined"]
+    assert img.shape == (24, 32, 3) and img.dtype == np.float32
+    assert np.isfinite(img).all()
+    assert img.mean() > 0.05
+    assert res["stats"]["spp_max"] == 4 and res["stats"]["invalid_samples"] == 0
+
+
+def test_same_seed_same_image_any_thread_count():
+    scene = gdmlt.Scene(gdmlt.builtin_scene("cornell", 16, 16))
+    a = gdmlt.render(scene, spp=2, seed=3, threads=1)["layers"]["Combined"]
+    b = gdmlt.render(scene, spp=2, seed=3, threads=2)["layers"]["Combined"]
+    assert np.array_equal(a, b)
+
+
+def test_exr_round_trip(tmp_path):
+    rng = np.random.default_rng(0)
+    a = rng.random((5, 7, 3), dtype=np.float32)
+    b = rng.random((5, 7, 3), dtype=np.float32)
+    p = tmp_path / "x.exr"
+    gdmlt.write_exr(str(p), [("Combined", a), ("GD Primal", b)])
+    assert np.array_equal(read_exr(p), a)
+    assert np.array_equal(read_exr(p, "GD Primal"), b)
+
+
+def _cornell_desc():
+    return gdmlt.builtin_scene("cornell", 8, 8)
+
+
+def test_nan_vertex_is_a_value_error_naming_the_mesh():
+    d = _cornell_desc()
+    pos = d["meshes"][3]["positions"].copy()
+    pos[2, 1] = np.nan
+    d["meshes"][3]["positions"] = pos
+    with pytest.raises(ValueError, match="LeftWall.*NaN"):
+        gdmlt.Scene(d)
+
+
+@pytest.mark.parametrize("mutate, match", [
+    (lambda d: d["meshes"][0].__setitem__("indices", np.array([[0, 1, 9]], np.uint32)), "Floor"),
+    (lambda d: d["meshes"][0].__setitem__("positions", np.zeros((0, 3), np.float32)), "Floor"),
+    (lambda d: d["meshes"][0].__setitem__("positions", [[0, 0, 0]]), "float32"),
+    (lambda d: d["camera"].__setitem__("resolution_x", 0), "nothing to render"),
+    (lambda d: d["materials"][0].__setitem__("base_color", (np.inf, 0, 0)), "White"),
+    (lambda d: d.__setitem__("lights", [{"type": "BLOB", "name": "L"}]), "BLOB"),
+])
+def test_bad_input_is_a_clear_value_error(mutate, match):
+    d = _cornell_desc()
+    mutate(d)
+    with pytest.raises(ValueError, match=match):
+        gdmlt.Scene(d)
+
+
+def test_bad_render_settings():
+    scene = gdmlt.Scene(_cornell_desc())
+    with pytest.raises(ValueError, match="unknown method"):
+        gdmlt.render(scene, method="bdpt")
+    with pytest.raises(ValueError, match="samples"):
+        gdmlt.render(scene, spp=0)
+    with pytest.raises(ValueError, match="time limit"):
+        gdmlt.render(scene, time_limit=float("nan"))
+
+
+def test_cancellation_returns_within_a_second():
+    scene = gdmlt.Scene(gdmlt.builtin_scene("cornell", 128, 128))
+    asked = {}
+
+    def progress(fraction, elapsed):
+        if elapsed > 0.3 and "t" not in asked:
+            asked["t"] = time.perf_counter()
+        return "t" in asked
+
+    res = gdmlt.render(scene, spp=100000, progress=progress)
+    stopped = time.perf_counter() - asked["t"]
+    assert stopped < 1.0, f"took {stopped:.2f} s to stop"
+    assert res["stats"]["cancelled"]
+    img = res["layers"]["Combined"]
+    assert np.isfinite(img).all() and img.mean() > 0  # keeps what it had
+
+
+def test_progress_callback_exception_propagates():
+    scene = gdmlt.Scene(gdmlt.builtin_scene("cornell", 64, 64))
+
+    def progress(fraction, elapsed):
+        raise KeyError("boom")
+
+    with pytest.raises(KeyError):
+        gdmlt.render(scene, spp=100000, progress=progress)
+
+
+def _cli(*args):
+    return subprocess.run([sys.executable, "-m", "gdmlt.cli", *args], capture_output=True, text=True, cwd=ROOT)
+
+
+def test_cli_renders_builtin(tmp_path):
+    out = tmp_path / "c.exr"
+    r = _cli("render", "cornell", "-o", str(out), "--spp", "2", "--width", "20", "--height", "10", "--no-nee", "--max-bounces", "3")
+    assert r.returncode == 0, r.stderr
+    img = read_exr(out)
+    assert img.shape == (10, 20, 3) and np.isfinite(img).all()
+    assert (tmp_path / "c.png").stat().st_size > 0
+
+
+@pytest.mark.parametrize("args", [
+    ["render", "cornell", "-o", "x.exr", "--method", "magic"],
+    ["render", "cornell", "-o", "x.exr", "--spp", "-3"],
+    ["render", "cornell", "-o", "x.exr", "--time", "soon"],
+    ["render", "nowhere.obj", "-o", "x.exr"],
+    ["render", "cornell", "-o", "x.png"],
+])
+def test_cli_bad_values_exit_2(args):
+    r = _cli(*args)
+    assert r.returncode == 2, (r.returncode, r.stderr)
+    assert "error" in r.stderr
+
+
+def test_cli_missing_blend_file_is_an_error():
+    r = _cli("render", "missing.blend", "-o", "x.exr")
+    assert r.returncode == 1 and "not found" in r.stderr
