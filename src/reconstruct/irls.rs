@@ -1,0 +1,63 @@
+//! L1 reconstruction by iteratively reweighted least squares: start from the exact L2
+//! solution, then weight each residual row by 1/(‖e‖_RGB + reg_k) (weights normalised to
+//! mean 1, reg_k = reg₀·decay^(k−1)) and re-solve by warm-started CG. RGB channels share
+//! their weights, so an outlier in one channel is treated as an outlier in all.
+
+use super::{solve_cg, solve_l2_dct, Channel, WeightedProblem};
+
+#[derive(Clone, Debug)]
+pub struct IrlsParams {
+    pub outer_iterations: usize,
+    pub cg_iterations: usize,
+    pub reg0: f64,
+    pub decay: f64,
+}
+
+impl Default for IrlsParams {
+    fn default() -> Self {
+        // the public GDPT code's defaults
+        IrlsParams { outer_iterations: 20, cg_iterations: 50, reg0: 0.05, decay: 0.5 }
+    }
+}
+
+fn normalise(w: &mut [f64]) {
+    let m = w.iter().sum::<f64>() / w.len().max(1) as f64;
+    if m > 0.0 {
+        w.iter_mut().for_each(|v| *v /= m);
+    }
+}
+
+pub fn solve_l1(chans: &[Channel], alpha: f64, params: &IrlsParams) -> Vec<Vec<f64>> {
+    let (w, h) = (chans[0].width, chans[0].height);
+    let n = w * h;
+    let mut sol: Vec<Vec<f64>> = chans.iter().map(|c| solve_l2_dct(c, alpha)).collect();
+    let mut reg = params.reg0;
+    for _ in 0..params.outer_iterations {
+        let (mut wg, mut wx, mut wy) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
+        for i in 0..n {
+            let (x, y) = (i % w, i / w);
+            let (mut eg, mut ex, mut ey) = (0.0, 0.0, 0.0);
+            for (c, s) in chans.iter().zip(&sol) {
+                eg += (alpha * (s[i] - c.primal[i])).powi(2);
+                if x + 1 < w {
+                    ex += (s[i + 1] - s[i] - c.dx[i]).powi(2);
+                }
+                if y + 1 < h {
+                    ey += (s[i + w] - s[i] - c.dy[i]).powi(2);
+                }
+            }
+            wg[i] = 1.0 / (eg.sqrt() + reg);
+            wx[i] = 1.0 / (ex.sqrt() + reg);
+            wy[i] = 1.0 / (ey.sqrt() + reg);
+        }
+        normalise(&mut wg);
+        normalise(&mut wx);
+        normalise(&mut wy);
+        for (c, s) in chans.iter().zip(sol.iter_mut()) {
+            let p = WeightedProblem { c, alpha, wg: wg.clone(), wx: wx.clone(), wy: wy.clone() };
+            *s = solve_cg(&p, s, params.cg_iterations, 1e-10);
+        }
+        reg *= params.decay;
+    }
+    sol
+}
