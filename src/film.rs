@@ -33,6 +33,8 @@ impl Image {
 #[derive(Clone, Debug)]
 pub struct FilmRow {
     pub color: Vec<[f64; 3]>,
+    /// Light seen directly by the camera (part of `color`), for gradient-domain comparisons.
+    pub direct: Vec<[f64; 3]>,
     pub albedo: Vec<[f64; 3]>,
     pub normal: Vec<[f64; 3]>,
     pub count: Vec<u32>,
@@ -43,6 +45,7 @@ impl FilmRow {
     pub fn new(width: usize) -> FilmRow {
         FilmRow {
             color: vec![[0.0; 3]; width],
+            direct: vec![[0.0; 3]; width],
             albedo: vec![[0.0; 3]; width],
             normal: vec![[0.0; 3]; width],
             count: vec![0; width],
@@ -53,7 +56,7 @@ impl FilmRow {
     /// Adds one sample; a NaN/Inf radiance is counted and replaced by black (the sample
     /// still counts, so the estimator stays an average over all samples drawn).
     #[inline]
-    pub fn add(&mut self, x: usize, radiance: Spectrum, albedo: Spectrum, normal: Vec3) {
+    pub fn add(&mut self, x: usize, radiance: Spectrum, direct: Spectrum, albedo: Spectrum, normal: Vec3) {
         let c = if is_finite_spectrum(radiance) {
             radiance
         } else {
@@ -68,6 +71,9 @@ impl FilmRow {
             }
         };
         acc(&mut self.color[x], c);
+        if is_finite_spectrum(radiance) {
+            acc(&mut self.direct[x], direct);
+        }
         acc(&mut self.albedo[x], albedo);
         acc(&mut self.normal[x], normal);
         self.count[x] += 1;
@@ -120,6 +126,9 @@ impl Film {
     /// Mean radiance per pixel.
     pub fn color(&self) -> Image {
         self.resolve(|r| &r.color)
+    }
+    pub fn direct(&self) -> Image {
+        self.resolve(|r| &r.direct)
     }
     pub fn albedo(&self) -> Image {
         self.resolve(|r| &r.albedo)

@@ -16,6 +16,7 @@ pub mod path;
 pub mod reconstruct;
 pub mod sampler;
 pub mod scene;
+pub mod shift;
 
 #[cfg(feature = "python")]
 mod python;

@@ -49,10 +49,43 @@ pub struct Vertex {
     pub pdf_in: f32,
 }
 
+/// Index used for events whose last segment starts at the camera (very-direct light).
+pub const CAMERA_VERTEX: u32 = u32::MAX;
+
+/// One way the path picked up light: an emitter hit after a BSDF sample from vertex
+/// `vertex` (or an escape to the world), or a next-event estimate at `vertex`. The shift
+/// mapping re-evaluates these for offset paths (ALGORITHM.md §4).
+#[derive(Clone, Copy, Debug)]
+pub struct Event {
+    pub nee: bool,
+    /// The vertex the last segment leaves from (`CAMERA_VERTEX` for camera rays).
+    pub vertex: u32,
+    /// Light index, or u32::MAX for the world background.
+    pub light: u32,
+    /// Point on the light; for lights at infinity the unit direction towards them.
+    pub z: Vec3,
+    pub at_infinity: bool,
+    pub delta: bool,
+    /// Radiance arriving from z.
+    pub le: Spectrum,
+    /// BSDF·|cos| at `vertex` towards z.
+    pub f: Spectrum,
+    /// Solid-angle pdfs at `vertex` of z by BSDF sampling and by light sampling (selection
+    /// included; 0 when that strategy cannot produce it; delta lights: pdf_l = selection).
+    pub pdf_b: f32,
+    pub pdf_l: f32,
+    /// Throughput-weighted numerator: the balance-heuristic contribution is
+    /// numerator / (pdf_b + pdf_l) (ALGORITHM.md §4, "MIS between base and offset").
+    pub numerator: Spectrum,
+}
+
 /// A recorded path (reused between samples: no allocation once warm).
 #[derive(Clone, Debug, Default)]
 pub struct Path {
     pub vertices: Vec<Vertex>,
+    pub events: Vec<Event>,
+    /// The lens sample of the camera ray (offset paths reuse it).
+    pub lens: Vec2,
 }
 
 /// What one camera path contributes.
@@ -77,15 +110,21 @@ pub fn trace_path<S: Sampler>(
 ) -> PathContribution {
     if let Some(p) = record.as_deref_mut() {
         p.vertices.clear();
+        p.events.clear();
     }
     let mut out = PathContribution::default();
-    let cam = scene.camera.generate_ray(raster, sampler.next_2d());
+    let lens = sampler.next_2d();
+    if let Some(p) = record.as_deref_mut() {
+        p.lens = lens;
+    }
+    let cam = scene.camera.generate_ray(raster, lens);
     let (mut o, mut d, mut tmin, mut tmax) = (cam.origin, cam.dir, cam.tmin, cam.tmax);
     let mut beta = Spectrum::ONE;
     let mut depth = 0u32; // scattering events so far
     let mut prev_p = o;
     let mut prev_pdf = 0.0f32; // pdf of the BSDF sample that produced `d` (0: camera ray)
     let mut prev_delta = true; // camera ray or specular bounce: no MIS with NEE
+    let mut prev_fcos = Spectrum::ONE; // BSDF·cos of the sampled direction at the previous vertex
     let use_nee = cfg.nee && scene.has_lights();
 
     loop {
@@ -100,19 +139,48 @@ pub fn trace_path<S: Sampler>(
             }
         };
 
+        let from_vertex = if camera_ray { CAMERA_VERTEX } else { depth - 1 };
+        let pdf_l_if_nee = |pdf: f32| if use_nee { pdf } else { 0.0 };
+        let push = |rec: &mut Option<&mut Path>, light: u32, z: Vec3, at_infinity: bool, le: Spectrum, pdf_l: f32| {
+            if let Some(p) = rec.as_deref_mut() {
+                p.events.push(Event {
+                    nee: false,
+                    vertex: from_vertex,
+                    light,
+                    z,
+                    at_infinity,
+                    delta: false,
+                    le,
+                    f: prev_fcos,
+                    pdf_b: prev_pdf,
+                    pdf_l: pdf_l_if_nee(pdf_l),
+                    numerator: beta * le * prev_pdf,
+                });
+            }
+        };
+
         // Analytic lights crossed before the surface (lights are transparent).
         let mut crossed = Spectrum::ZERO;
-        scene.for_each_light_crossed(o, d, t_surface, camera_ray, |le, pdf_light| crossed += le * mis(pdf_light));
+        scene.for_each_light_crossed(o, d, t_surface, camera_ray, |li, t, le, pdf_light| {
+            crossed += le * mis(pdf_light);
+            let inf = !t.is_finite();
+            push(&mut record, li, if inf { d } else { o + d * t }, inf, le, pdf_light);
+        });
         add(&mut out, beta * crossed, camera_ray);
 
         let Some(hit) = hit else {
             add(&mut out, beta * scene.world, camera_ray); // the world is found by BSDF sampling only
+            if scene.world.max_element() > 0.0 {
+                push(&mut record, u32::MAX, d, true, scene.world, 0.0);
+            }
             break;
         };
         let si: SurfaceInteraction = scene.interaction(&hit, o, d);
         let wo_world = -d;
         if let Some((le, pdf_light)) = scene.surface_emission(&si, prev_p, d) {
             add(&mut out, beta * le * mis(pdf_light), camera_ray);
+            let li = scene.triangle_light(si.prim).unwrap_or(u32::MAX);
+            push(&mut record, li, si.p, false, le, pdf_light);
         }
         let material = scene.material(&si);
         let bsdf = material.bsdf();
@@ -145,12 +213,29 @@ pub fn trace_path<S: Sampler>(
 
         // Next-event estimation.
         if use_nee && !bsdf.is_delta() {
-            if let Some((_, ls)) = scene.sample_light(si.p, u_light_select, u_light) {
+            if let Some((li, ls)) = scene.sample_light(si.p, u_light_select, u_light) {
                 let wi = si.frame.to_local(ls.wi);
                 let f = bsdf.eval(wo, wi);
                 if f.max_element() > 0.0 && ls.wi.dot(si.ng) > 0.0 && scene.visible(&si, &ls) {
-                    let w = if ls.is_delta { 1.0 } else { power_heuristic(ls.pdf, bsdf.pdf(wo, wi)) };
+                    let pdf_b = if ls.is_delta { 0.0 } else { bsdf.pdf(wo, wi) };
+                    let w = if ls.is_delta { 1.0 } else { power_heuristic(ls.pdf, pdf_b) };
                     add(&mut out, beta * f * ls.radiance * (w / ls.pdf), false);
+                    if let Some(p) = record.as_deref_mut() {
+                        let at_infinity = !ls.dist.is_finite();
+                        p.events.push(Event {
+                            nee: true,
+                            vertex: depth,
+                            light: li,
+                            z: if at_infinity { ls.wi } else { ls.p },
+                            at_infinity,
+                            delta: ls.is_delta,
+                            le: ls.radiance,
+                            f,
+                            pdf_b,
+                            pdf_l: ls.pdf,
+                            numerator: beta * f * ls.radiance,
+                        });
+                    }
                 }
             }
         }
@@ -177,6 +262,7 @@ pub fn trace_path<S: Sampler>(
         }
         prev_p = si.p;
         prev_pdf = bs.pdf;
+        prev_fcos = bs.weight * bs.pdf;
         prev_delta = bs.lobe == crate::bsdf::LobeKind::Specular;
         o = si.spawn_origin(wi_world);
         d = wi_world;
@@ -191,5 +277,37 @@ fn add(out: &mut PathContribution, c: Spectrum, very_direct: bool) {
     out.radiance += c;
     if very_direct {
         out.very_direct += c;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sampler::IndependentSampler;
+    use crate::scene::builtin::cornell_box;
+
+    /// The recorded events, weighted by the balance heuristic, estimate the same radiance as
+    /// the path tracer's own (power-heuristic) sum: they must agree in the mean.
+    #[test]
+    fn recorded_events_reproduce_the_radiance() {
+        let scene = Scene::build(&cornell_box(16, 16)).unwrap();
+        for nee in [true, false] {
+            let cfg = PathSettings { max_bounces: 4, nee };
+            let mut path = Path::default();
+            let (mut a, mut b) = (0.0f64, 0.0f64);
+            let n = 200_000;
+            for i in 0..n {
+                let mut s = IndependentSampler::new(9, i);
+                let raster =
+                    Vec2::new(8.0, 8.0) + s.next_2d() * 2.0 - Vec2::ONE * 1.0 + Vec2::new((i % 7) as f32 - 3.0, 0.0);
+                let c = trace_path(&scene, &cfg, raster, &mut s, Some(&mut path));
+                a += crate::math::luminance(c.radiance - c.very_direct) as f64;
+                for e in path.events.iter().filter(|e| e.vertex != CAMERA_VERTEX) {
+                    b += crate::math::luminance(e.numerator / (e.pdf_b + e.pdf_l)) as f64;
+                }
+            }
+            let (a, b) = (a / n as f64, b / n as f64);
+            assert!((a - b).abs() < 0.01 * a, "nee={nee}: path tracer {a} vs events {b}");
+        }
     }
 }

@@ -275,7 +275,7 @@ fn numpy_to_image(obj: &Bound<'_, PyAny>) -> PyResult<Image> {
 /// Renders a scene. `progress(fraction, elapsed_seconds)` is called about every 50 ms from
 /// the calling thread; if it returns True the render stops and keeps what it has.
 #[pyfunction]
-#[pyo3(signature = (scene, method="pt", spp=16, time_limit=0.0, max_bounces=8, nee=true, seed=0, threads=0, progress=None))]
+#[pyo3(signature = (scene, method="pt", spp=16, time_limit=0.0, max_bounces=8, nee=true, seed=0, threads=0, reconstruction="l1", alpha_rec=0.2, progress=None))]
 #[allow(clippy::too_many_arguments)]
 fn render<'py>(
     py: Python<'py>,
@@ -287,10 +287,23 @@ fn render<'py>(
     nee: bool,
     seed: u64,
     threads: usize,
+    reconstruction: &str,
+    alpha_rec: f64,
     progress: Option<Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let method = Method::parse(method).map_err(|e| verr(e.to_string()))?;
-    let settings = RenderSettings { method, spp, time_limit, path: PathSettings { max_bounces, nee }, seed, threads };
+    let reconstruction = crate::reconstruct::Norm::parse(reconstruction)
+        .ok_or_else(|| verr(format!("unknown reconstruction '{reconstruction}' (expected l1 or l2)")))?;
+    let settings = RenderSettings {
+        method,
+        spp,
+        time_limit,
+        path: PathSettings { max_bounces, nee },
+        seed,
+        threads,
+        reconstruction,
+        alpha_rec,
+    };
     settings.validate().map_err(|e| verr(e.to_string()))?;
     let control = RenderControl::new(time_limit);
     let sc = self::Scene { inner: scene.inner.clone() };

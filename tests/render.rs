@@ -2,24 +2,40 @@
 //! the same test (independent renders), not from guesses.
 
 use gdmlt::film::Image;
-use gdmlt::integrator::{render, Method, RenderControl, RenderSettings};
+use gdmlt::integrator::{render, Method, RenderControl, RenderOutput, RenderSettings};
 use gdmlt::path::PathSettings;
+use gdmlt::reconstruct::{gradients, Norm};
 use gdmlt::scene::builtin::{cornell_box, furnace_sphere};
 use gdmlt::scene::{Scene, SceneDesc};
 
 fn run(desc: &SceneDesc, spp: u32, nee: bool, max_bounces: u32, seed: u64, threads: usize) -> Image {
+    run_method(desc, Method::Pt, Norm::L2, spp, nee, max_bounces, seed, threads).layer("Combined").unwrap().clone()
+}
+
+#[allow(clippy::too_many_arguments)]
+fn run_method(
+    desc: &SceneDesc,
+    method: Method,
+    recon: Norm,
+    spp: u32,
+    nee: bool,
+    max_bounces: u32,
+    seed: u64,
+    threads: usize,
+) -> RenderOutput {
     let scene = Scene::build(desc).expect("scene builds");
     let settings = RenderSettings {
-        method: Method::Pt,
+        method,
         spp,
-        time_limit: 0.0,
         path: PathSettings { max_bounces, nee },
         seed,
         threads,
+        reconstruction: recon,
+        ..Default::default()
     };
     let out = render(&scene, &settings, &RenderControl::new(0.0)).expect("render");
     assert_eq!(out.stats.invalid_samples, 0);
-    out.layer("Combined").unwrap().clone()
+    out
 }
 
 fn mean_and_stderr(img: &Image, channel: usize) -> (f64, f64) {
@@ -116,7 +132,8 @@ fn cancel_and_time_limit_stop_the_render() {
 #[test]
 fn bad_input_is_an_error_naming_the_object() {
     let mut desc = cornell_box(8, 8);
-    desc.meshes[2].positions[1][0] = f32::NAN;
+    let i = desc.meshes.iter().position(|m| m.name == "BackWall").unwrap();
+    desc.meshes[i].positions[1][0] = f32::NAN;
     let err = Scene::build(&desc).err().expect("NaN vertex must be rejected").to_string();
     assert!(err.contains("BackWall") && err.contains("NaN"), "{err}");
     let mut desc = cornell_box(8, 8);
@@ -139,4 +156,104 @@ fn degenerate_triangles_and_empty_scenes_render_finite() {
     assert!(scene.report.warnings.iter().any(|w| w.contains("no light")));
     let out = render(&scene, &RenderSettings { spp: 2, ..Default::default() }, &RenderControl::new(0.0)).unwrap();
     assert!(out.layer("Combined").unwrap().data.iter().all(|&x| x == 0.0));
+}
+
+fn rms(v: &[f64]) -> f64 {
+    (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt()
+}
+
+fn diff(a: &[f64], b: &[f64]) -> Vec<f64> {
+    a.iter().zip(b).map(|(x, y)| x - y).collect()
+}
+
+/// GDPT's primal, its gradients and its reconstruction (L2, a linear and so unbiased
+/// estimator; L1 is robust and slightly biased) converge to the path-traced image, in both
+/// light modes. Tolerances come from the spread of K GDPT renders with different seeds
+/// (σ per block), scaled to the reference's own noise by its sample count.
+#[test]
+fn gdpt_converges_to_the_path_traced_image() {
+    let (w, h) = (24, 24);
+    let desc = cornell_box(w as u32, h as u32);
+    let k = 4usize;
+    for nee in [true, false] {
+        let (spp, ref_spp) = if nee { (64u32, 4096u32) } else { (256, 8192) };
+        let ref_out = run_method(&desc, Method::Pt, Norm::L2, ref_spp, nee, 4, 100, 0);
+        let reference = ref_out.layer("Combined").unwrap().clone();
+        let runs: Vec<RenderOutput> =
+            (0..k).map(|s| run_method(&desc, Method::Gdpt, Norm::L2, spp, nee, 4, s as u64 + 1, 0)).collect();
+        let ref_frac = spp as f64 / ref_spp as f64; // reference variance relative to one run
+        let check = |name: &str, est: Vec<Vec<f64>>, refv: Vec<f64>| {
+            let n = refv.len();
+            let mean: Vec<f64> = (0..n).map(|i| est.iter().map(|e| e[i]).sum::<f64>() / k as f64).collect();
+            let var: Vec<f64> =
+                (0..n).map(|i| est.iter().map(|e| (e[i] - mean[i]).powi(2)).sum::<f64>() / (k - 1) as f64).collect();
+            // expected squared error per entry: var/K (our mean) + var·ref_frac (reference)
+            let expected = (var.iter().sum::<f64>() / n as f64 * (1.0 / k as f64 + ref_frac)).sqrt();
+            let err = rms(&diff(&mean, &refv));
+            assert!(err < 2.0 * expected + 1e-4, "{name} nee={nee}: rms error {err} vs expected noise {expected}");
+            let gm = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
+            let means: Vec<f64> = est.iter().map(|e| gm(e)).collect();
+            let mm = gm(&means);
+            let sd = (means.iter().map(|m| (m - mm).powi(2)).sum::<f64>() / (k - 1) as f64).sqrt();
+            let tol = 4.0 * sd * (1.0 / k as f64 + ref_frac).sqrt() + 1e-5;
+            assert!(
+                (mm - gm(&refv)).abs() < tol,
+                "{name} nee={nee}: image mean {mm} vs {} (tolerance {tol})",
+                gm(&refv)
+            );
+        };
+        for layer in ["GD Primal", "Combined"] {
+            check(
+                layer,
+                runs.iter().map(|r| block_means(r.layer(layer).unwrap(), 4)).collect(),
+                block_means(&reference, 4),
+            );
+        }
+        // Gradients: E[dx] = D_x(I − very direct) of the pixel-integrated image, per 4×4 block.
+        let green = |img: &Image| -> Vec<f64> { img.data.iter().skip(1).step_by(3).map(|&v| v as f64).collect() };
+        let indirect: Vec<f64> =
+            diff(&green(&reference), &green(ref_out.layer("Very Direct").expect("PT writes its very-direct layer")));
+        let (rdx, rdy) = gradients(&indirect, w, h);
+        let blocks = |v: &[f64]| -> Vec<f64> {
+            let img = Image { width: w, height: h, channels: 3, data: v.iter().flat_map(|&x| [x as f32; 3]).collect() };
+            block_means(&img, 4).into_iter().step_by(3).collect()
+        };
+        for (name, refg) in [("GD Gradient X", rdx), ("GD Gradient Y", rdy)] {
+            check(name, runs.iter().map(|r| blocks(&green(r.layer(name).unwrap()))).collect(), blocks(&refg));
+        }
+    }
+}
+
+/// A flat diffuse wall under a uniform sky has the same radiance in every pixel: the shift
+/// (reconnection at infinity) must then give gradients of zero.
+#[test]
+fn gradients_vanish_on_a_uniformly_lit_flat_wall() {
+    let mut desc = furnace_sphere(0.5, 0.0, 16, 16);
+    desc.meshes[0] = gdmlt::scene::MeshDesc {
+        name: "Wall".into(),
+        positions: vec![[-50.0, 5.0, -50.0], [50.0, 5.0, -50.0], [50.0, 5.0, 50.0], [-50.0, 5.0, 50.0]],
+        indices: vec![[0, 1, 2], [0, 2, 3]],
+        corner_normals: vec![],
+        material_ids: vec![0, 0],
+    };
+    desc.world = [1.0, 1.0, 1.0];
+    let out = run_method(&desc, Method::Gdpt, Norm::L1, 16, true, 2, 3, 0);
+    let primal = out.layer("GD Primal").unwrap();
+    let m = primal.mean();
+    assert!(m[1] > 0.1, "wall is lit: {m:?}");
+    for name in ["GD Gradient X", "GD Gradient Y"] {
+        let g = out.layer(name).unwrap();
+        let worst = g.data.iter().fold(0.0f32, |a, v| a.max(v.abs()));
+        assert!(worst < 1e-3 * m[1] as f32, "{name}: |gradient| up to {worst}");
+    }
+}
+
+#[test]
+fn gdpt_is_independent_of_thread_count() {
+    let desc = cornell_box(13, 11);
+    let a = run_method(&desc, Method::Gdpt, Norm::L2, 2, true, 3, 4, 1);
+    let b = run_method(&desc, Method::Gdpt, Norm::L2, 2, true, 3, 4, 2);
+    for name in ["Combined", "GD Gradient X", "GD Primal"] {
+        assert_eq!(a.layer(name).unwrap().data, b.layer(name).unwrap().data, "{name}");
+    }
 }

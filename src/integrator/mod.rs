@@ -2,11 +2,13 @@
 //! construction itself lives in path.rs. This module holds what they share: settings,
 //! halting, progress and cancellation, and the output.
 
+pub mod gdpt;
 pub mod pt;
 
 use crate::error::RenderError;
 use crate::film::Image;
 use crate::path::PathSettings;
+use crate::reconstruct::Norm;
 use crate::scene::Scene;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::{Duration, Instant};
@@ -52,6 +54,9 @@ pub struct RenderSettings {
     pub seed: u64,
     /// Worker threads; 0 = all cores.
     pub threads: usize,
+    /// Gradient-domain methods: reconstruction norm and screened-Poisson weight α.
+    pub reconstruction: Norm,
+    pub alpha_rec: f64,
 }
 
 impl Default for RenderSettings {
@@ -63,6 +68,8 @@ impl Default for RenderSettings {
             path: PathSettings::default(),
             seed: 0,
             threads: 0,
+            reconstruction: Norm::L1,
+            alpha_rec: 0.2,
         }
     }
 }
@@ -77,6 +84,9 @@ impl RenderSettings {
         }
         if self.path.max_bounces > 1024 {
             return Err(RenderError::Settings("max bounces must be at most 1024".into()));
+        }
+        if !(self.alpha_rec.is_finite() && self.alpha_rec > 0.0) {
+            return Err(RenderError::Settings("reconstruction alpha must be a finite number > 0".into()));
         }
         if self.threads > 1024 {
             return Err(RenderError::Settings("threads must be at most 1024".into()));
@@ -173,6 +183,7 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl)
     }
     let mut out = pool.install(|| match settings.method {
         Method::Pt => Ok(pt::render(scene, settings, control)),
+        Method::Gdpt => Ok(gdpt::render(scene, settings, control)),
         m => Err(RenderError::Settings(format!("method '{}' is not available in this build yet", m.name()))),
     })?;
     out.stats.warnings.splice(0..0, warnings);

@@ -35,7 +35,7 @@ fn render_row(
             let mut sampler = pixel_sampler(settings.seed, y * w + x, s);
             let raster = Vec2::new(x as f32, y as f32) + sampler.next_2d();
             let c = trace_path(scene, &settings.path, raster, &mut sampler, Some(&mut path));
-            row.add(x, c.radiance, c.albedo, c.normal);
+            row.add(x, c.radiance, c.very_direct, c.albedo, c.normal);
         }
     }
     control.work_done.fetch_add(w as u64 * (to - from) as u64, Ordering::Relaxed);
@@ -70,6 +70,7 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl)
             ("Combined".into(), film.color()),
             ("Denoising Albedo".into(), film.albedo()),
             ("Denoising Normal".into(), film.normal()),
+            ("Very Direct".into(), film.direct()),
         ],
         stats: RenderStats {
             method: "pt",

@@ -66,7 +66,7 @@ pub fn camera_looking_along_y(position: [f32; 3], lens: f32, width: u32, height:
 }
 
 /// The Cornell box: walls at x, z = ±1, back wall at y = 1, open towards the camera at −y,
-/// lit by an emissive quad just below the ceiling.
+/// lit by an emissive quad set into the ceiling.
 pub fn cornell_box(width: u32, height: u32) -> SceneDesc {
     let materials = vec![
         material("White", WHITE, [0.0; 3]),
@@ -75,10 +75,15 @@ pub fn cornell_box(width: u32, height: u32) -> SceneDesc {
         material("Light", [0.0; 3], CORNELL_LIGHT),
     ];
     let l = 0.25;
-    let lz = 0.99;
+    let lz = 1.0;
     let meshes = vec![
         quad("Floor", [[-1.0, -1.0, -1.0], [1.0, -1.0, -1.0], [1.0, 1.0, -1.0], [-1.0, 1.0, -1.0]], 0),
-        quad("Ceiling", [[-1.0, -1.0, 1.0], [-1.0, 1.0, 1.0], [1.0, 1.0, 1.0], [1.0, -1.0, 1.0]], 0),
+        // The ceiling has a hole that the light fills, so the light's back (mesh emission is
+        // two-sided) faces outside instead of into a thin gap above it.
+        quad("Ceiling", [[-1.0, -1.0, 1.0], [-1.0, -l, 1.0], [1.0, -l, 1.0], [1.0, -1.0, 1.0]], 0),
+        quad("Ceiling.001", [[-1.0, l, 1.0], [-1.0, 1.0, 1.0], [1.0, 1.0, 1.0], [1.0, l, 1.0]], 0),
+        quad("Ceiling.002", [[-1.0, -l, 1.0], [-1.0, l, 1.0], [-l, l, 1.0], [-l, -l, 1.0]], 0),
+        quad("Ceiling.003", [[l, -l, 1.0], [l, l, 1.0], [1.0, l, 1.0], [1.0, -l, 1.0]], 0),
         quad("BackWall", [[-1.0, 1.0, -1.0], [1.0, 1.0, -1.0], [1.0, 1.0, 1.0], [-1.0, 1.0, 1.0]], 0),
         quad("LeftWall", [[-1.0, -1.0, -1.0], [-1.0, 1.0, -1.0], [-1.0, 1.0, 1.0], [-1.0, -1.0, 1.0]], 1),
         quad("RightWall", [[1.0, -1.0, -1.0], [1.0, -1.0, 1.0], [1.0, 1.0, 1.0], [1.0, 1.0, -1.0]], 2),

@@ -348,17 +348,80 @@ impl Scene {
         d: Vec3,
         tmax: f32,
         camera_ray: bool,
-        mut f: impl FnMut(Spectrum, f32),
+        mut f: impl FnMut(u32, f32, Spectrum, f32),
     ) {
         for &li in &self.hittable_lights {
             let light = &self.lights[li as usize];
             if camera_ray && !light.visible_camera {
                 continue;
             }
-            if let Some((_, le, pdf)) = light.intersect(o, d, tmax) {
-                f(le, pdf * self.light_distribution.pmf(li as usize));
+            if let Some((t, le, pdf)) = light.intersect(o, d, tmax) {
+                f(li, t, le, pdf * self.light_distribution.pmf(li as usize));
             }
         }
+    }
+
+    /// Radiance that light `li` sends from its point `z` (or, for distant lights, from
+    /// direction `z`) towards `from`, and the NEE pdf (solid angle at `from`, selection
+    /// included; 1·selection for delta lights) of choosing that point. None if `z` does not
+    /// face `from`. Used by the shift mapping to re-evaluate a light point from an offset path.
+    pub fn light_eval(&self, li: u32, from: Vec3, z: Vec3) -> Option<(Spectrum, f32)> {
+        let light = self.lights.get(li as usize)?;
+        let pmf = self.light_distribution.pmf(li as usize);
+        match &light.shape {
+            LightShape::Triangle { prim } => {
+                let n = self.geo_normals[*prim as usize];
+                let to = from - z;
+                let d2 = to.length_squared();
+                let cos = (to.dot(n) / d2.sqrt()).abs();
+                (cos > 1e-7).then(|| (light.emission, pmf * d2 / (cos * self.areas[*prim as usize])))
+            }
+            LightShape::Planar { normal, area, .. } => {
+                let to = from - z;
+                let d2 = to.length_squared();
+                let cos = to.dot(*normal) / d2.sqrt();
+                (cos > 1e-7).then(|| (light.emission, pmf * d2 / (cos * area)))
+            }
+            LightShape::Sphere { center, radius, spot, soft_falloff } => {
+                let att = spot.map_or(1.0, |s| s.attenuation((from - *center).normalize_or_zero()));
+                if att <= 0.0 {
+                    return None;
+                }
+                if *radius > 0.0 {
+                    if (from - z).dot(z - *center) <= 0.0 {
+                        return None; // the point is on the far side of the sphere
+                    }
+                    let soft = light::soft_falloff_factor(*soft_falloff, from, *center, *radius);
+                    Some((light.emission * (att * soft), pmf * light::sphere_cone_pdf(from, *center, *radius)))
+                } else {
+                    let d2 = (from - *center).length_squared();
+                    Some((light.emission * (att / d2), pmf))
+                }
+            }
+            LightShape::Distant { cos_half, .. } => {
+                if *cos_half >= 1.0 {
+                    Some((light.emission, pmf))
+                } else {
+                    Some((light.emission, pmf / (2.0 * std::f32::consts::PI * (1.0 - cos_half))))
+                }
+            }
+        }
+    }
+
+    /// Surface normal of light `li` at its point `z` (zero for points and distant lights).
+    pub fn light_normal(&self, li: u32, z: Vec3) -> Vec3 {
+        match self.lights.get(li as usize).map(|l| &l.shape) {
+            Some(LightShape::Triangle { prim }) => self.geo_normals[*prim as usize],
+            Some(LightShape::Planar { normal, .. }) => *normal,
+            Some(LightShape::Sphere { center, radius, .. }) if *radius > 0.0 => (z - *center).normalize_or_zero(),
+            _ => Vec3::ZERO,
+        }
+    }
+
+    /// Light index of an emissive triangle (None if it does not emit).
+    pub fn triangle_light(&self, prim: u32) -> Option<u32> {
+        let li = self.tri_light[prim as usize];
+        (li != u32::MAX).then_some(li)
     }
 
     /// True when some light is a delta light (point without radius, sun without angle),
