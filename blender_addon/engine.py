@@ -11,12 +11,37 @@ from . import export
 # Statistics of the last finished render in this process (the CLI prints them).
 last_stats = {}
 
+# The one table of extra passes: (name, channels, chan_id, type). Written when the core
+# returns a layer of that name (gradient-domain methods write the GD passes).
+PASSES = (
+    ("GD Primal", 3, "RGB", "COLOR"),
+    ("GD Gradient X", 3, "RGB", "COLOR"),
+    ("GD Gradient Y", 3, "RGB", "COLOR"),
+    ("Denoising Albedo", 3, "RGB", "COLOR"),
+    ("Denoising Normal", 3, "XYZ", "VECTOR"),
+)
+
+
+def _to_blender_rows(img, channels):
+    """Core image (H, W, C), top row first → flat float32 buffer, bottom row first."""
+    h, w = img.shape[:2]
+    out = np.empty((h, w, channels), np.float32)
+    out[..., :3] = img[::-1, :, :3]
+    if channels == 4:
+        out[..., 3] = 1.0
+    return out
+
 
 class GDMLTRenderEngine(bpy.types.RenderEngine):
     bl_idname = "GDMLT"
     bl_label = "GDMLT"
     bl_use_preview = False
     bl_use_postprocess = True
+
+    def update_render_passes(self, scene=None, renderlayer=None):
+        self.register_pass(scene, renderlayer, "Combined", 4, "RGBA", "COLOR")
+        for name, channels, chan_id, kind in PASSES:
+            self.register_pass(scene, renderlayer, name, channels, chan_id, kind)
 
     def render(self, depsgraph):
         try:
@@ -49,6 +74,7 @@ class GDMLTRenderEngine(bpy.types.RenderEngine):
 
         res = gdmlt.render(core_scene, method=method, spp=s.samples, time_limit=s.time_limit,
                            max_bounces=s.max_bounces, nee=s.use_nee, seed=s.seed, threads=s.threads,
+                           reconstruction=s.reconstruction.lower(), alpha_rec=s.alpha_reconstruction,
                            progress=progress)
         st = res["stats"]
         global last_stats
@@ -59,17 +85,22 @@ class GDMLTRenderEngine(bpy.types.RenderEngine):
         if st["invalid_samples"]:
             self.report({"WARNING"}, f"GDMLT: {st['invalid_samples']} samples were NaN/Inf and were dropped")
         w, h = core_scene.size
-        img = res["layers"]["Combined"]
-        rgba = np.empty((h, w, 4), np.float32)
-        rgba[:, :, :3] = img[::-1]  # Blender's row 0 is the bottom row
-        rgba[:, :, 3] = 1.0
-        result = self.begin_result(0, 0, w, h)
+        layers = res["layers"]
+        layer_name = depsgraph.view_layer.name
+        for name, channels, chan_id, _ in PASSES:
+            if name in layers:
+                self.add_pass(name, channels, chan_id, layer=layer_name)
+        result = self.begin_result(0, 0, w, h, layer=layer_name)
         r = scene.render
+        crop = (slice(None), slice(None))
         if r.use_border:  # the result comes back clipped to the border rectangle
-            x0, x1 = round(r.border_min_x * w), round(r.border_max_x * w)
-            y0, y1 = round(r.border_min_y * h), round(r.border_max_y * h)
-            rgba = rgba[y0:y1, x0:x1]
-        result.layers[0].passes["Combined"].rect.foreach_set(np.ascontiguousarray(rgba).ravel())
+            crop = (slice(round(r.border_min_y * h), round(r.border_max_y * h)),
+                    slice(round(r.border_min_x * w), round(r.border_max_x * w)))
+        passes = result.layers[0].passes
+        for name, channels in [("Combined", 4)] + [(p[0], p[1]) for p in PASSES]:
+            if name in layers and passes.get(name) is not None:
+                buf = _to_blender_rows(layers[name], channels)[crop]
+                passes[name].rect.foreach_set(np.ascontiguousarray(buf).ravel())
         self.end_result(result)
         self.update_stats("GDMLT", f"{s.method} | {st['spp_max']} spp | render {st['elapsed']:.2f} s, export {export_time:.2f} s"
                           + (" | cancelled" if st["cancelled"] else ""))

@@ -6,6 +6,13 @@ from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, Po
 
 METHOD_ITEMS = [
     ("PT", "Path Tracing", "Unidirectional path tracing (Kajiya 1986)"),
+    ("GDPT", "Gradient-Domain Path Tracing",
+     "Path tracing with shifted offset paths and screened Poisson reconstruction (Kettunen et al. 2015)"),
+]
+
+RECON_ITEMS = [
+    ("L1", "L1", "Robust reconstruction (iteratively reweighted least squares): fewer artefacts, slightly biased"),
+    ("L2", "L2", "Least-squares reconstruction (exact, by DCT): unbiased, can show dipole artefacts"),
 ]
 
 
@@ -21,6 +28,10 @@ class GDMLTRenderSettings(bpy.types.PropertyGroup):
     use_nee: BoolProperty(name="Next Event Estimation", default=True,
                           description="Sample lights directly with shadow rays (off: lights are found only by hitting them, the paper's naive mode)")
     seed: IntProperty(name="Seed", default=0, min=0, description="Random seed; the same seed and settings give the same image")
+    reconstruction: EnumProperty(name="Reconstruction", items=RECON_ITEMS, default="L1",
+                                 description="Norm of the screened Poisson reconstruction (gradient-domain methods)")
+    alpha_reconstruction: FloatProperty(name="Alpha", default=0.2, min=1e-4, soft_max=2.0,
+                                        description="Weight of the primal image against the gradients in the reconstruction")
     threads: IntProperty(name="Threads", default=0, min=0, max=1024, description="Render threads (0 = all cores)")
 
 

@@ -24,6 +24,10 @@ class GDMLT_PT_sampling(bpy.types.Panel):
         col.prop(s, "samples")
         col.prop(s, "time_limit")
         layout.prop(s, "seed")
+        if s.method in {"GDPT", "GDPSSMLT"}:
+            col = layout.column(align=True)
+            col.prop(s, "reconstruction")
+            col.prop(s, "alpha_reconstruction")
 
 
 class GDMLT_PT_light_paths(bpy.types.Panel):

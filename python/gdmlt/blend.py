@@ -6,7 +6,8 @@ from pathlib import Path
 
 # keys of gdmlt.render's keyword arguments → scene.gdmlt property names
 PROPERTY_OF = {"method": "method", "spp": "samples", "time_limit": "time_limit", "max_bounces": "max_bounces",
-               "nee": "use_nee", "seed": "seed", "threads": "threads"}
+               "nee": "use_nee", "seed": "seed", "threads": "threads",
+               "reconstruction": "reconstruction", "alpha_rec": "alpha_reconstruction"}
 
 
 def import_bpy():
@@ -18,7 +19,7 @@ def import_bpy():
 
 def apply_settings(scene, settings: dict):
     for k, v in settings.items():
-        setattr(scene.gdmlt, PROPERTY_OF[k], v.upper() if k == "method" else v)
+        setattr(scene.gdmlt, PROPERTY_OF[k], v.upper() if k in ("method", "reconstruction") else v)
 
 
 def render_blend(path: Path, out: Path, settings: dict, width=None, height=None, png=True) -> dict:

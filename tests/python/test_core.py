@@ -46,9 +46,10 @@ def _cornell_desc():
 
 def test_nan_vertex_is_a_value_error_naming_the_mesh():
     d = _cornell_desc()
-    pos = d["meshes"][3]["positions"].copy()
+    mesh = next(m for m in d["meshes"] if m["name"] == "LeftWall")
+    pos = mesh["positions"].copy()
     pos[2, 1] = np.nan
-    d["meshes"][3]["positions"] = pos
+    mesh["positions"] = pos
     with pytest.raises(ValueError, match="LeftWall.*NaN"):
         gdmlt.Scene(d)
 
@@ -111,11 +112,13 @@ def _cli(*args):
 
 def test_cli_renders_builtin(tmp_path):
     out = tmp_path / "c.exr"
-    r = _cli("render", "cornell", "-o", str(out), "--spp", "2", "--width", "20", "--height", "10", "--no-nee", "--max-bounces", "3")
+    r = _cli("render", "cornell", "-o", str(out), "--spp", "2", "--width", "20", "--height", "10", "--no-nee", "--max-bounces", "3",
+             "--method", "gdpt", "--recon", "l2", "--alpha-rec", "0.3")
     assert r.returncode == 0, r.stderr
     img = read_exr(out)
     assert img.shape == (10, 20, 3) and np.isfinite(img).all()
     assert (tmp_path / "c.png").stat().st_size > 0
+    assert read_exr(out, "GD Gradient X").shape == (10, 20, 3)
 
 
 @pytest.mark.parametrize("args", [
