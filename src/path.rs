@@ -272,6 +272,25 @@ pub fn trace_path<S: Sampler>(
     out
 }
 
+/// Emission seen directly along the camera ray through `raster` (the very-direct image of
+/// the gradient-domain methods, estimated by plain Monte Carlo).
+pub fn very_direct(scene: &Scene, raster: Vec2, lens: Vec2) -> Spectrum {
+    let cam = scene.camera.generate_ray(raster, lens);
+    let hit = scene.intersect(cam.origin, cam.dir, cam.tmin, cam.tmax);
+    let mut l = Spectrum::ZERO;
+    scene.for_each_light_crossed(cam.origin, cam.dir, hit.map_or(cam.tmax, |h| h.t), true, |_, _, le, _| l += le);
+    match hit {
+        None => l += scene.world,
+        Some(h) => {
+            let si = scene.interaction(&h, cam.origin, cam.dir);
+            if let Some((le, _)) = scene.surface_emission(&si, cam.origin, cam.dir) {
+                l += le;
+            }
+        }
+    }
+    l
+}
+
 #[inline]
 fn add(out: &mut PathContribution, c: Spectrum, very_direct: bool) {
     out.radiance += c;

@@ -275,7 +275,7 @@ fn numpy_to_image(obj: &Bound<'_, PyAny>) -> PyResult<Image> {
 /// Renders a scene. `progress(fraction, elapsed_seconds)` is called about every 50 ms from
 /// the calling thread; if it returns True the render stops and keeps what it has.
 #[pyfunction]
-#[pyo3(signature = (scene, method="pt", spp=16, time_limit=0.0, max_bounces=8, nee=true, seed=0, threads=0, reconstruction="l1", alpha_rec=0.2, progress=None))]
+#[pyo3(signature = (scene, method="pt", spp=16, time_limit=0.0, max_bounces=8, nee=true, seed=0, threads=0, reconstruction="l1", alpha_rec=0.2, large_step_probability=0.3, alpha_target=0.25, progress=None))]
 #[allow(clippy::too_many_arguments)]
 fn render<'py>(
     py: Python<'py>,
@@ -289,6 +289,8 @@ fn render<'py>(
     threads: usize,
     reconstruction: &str,
     alpha_rec: f64,
+    large_step_probability: f32,
+    alpha_target: f32,
     progress: Option<Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let method = Method::parse(method).map_err(|e| verr(e.to_string()))?;
@@ -303,6 +305,8 @@ fn render<'py>(
         threads,
         reconstruction,
         alpha_rec,
+        large_step_probability,
+        alpha_target,
     };
     settings.validate().map_err(|e| verr(e.to_string()))?;
     let control = RenderControl::new(time_limit);
@@ -360,6 +364,9 @@ fn render<'py>(
     stats.set_item("invalid_samples", st.invalid_samples)?;
     stats.set_item("cancelled", st.cancelled)?;
     stats.set_item("warnings", st.warnings.clone())?;
+    stats.set_item("acceptance", st.acceptance)?;
+    stats.set_item("normalization", st.normalization)?;
+    stats.set_item("chains", st.chains)?;
     dict.set_item("stats", stats)?;
     Ok(dict)
 }

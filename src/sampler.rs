@@ -104,3 +104,168 @@ mod tests {
         assert_ne!(a, c);
     }
 }
+
+/// Primary-sample-space state for Metropolis light transport (Kelemen et al. 2002, with
+/// pbrt-v3's lazy evaluation): coordinates are created and mutated only when the path
+/// builder asks for them, and restored on rejection.
+#[derive(Clone, Debug)]
+pub struct PssSampler {
+    rng: IndependentSampler,
+    x: Vec<PrimarySample>,
+    index: usize,
+    iteration: u64,
+    last_large_step: u64,
+    large_step: bool,
+    sigma: f32,
+    large_step_probability: f32,
+}
+
+#[derive(Clone, Copy, Debug, Default)]
+struct PrimarySample {
+    value: f32,
+    modified: u64,
+    backup_value: f32,
+    backup_modified: u64,
+}
+
+/// Standard deviation of a small step per coordinate (pbrt's default).
+pub const SMALL_STEP_SIGMA: f32 = 0.01;
+
+impl PssSampler {
+    pub fn new(seed: u64, stream: u64, large_step_probability: f32) -> Self {
+        PssSampler {
+            rng: IndependentSampler::new(seed, stream),
+            x: Vec::with_capacity(64),
+            index: 0,
+            iteration: 0,
+            last_large_step: 0,
+            large_step: true,
+            sigma: SMALL_STEP_SIGMA,
+            large_step_probability,
+        }
+    }
+
+    /// Starts a proposal: a large step (all coordinates redrawn) with the configured
+    /// probability, else a small step. The first iteration is always a large step.
+    pub fn start_iteration(&mut self) {
+        self.iteration += 1;
+        self.large_step = self.iteration == 1 || self.rng.next_1d() < self.large_step_probability;
+        self.index = 0;
+    }
+
+    pub fn is_large_step(&self) -> bool {
+        self.large_step
+    }
+
+    pub fn accept(&mut self) {
+        if self.large_step {
+            self.last_large_step = self.iteration;
+        }
+    }
+
+    pub fn reject(&mut self) {
+        for xi in &mut self.x {
+            if xi.modified == self.iteration {
+                xi.value = xi.backup_value;
+                xi.modified = xi.backup_modified;
+            }
+        }
+        self.iteration -= 1;
+    }
+
+    /// The chain's own random numbers (acceptance tests, discrete mutations).
+    pub fn rng(&mut self) -> &mut IndependentSampler {
+        &mut self.rng
+    }
+
+    fn gaussian(&mut self) -> f32 {
+        // Box–Muller
+        let u1 = self.rng.next_1d().max(1e-12);
+        let u2 = self.rng.next_1d();
+        (-2.0 * u1.ln()).sqrt() * (2.0 * std::f32::consts::PI * u2).cos()
+    }
+
+    fn ensure_ready(&mut self, i: usize) {
+        if i >= self.x.len() {
+            self.x.resize(i + 1, PrimarySample::default());
+        }
+        let mut xi = self.x[i];
+        // Apply the large step that this coordinate missed.
+        if xi.modified < self.last_large_step {
+            xi.value = self.rng.next_1d();
+            xi.modified = self.last_large_step;
+        }
+        xi.backup_value = xi.value;
+        xi.backup_modified = xi.modified;
+        if self.large_step {
+            xi.value = self.rng.next_1d();
+        } else {
+            // The small steps it missed compose into one Gaussian of σ·√n.
+            let n = (self.iteration - xi.modified) as f32;
+            let step = self.gaussian() * self.sigma * n.sqrt();
+            xi.value += step;
+            xi.value -= xi.value.floor();
+            if xi.value >= 1.0 {
+                xi.value = 0.0;
+            }
+        }
+        xi.modified = self.iteration;
+        self.x[i] = xi;
+    }
+}
+
+impl Sampler for PssSampler {
+    #[inline]
+    fn next_1d(&mut self) -> f32 {
+        let i = self.index;
+        self.index += 1;
+        self.ensure_ready(i);
+        self.x[i].value
+    }
+}
+
+#[cfg(test)]
+mod pss_tests {
+    use super::*;
+
+    #[test]
+    fn reject_restores_the_state() {
+        let mut s = PssSampler::new(1, 2, 0.3);
+        s.start_iteration();
+        let a: Vec<f32> = (0..5).map(|_| s.next_1d()).collect();
+        s.accept();
+        for _ in 0..20 {
+            s.start_iteration();
+            let _b: Vec<f32> = (0..5).map(|_| s.next_1d()).collect();
+            s.reject();
+        }
+        // a lazily-updated coordinate read after rejections still equals its accepted value
+        // when the next step is forced small and σ→0 (checked here by replaying the state)
+        let mut t = s.clone();
+        t.sigma = 0.0;
+        t.large_step_probability = 0.0;
+        t.start_iteration();
+        let c: Vec<f32> = (0..5).map(|_| t.next_1d()).collect();
+        assert_eq!(a, c);
+    }
+
+    /// Small steps are symmetric and stay in [0,1): the chain over one coordinate with
+    /// target ≡ 1 accepts everything and must stay uniform.
+    #[test]
+    fn uniform_target_stays_uniform() {
+        let mut s = PssSampler::new(3, 4, 0.3);
+        let mut hist = [0usize; 10];
+        let n = 200_000;
+        for _ in 0..n {
+            s.start_iteration();
+            let v = s.next_1d();
+            assert!((0.0..1.0).contains(&v));
+            s.accept();
+            hist[(v * 10.0) as usize] += 1;
+        }
+        for h in hist {
+            let p = h as f64 / n as f64;
+            assert!((p - 0.1).abs() < 0.01, "{hist:?}");
+        }
+    }
+}

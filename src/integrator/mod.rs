@@ -3,6 +3,7 @@
 //! halting, progress and cancellation, and the output.
 
 pub mod gdpt;
+pub mod mlt;
 pub mod pt;
 
 use crate::error::RenderError;
@@ -57,6 +58,10 @@ pub struct RenderSettings {
     /// Gradient-domain methods: reconstruction norm and screened-Poisson weight α.
     pub reconstruction: Norm,
     pub alpha_rec: f64,
+    /// Metropolis methods: probability of a large step (Kelemen), and the weight α of the
+    /// primal term in gdpssmlt's target function.
+    pub large_step_probability: f32,
+    pub alpha_target: f32,
 }
 
 impl Default for RenderSettings {
@@ -70,6 +75,8 @@ impl Default for RenderSettings {
             threads: 0,
             reconstruction: Norm::L1,
             alpha_rec: 0.2,
+            large_step_probability: 0.3,
+            alpha_target: 0.25,
         }
     }
 }
@@ -87,6 +94,12 @@ impl RenderSettings {
         }
         if !(self.alpha_rec.is_finite() && self.alpha_rec > 0.0) {
             return Err(RenderError::Settings("reconstruction alpha must be a finite number > 0".into()));
+        }
+        if !(0.0..=1.0).contains(&self.large_step_probability) {
+            return Err(RenderError::Settings("large step probability must be in [0, 1]".into()));
+        }
+        if !(self.alpha_target.is_finite() && self.alpha_target >= 0.0) {
+            return Err(RenderError::Settings("target alpha must be a finite number ≥ 0".into()));
         }
         if self.threads > 1024 {
             return Err(RenderError::Settings("threads must be at most 1024".into()));
@@ -149,6 +162,10 @@ pub struct RenderStats {
     pub invalid_samples: u64,
     pub cancelled: bool,
     pub warnings: Vec<String>,
+    /// Metropolis methods: acceptance rate, normalisation b = E[F], number of chains.
+    pub acceptance: f64,
+    pub normalization: f64,
+    pub chains: usize,
 }
 
 /// Named images: "Combined" first, then passes.
@@ -184,7 +201,8 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl)
     let mut out = pool.install(|| match settings.method {
         Method::Pt => Ok(pt::render(scene, settings, control)),
         Method::Gdpt => Ok(gdpt::render(scene, settings, control)),
-        m => Err(RenderError::Settings(format!("method '{}' is not available in this build yet", m.name()))),
+        Method::Pssmlt => Ok(mlt::render(scene, settings, control, false)),
+        Method::Gdpssmlt => Ok(mlt::render(scene, settings, control, true)),
     })?;
     out.stats.warnings.splice(0..0, warnings);
     out.stats.cancelled = control.is_cancelled();

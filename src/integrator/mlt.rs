@@ -1,0 +1,305 @@
+//! Metropolis light transport in primary sample space (Kelemen et al. 2002), and its
+//! gradient-domain variant (Lehtinen et al. 2013 with Kettunen's shift mapping, as in the
+//! seed paper): one driver, two targets.
+//!
+//! * `pssmlt`: state u; target F = luminance of the path's radiance; splat L at its pixel.
+//! * `gdpssmlt`: state (u, d), d ∈ {+x, −x, +y, −y}; target
+//!   F = ℓ(|G_d|) + (α/4)·ℓ(|L|) (ALGORITHM.md §3, ℓ of per-channel absolute values);
+//!   splats: primal C_x (base pixel) and C_y (neighbour), gradient ±4·G_d; then screened
+//!   Poisson reconstruction and the very-direct image (plain Monte Carlo) on top.
+//!
+//! Bootstrap: independent states estimate b = E[F] and give chain starts ∝ F. Expected-value
+//! splatting: proposed × a/F_p, current × (1−a)/F_c; image × b/mpp. Chains are split into a
+//! fixed number of groups with their own buffers, summed in order: the image depends only on
+//! the seed (not on the thread count) unless a time limit stops chains early.
+
+use super::{RenderControl, RenderOutput, RenderSettings, RenderStats};
+use crate::distribution::Distribution1D;
+use crate::film::Image;
+use crate::math::{abs_luminance, is_finite_spectrum, Spectrum};
+use crate::path::{trace_path, very_direct, Path};
+use crate::reconstruct::reconstruct_rgb;
+use crate::sampler::{mix64, IndependentSampler, PssSampler, Sampler};
+use crate::scene::Scene;
+use crate::shift::shift;
+use glam::Vec2;
+use rayon::prelude::*;
+use std::sync::atomic::Ordering;
+
+/// Independent states drawn to estimate the normalisation and choose chain starts.
+pub const BOOTSTRAP_SAMPLES: usize = 100_000;
+/// Probability that a small step also redraws the shift direction d (its own symmetric
+/// mutation: a Gaussian step of the other coordinates never changes d).
+pub const DIRECTION_MUTATION_PROBABILITY: f32 = 0.1;
+/// Fixed number of accumulation groups (independent of the thread count).
+const GROUPS: usize = 8;
+/// Spp of the very-direct image of gdpssmlt.
+const VERY_DIRECT_SPP: u32 = 16;
+
+const SHIFTS: [(i32, i32); 4] = [(1, 0), (-1, 0), (0, 1), (0, -1)];
+const PRIMAL: usize = 0;
+const DX: usize = 1;
+const DY: usize = 2;
+
+/// What one state contributes, before the 1/F weighting.
+#[derive(Clone, Copy, Default)]
+struct Splats {
+    n: usize,
+    items: [(usize, usize, Spectrum); 4], // (layer, pixel, value)
+    pixel: usize,
+}
+
+impl Splats {
+    fn push(&mut self, layer: usize, pixel: usize, v: Spectrum) {
+        self.items[self.n] = (layer, pixel, v);
+        self.n += 1;
+    }
+}
+
+/// A base path evaluated at one primary-sample vector; `f(d)` and `splats(d)` per direction.
+struct Evaluated {
+    splats: [Splats; 4],
+    f: [f32; 4],
+}
+
+struct Target<'a> {
+    scene: &'a Scene,
+    settings: &'a RenderSettings,
+    gradient: bool,
+    w: usize,
+    h: usize,
+}
+
+impl Target<'_> {
+    fn evaluate<S: Sampler>(&self, sampler: &mut S, path: &mut Path) -> Evaluated {
+        let u = sampler.next_2d();
+        let raster = Vec2::new(u.x * self.w as f32, u.y * self.h as f32);
+        let (px, py) = ((raster.x as usize).min(self.w - 1), (raster.y as usize).min(self.h - 1));
+        let pixel = py * self.w + px;
+        let c = trace_path(self.scene, &self.settings.path, raster, sampler, Some(path));
+        let mut ev = Evaluated { splats: [Splats::default(); 4], f: [0.0; 4] };
+        if !is_finite_spectrum(c.radiance) {
+            return ev;
+        }
+        if !self.gradient {
+            let f = abs_luminance(c.radiance);
+            for k in 0..4 {
+                ev.f[k] = f;
+                ev.splats[k].pixel = pixel;
+                ev.splats[k].push(PRIMAL, pixel, c.radiance);
+            }
+            return ev;
+        }
+        let l = c.radiance - c.very_direct;
+        for (k, (dx, dy)) in SHIFTS.iter().enumerate() {
+            let (nx, ny) = (px as i32 + dx, py as i32 + dy);
+            let inside = nx >= 0 && ny >= 0 && nx < self.w as i32 && ny < self.h as i32;
+            let pc = shift(self.scene, path, inside.then(|| raster + Vec2::new(*dx as f32, *dy as f32)));
+            if !is_finite_spectrum(pc.base) || !is_finite_spectrum(pc.offset) {
+                continue;
+            }
+            let g = pc.offset - pc.base;
+            ev.f[k] = abs_luminance(g) + 0.25 * self.settings.alpha_target * abs_luminance(l);
+            let s = &mut ev.splats[k];
+            s.pixel = pixel;
+            s.push(PRIMAL, pixel, pc.base);
+            if inside {
+                let n = ny as usize * self.w + nx as usize;
+                s.push(PRIMAL, n, pc.offset);
+                // each direction has measure 1/4: gradients × 4 (ALGORITHM.md §4b)
+                match (dx, dy) {
+                    (1, 0) => s.push(DX, pixel, g * 4.0),
+                    (-1, 0) => s.push(DX, n, g * -4.0),
+                    (0, 1) => s.push(DY, pixel, g * 4.0),
+                    _ => s.push(DY, n, g * -4.0),
+                }
+            }
+        }
+        ev
+    }
+}
+
+struct Group {
+    layers: [Vec<[f64; 3]>; 3],
+    density: Vec<f64>,
+    mutations: u64,
+    accepted: u64,
+}
+
+fn splat(group: &mut Group, s: &Splats, weight: f64) {
+    if weight <= 0.0 || !weight.is_finite() {
+        return;
+    }
+    for &(layer, pixel, v) in &s.items[..s.n] {
+        let a = &mut group.layers[layer][pixel];
+        a[0] += v.x as f64 * weight;
+        a[1] += v.y as f64 * weight;
+        a[2] += v.z as f64 * weight;
+    }
+}
+
+pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl, gradient: bool) -> RenderOutput {
+    let (w, h) = (scene.camera.width as usize, scene.camera.height as usize);
+    let target = Target { scene, settings, gradient, w, h };
+    let p_large = settings.large_step_probability;
+    let boot_seed = mix64(settings.seed ^ 0xB007);
+
+    // Bootstrap (parallel, deterministic): F averaged over the four directions.
+    let boot: Vec<(f32, [f32; 4])> = (0..BOOTSTRAP_SAMPLES)
+        .into_par_iter()
+        .map_init(Path::default, |path, i| {
+            let mut s = PssSampler::new(boot_seed, i as u64, p_large);
+            s.start_iteration();
+            let ev = target.evaluate(&mut s, path);
+            (ev.f.iter().sum::<f32>() * 0.25, ev.f)
+        })
+        .collect();
+    let b: f64 = boot.iter().map(|(f, _)| *f as f64).sum::<f64>() / BOOTSTRAP_SAMPLES as f64;
+    let starts = Distribution1D::new(&boot.iter().map(|(f, _)| *f).collect::<Vec<_>>());
+
+    let total = settings.spp as u64 * (w * h) as u64;
+    let n_chains = (total / 2000).clamp(1, 1024) as usize;
+    control.work_total.store(total, Ordering::Relaxed);
+    let chain_seed = mix64(settings.seed ^ 0xC4A1);
+
+    let groups: Vec<Group> = (0..GROUPS)
+        .into_par_iter()
+        .map(|g| {
+            let mut group = Group {
+                layers: [vec![[0.0; 3]; w * h], vec![[0.0; 3]; w * h], vec![[0.0; 3]; w * h]],
+                density: vec![0.0; w * h],
+                mutations: 0,
+                accepted: 0,
+            };
+            if starts.is_empty() {
+                return group;
+            }
+            let mut path = Path::default();
+            for chain in (g..n_chains).step_by(GROUPS) {
+                let mutations = total / n_chains as u64 + u64::from((chain as u64) < total % n_chains as u64);
+                let mut pick = IndependentSampler::new(chain_seed, chain as u64);
+                let Some((start, _)) = starts.sample(pick.next_1d()) else { continue };
+                // Replay the bootstrap state, then choose its direction ∝ F.
+                let mut s = PssSampler::new(boot_seed, start as u64, p_large);
+                s.start_iteration();
+                let mut cur = target.evaluate(&mut s, &mut path);
+                s.accept();
+                let fsum: f32 = cur.f.iter().sum();
+                let mut d = 0;
+                let mut acc = pick.next_1d() * fsum;
+                while d < 3 && acc >= cur.f[d] {
+                    acc -= cur.f[d];
+                    d += 1;
+                }
+                for m in 0..mutations {
+                    if m % 256 == 0 && control.should_stop() {
+                        break;
+                    }
+                    s.start_iteration();
+                    let prop = target.evaluate(&mut s, &mut path);
+                    let d_new = if !gradient {
+                        d
+                    } else if s.is_large_step() || s.rng().next_1d() < DIRECTION_MUTATION_PROBABILITY {
+                        ((s.rng().next_1d() * 4.0) as usize).min(3)
+                    } else {
+                        d
+                    };
+                    let (fc, fp) = (cur.f[d], prop.f[d_new]);
+                    let a = if fc > 0.0 { (fp / fc).min(1.0) } else { 1.0 };
+                    if fp > 0.0 {
+                        splat(&mut group, &prop.splats[d_new], a as f64 / fp as f64);
+                    }
+                    if fc > 0.0 {
+                        splat(&mut group, &cur.splats[d], (1.0 - a) as f64 / fc as f64);
+                    }
+                    if s.rng().next_1d() < a {
+                        s.accept();
+                        cur = prop;
+                        d = d_new;
+                        group.accepted += 1;
+                    } else {
+                        s.reject();
+                    }
+                    group.density[cur.splats[d].pixel] += 1.0;
+                    group.mutations += 1;
+                    if m % 1024 == 1023 {
+                        control.work_done.fetch_add(1024, Ordering::Relaxed);
+                    }
+                }
+            }
+            group
+        })
+        .collect();
+
+    let mutations: u64 = groups.iter().map(|g| g.mutations).sum();
+    let accepted: u64 = groups.iter().map(|g| g.accepted).sum();
+    let mpp = mutations as f64 / (w * h) as f64;
+    let scale = if mpp > 0.0 { b / mpp } else { 0.0 };
+    let sum_layer = |l: usize| -> Vec<f64> {
+        let mut out = vec![0.0; w * h * 3];
+        for g in &groups {
+            for (i, v) in g.layers[l].iter().enumerate() {
+                for c in 0..3 {
+                    out[i * 3 + c] += v[c] * scale;
+                }
+            }
+        }
+        out
+    };
+    let primal = sum_layer(PRIMAL);
+    let mut density = vec![0.0; w * h];
+    for g in &groups {
+        for (a, b) in density.iter_mut().zip(&g.density) {
+            *a += b;
+        }
+    }
+    let dmean = density.iter().sum::<f64>() / (w * h) as f64;
+    let density_img: Vec<f64> = density.iter().flat_map(|v| [v / dmean.max(1e-300); 3]).collect();
+    let img = |v: &[f64]| Image { width: w, height: h, channels: 3, data: v.iter().map(|&x| x as f32).collect() };
+    let mut stats = RenderStats {
+        method: if gradient { "gdpssmlt" } else { "pssmlt" },
+        spp_min: mpp as u32,
+        spp_max: mpp.ceil() as u32,
+        ..Default::default()
+    };
+    stats.acceptance = accepted as f64 / mutations.max(1) as f64;
+    stats.normalization = b;
+    stats.chains = n_chains;
+    if starts.is_empty() {
+        stats.warnings.push("no light reaches the camera in the bootstrap: the image is black".into());
+    }
+    let layers = if !gradient {
+        vec![("Combined".into(), img(&primal)), ("MLT Density".into(), img(&density_img))]
+    } else {
+        let dx = sum_layer(DX);
+        let dy = sum_layer(DY);
+        // Very-direct light by plain Monte Carlo, added after reconstruction.
+        let direct: Vec<f64> = (0..h)
+            .into_par_iter()
+            .flat_map_iter(|y| {
+                (0..w).flat_map(move |x| {
+                    let mut acc = Spectrum::ZERO;
+                    for s in 0..VERY_DIRECT_SPP {
+                        let mut smp = super::pt::pixel_sampler(settings.seed ^ 0xD1, y * w + x, s);
+                        let raster = Vec2::new(x as f32, y as f32) + smp.next_2d();
+                        acc += very_direct(scene, raster, smp.next_2d());
+                    }
+                    let v = acc / VERY_DIRECT_SPP as f32;
+                    [v.x as f64, v.y as f64, v.z as f64]
+                })
+            })
+            .collect();
+        let recon = reconstruct_rgb(w, h, &primal, &dx, &dy, settings.alpha_rec, settings.reconstruction);
+        let combined: Vec<f64> = recon.iter().zip(&direct).map(|(a, b)| a + b).collect();
+        let primal_full: Vec<f64> = primal.iter().zip(&direct).map(|(a, b)| a + b).collect();
+        vec![
+            ("Combined".into(), img(&combined)),
+            ("GD Primal".into(), img(&primal_full)),
+            ("GD Gradient X".into(), img(&dx)),
+            ("GD Gradient Y".into(), img(&dy)),
+            ("MLT Density".into(), img(&density_img)),
+        ]
+    };
+    stats.elapsed = control.elapsed();
+    RenderOutput { layers, stats }
+}
