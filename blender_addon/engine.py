@@ -19,6 +19,7 @@ PASSES = (
     ("GD Gradient Y", 3, "RGB", "COLOR"),
     ("Denoising Albedo", 3, "RGB", "COLOR"),
     ("Denoising Normal", 3, "XYZ", "VECTOR"),
+    ("MLT Density", 3, "RGB", "COLOR"),
 )
 
 
@@ -75,6 +76,7 @@ class GDMLTRenderEngine(bpy.types.RenderEngine):
         res = gdmlt.render(core_scene, method=method, spp=s.samples, time_limit=s.time_limit,
                            max_bounces=s.max_bounces, nee=s.use_nee, seed=s.seed, threads=s.threads,
                            reconstruction=s.reconstruction.lower(), alpha_rec=s.alpha_reconstruction,
+                           alpha_target=s.alpha_target, large_step_probability=s.large_step_probability,
                            progress=progress)
         st = res["stats"]
         global last_stats
@@ -102,5 +104,6 @@ class GDMLTRenderEngine(bpy.types.RenderEngine):
                 buf = _to_blender_rows(layers[name], channels)[crop]
                 passes[name].rect.foreach_set(np.ascontiguousarray(buf).ravel())
         self.end_result(result)
-        self.update_stats("GDMLT", f"{s.method} | {st['spp_max']} spp | render {st['elapsed']:.2f} s, export {export_time:.2f} s"
-                          + (" | cancelled" if st["cancelled"] else ""))
+        extra = f" | acceptance {st['acceptance'] * 100:.0f}%" if st.get("chains") else ""
+        self.update_stats("GDMLT", f"{s.method} | {st['spp_max']} per pixel | render {st['elapsed']:.2f} s, "
+                          f"export {export_time:.2f} s{extra}" + (" | cancelled" if st["cancelled"] else ""))

@@ -8,6 +8,9 @@ METHOD_ITEMS = [
     ("PT", "Path Tracing", "Unidirectional path tracing (Kajiya 1986)"),
     ("GDPT", "Gradient-Domain Path Tracing",
      "Path tracing with shifted offset paths and screened Poisson reconstruction (Kettunen et al. 2015)"),
+    ("PSSMLT", "Metropolis (PSSMLT)", "Primary-sample-space Metropolis light transport (Kelemen et al. 2002)"),
+    ("GDPSSMLT", "Gradient-Domain Metropolis",
+     "Metropolis sampling of image gradients with screened Poisson reconstruction (Lehtinen et al. 2013)"),
 ]
 
 RECON_ITEMS = [
@@ -17,7 +20,7 @@ RECON_ITEMS = [
 
 
 class GDMLTRenderSettings(bpy.types.PropertyGroup):
-    method: EnumProperty(name="Method", items=METHOD_ITEMS, default="PT",
+    method: EnumProperty(name="Method", items=METHOD_ITEMS, default="GDPSSMLT",
                          description="Light transport algorithm")
     samples: IntProperty(name="Samples", default=64, min=1, soft_max=4096,
                          description="Samples per pixel (mutations per pixel for Metropolis methods)")
@@ -32,6 +35,10 @@ class GDMLTRenderSettings(bpy.types.PropertyGroup):
                                  description="Norm of the screened Poisson reconstruction (gradient-domain methods)")
     alpha_reconstruction: FloatProperty(name="Alpha", default=0.2, min=1e-4, soft_max=2.0,
                                         description="Weight of the primal image against the gradients in the reconstruction")
+    alpha_target: FloatProperty(name="Target Alpha", default=0.25, min=0.0, soft_max=1.0,
+                                description="Gradient-domain Metropolis: weight of the primal image in the target function")
+    large_step_probability: FloatProperty(name="Large Step Probability", default=0.3, min=0.0, max=1.0,
+                                          description="Metropolis methods: probability of a fresh independent sample per mutation")
     threads: IntProperty(name="Threads", default=0, min=0, max=1024, description="Render threads (0 = all cores)")
 
 

@@ -28,6 +28,11 @@ class GDMLT_PT_sampling(bpy.types.Panel):
             col = layout.column(align=True)
             col.prop(s, "reconstruction")
             col.prop(s, "alpha_reconstruction")
+        if s.method in {"PSSMLT", "GDPSSMLT"}:
+            col = layout.column(align=True)
+            col.prop(s, "large_step_probability")
+            if s.method == "GDPSSMLT":
+                col.prop(s, "alpha_target")
 
 
 class GDMLT_PT_light_paths(bpy.types.Panel):

@@ -83,7 +83,8 @@ def main():
     scene = build_cornell(bpy, gdmlt)
     gdmlt.enable_addon()
     scene.render.engine = "GDMLT"
-    scene.gdmlt.samples = 256
+    scene.gdmlt.method = "GDPSSMLT"
+    scene.gdmlt.samples = 64
     scene.gdmlt.max_bounces = 8
     out = ROOT / "examples" / "cornell.blend"
     out.parent.mkdir(exist_ok=True)

@@ -7,7 +7,8 @@ from pathlib import Path
 # keys of gdmlt.render's keyword arguments → scene.gdmlt property names
 PROPERTY_OF = {"method": "method", "spp": "samples", "time_limit": "time_limit", "max_bounces": "max_bounces",
                "nee": "use_nee", "seed": "seed", "threads": "threads",
-               "reconstruction": "reconstruction", "alpha_rec": "alpha_reconstruction"}
+               "reconstruction": "reconstruction", "alpha_rec": "alpha_reconstruction",
+               "alpha_target": "alpha_target", "large_step_probability": "large_step_probability"}
 
 
 def import_bpy():

@@ -55,13 +55,19 @@ def build_parser():
                                    "Options left out keep the .blend file's own GDMLT settings.")
     r.add_argument("scene", help="path to a .blend file, or a built-in scene name (" + ", ".join(BUILTIN) + ")")
     r.add_argument("-o", "--output", required=True, help="output EXR path; a PNG is written next to it")
-    r.add_argument("--method", choices=["pt", "gdpt"], type=str.lower,
-                   help="light transport method: pt (path tracing) or gdpt (gradient-domain path tracing); default: the file's, else pt")
+    r.add_argument("--method", choices=["pt", "gdpt", "pssmlt", "gdpssmlt"], type=str.lower,
+                   help="light transport method: pt (path tracing), gdpt (gradient-domain path tracing), "
+                        "pssmlt (primary-sample-space Metropolis), gdpssmlt (gradient-domain Metropolis); "
+                        "default: the file's, else gdpssmlt")
+    r.add_argument("--alpha-target", type=_nonneg_float, dest="alpha_target",
+                   help="gdpssmlt: weight of the primal term in the target function (default 0.25)")
+    r.add_argument("--large-step", type=_nonneg_float, dest="large_step_probability",
+                   help="Metropolis methods: probability of a large step (default 0.3)")
     r.add_argument("--recon", choices=["l1", "l2"], type=str.lower, dest="reconstruction",
                    help="gradient-domain reconstruction norm (default l1: robust; l2: unbiased)")
     r.add_argument("--alpha-rec", type=_pos_float, dest="alpha_rec",
                    help="screened-Poisson weight of the primal image in the reconstruction (default 0.2)")
-    r.add_argument("--spp", type=_positive_int, help="samples per pixel (default: the file's, else 64)")
+    r.add_argument("--spp", type=_positive_int, help="samples (PT methods) or mutations (Metropolis methods) per pixel (default: the file's, else 64)")
     r.add_argument("--time", type=_nonneg_float, dest="time_limit", help="time limit in seconds, 0 = none; halts on whichever of --spp and --time comes first")
     r.add_argument("--max-bounces", type=_nonneg_int, help="maximum bounces as in Cycles (0 = direct light; default 8)")
     nee = r.add_mutually_exclusive_group()
@@ -79,7 +85,8 @@ def _settings(args):
     return {k: v for k, v in {
         "method": args.method, "spp": args.spp, "time_limit": args.time_limit, "max_bounces": args.max_bounces,
         "nee": args.nee, "seed": args.seed, "threads": args.threads,
-        "reconstruction": args.reconstruction, "alpha_rec": args.alpha_rec}.items() if v is not None}
+        "reconstruction": args.reconstruction, "alpha_rec": args.alpha_rec,
+        "alpha_target": args.alpha_target, "large_step_probability": args.large_step_probability}.items() if v is not None}
 
 
 def render_builtin(args, out: Path):
@@ -88,8 +95,8 @@ def render_builtin(args, out: Path):
     w, h = args.width or 256, args.height or 256
     desc = gdmlt.builtin_scene(args.scene, w, h)
     scene = gdmlt.Scene(desc)
-    opts = {"method": "pt", "spp": 64, "time_limit": 0.0, "max_bounces": 8, "nee": True, "seed": 0, "threads": 0,
-            "reconstruction": "l1", "alpha_rec": 0.2}
+    opts = {"method": "gdpssmlt", "spp": 64, "time_limit": 0.0, "max_bounces": 8, "nee": True, "seed": 0, "threads": 0,
+            "reconstruction": "l1", "alpha_rec": 0.2, "alpha_target": 0.25, "large_step_probability": 0.3}
     opts.update(_settings(args))
     res = gdmlt.render(scene, **opts)
     layers = res["layers"]

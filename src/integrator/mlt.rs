@@ -71,7 +71,8 @@ struct Target<'a> {
 }
 
 impl Target<'_> {
-    fn evaluate<S: Sampler>(&self, sampler: &mut S, path: &mut Path) -> Evaluated {
+    /// Evaluates the state; for the gradient target only direction `only` (all four if None).
+    fn evaluate<S: Sampler>(&self, sampler: &mut S, path: &mut Path, only: Option<usize>) -> Evaluated {
         let u = sampler.next_2d();
         let raster = Vec2::new(u.x * self.w as f32, u.y * self.h as f32);
         let (px, py) = ((raster.x as usize).min(self.w - 1), (raster.y as usize).min(self.h - 1));
@@ -92,6 +93,9 @@ impl Target<'_> {
         }
         let l = c.radiance - c.very_direct;
         for (k, (dx, dy)) in SHIFTS.iter().enumerate() {
+            if only.is_some_and(|o| o != k) {
+                continue;
+            }
             let (nx, ny) = (px as i32 + dx, py as i32 + dy);
             let inside = nx >= 0 && ny >= 0 && nx < self.w as i32 && ny < self.h as i32;
             let pc = shift(self.scene, path, inside.then(|| raster + Vec2::new(*dx as f32, *dy as f32)));
@@ -150,7 +154,7 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl,
         .map_init(Path::default, |path, i| {
             let mut s = PssSampler::new(boot_seed, i as u64, p_large);
             s.start_iteration();
-            let ev = target.evaluate(&mut s, path);
+            let ev = target.evaluate(&mut s, path, None);
             (ev.f.iter().sum::<f32>() * 0.25, ev.f)
         })
         .collect();
@@ -182,7 +186,7 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl,
                 // Replay the bootstrap state, then choose its direction ∝ F.
                 let mut s = PssSampler::new(boot_seed, start as u64, p_large);
                 s.start_iteration();
-                let mut cur = target.evaluate(&mut s, &mut path);
+                let mut cur = target.evaluate(&mut s, &mut path, None);
                 s.accept();
                 let fsum: f32 = cur.f.iter().sum();
                 let mut d = 0;
@@ -196,7 +200,6 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl,
                         break;
                     }
                     s.start_iteration();
-                    let prop = target.evaluate(&mut s, &mut path);
                     let d_new = if !gradient {
                         d
                     } else if s.is_large_step() || s.rng().next_1d() < DIRECTION_MUTATION_PROBABILITY {
@@ -204,6 +207,7 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl,
                     } else {
                         d
                     };
+                    let prop = target.evaluate(&mut s, &mut path, Some(d_new));
                     let (fc, fp) = (cur.f[d], prop.f[d_new]);
                     let a = if fc > 0.0 { (fp / fc).min(1.0) } else { 1.0 };
                     if fp > 0.0 {

@@ -30,7 +30,8 @@ def test_demo_blend_matches_builtin_scene(bpy_mod, tmp_out):
     assert scene.render.engine == "GDMLT"
     scene.render.resolution_x = scene.render.resolution_y = 48
     s = scene.gdmlt
-    s.samples, s.seed, s.max_bounces, s.use_nee = 64, 1, 6, True
+    assert s.method == "GDPSSMLT"  # the demo shows the product's method
+    s.method, s.samples, s.seed, s.max_bounces, s.use_nee = "PT", 64, 1, 6, True
     blend = render_to_exr(bpy, scene, tmp_out / "blend.exr")
     assert blend.shape == (48, 48, 3) and np.isfinite(blend).all()
     core = gdmlt.Scene(gdmlt.builtin_scene("cornell", 48, 48))
@@ -205,7 +206,7 @@ def _lights_scene(bpy, engine, spp, seed, size=48, bounces=4):
         r.threads_mode = "AUTO"
     else:
         s = scene.gdmlt
-        s.samples, s.seed, s.max_bounces, s.use_nee = spp, seed, bounces, True
+        s.method, s.samples, s.seed, s.max_bounces, s.use_nee = "PT", spp, seed, bounces, True
     return scene
 
 
