@@ -78,6 +78,14 @@ def build_parser():
     r.add_argument("--height", type=_positive_int, help="image height in pixels (overrides the scene)")
     r.add_argument("--threads", type=_nonneg_int, help="render threads, 0 = all cores (default)")
     r.add_argument("--no-png", action="store_true", help="write only the EXR")
+    b = sub.add_parser("bench", help="error against a converged reference at equal time budgets, per method",
+                       description="Renders a built-in scene with every method for the same wall-clock budgets and "
+                                   "prints relMSE and SMAPE against a converged path-traced reference.")
+    b.add_argument("--scene", default="cornell", choices=BUILTIN)
+    b.add_argument("--size", type=_positive_int, default=128)
+    b.add_argument("--budgets", default="1,2,4", help="comma-separated seconds (default 1,2,4)")
+    b.add_argument("--reference-spp", type=_positive_int, default=8192)
+    b.add_argument("--threads", type=_nonneg_int, default=0)
     return p
 
 
@@ -109,8 +117,14 @@ def render_builtin(args, out: Path):
 def main(argv=None):
     parser = build_parser()
     args = parser.parse_args(argv)
-    if args.command != "render":
-        parser.error("unknown command")
+    if args.command == "bench":
+        from .bench import run
+        try:
+            budgets = tuple(float(x) for x in args.budgets.split(","))
+        except ValueError:
+            parser.error(f"--budgets: '{args.budgets}' is not a comma-separated list of seconds")
+        run(args.scene, args.size, budgets, reference_spp=args.reference_spp, threads=args.threads)
+        return 0
     out = Path(args.output)
     if out.suffix.lower() != ".exr":
         parser.error(f"output must be an .exr file, got '{out}'")
