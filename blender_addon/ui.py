@@ -3,8 +3,8 @@
 import bpy
 
 
-class GDMLT_PT_sampling(bpy.types.Panel):
-    bl_label = "Sampling"
+class GDMLTRenderPanel:
+    """What every GDMLT Render Properties panel shares."""
     bl_space_type = "PROPERTIES"
     bl_region_type = "WINDOW"
     bl_context = "render"
@@ -13,6 +13,10 @@ class GDMLT_PT_sampling(bpy.types.Panel):
     @classmethod
     def poll(cls, context):
         return context.engine in cls.COMPAT_ENGINES
+
+
+class GDMLT_PT_sampling(GDMLTRenderPanel, bpy.types.Panel):
+    bl_label = "Sampling"
 
     def draw(self, context):
         s = context.scene.gdmlt
@@ -35,16 +39,8 @@ class GDMLT_PT_sampling(bpy.types.Panel):
                 col.prop(s, "alpha_target")
 
 
-class GDMLT_PT_light_paths(bpy.types.Panel):
+class GDMLT_PT_light_paths(GDMLTRenderPanel, bpy.types.Panel):
     bl_label = "Light Paths"
-    bl_space_type = "PROPERTIES"
-    bl_region_type = "WINDOW"
-    bl_context = "render"
-    COMPAT_ENGINES = {"GDMLT"}
-
-    @classmethod
-    def poll(cls, context):
-        return context.engine in cls.COMPAT_ENGINES
 
     def draw(self, context):
         s = context.scene.gdmlt
@@ -55,17 +51,9 @@ class GDMLT_PT_light_paths(bpy.types.Panel):
         layout.prop(s, "use_nee")
 
 
-class GDMLT_PT_performance(bpy.types.Panel):
+class GDMLT_PT_performance(GDMLTRenderPanel, bpy.types.Panel):
     bl_label = "Performance"
-    bl_space_type = "PROPERTIES"
-    bl_region_type = "WINDOW"
-    bl_context = "render"
     bl_options = {"DEFAULT_CLOSED"}
-    COMPAT_ENGINES = {"GDMLT"}
-
-    @classmethod
-    def poll(cls, context):
-        return context.engine in cls.COMPAT_ENGINES
 
     def draw(self, context):
         layout = self.layout
