@@ -41,6 +41,7 @@ pub struct Vertex {
     pub frame: Frame,
     pub material: u32,
     pub prim: u32,
+    pub front: bool,
     /// Unit direction towards the previous vertex (world).
     pub wo: Vec3,
     /// Path throughput arriving at this vertex (product of f·cos/pdf and 1/RR so far).
@@ -183,7 +184,7 @@ pub fn trace_path<S: Sampler>(
             push(&mut record, li, si.p, false, le, pdf_light);
         }
         let material = scene.material(&si);
-        let bsdf = material.bsdf();
+        let bsdf = material.bsdf(si.front);
         if depth == 0 {
             out.albedo = bsdf.albedo();
             out.normal = si.frame.n;
@@ -195,6 +196,7 @@ pub fn trace_path<S: Sampler>(
                 frame: si.frame,
                 material: si.material,
                 prim: si.prim,
+                front: si.front,
                 wo: wo_world,
                 throughput: beta,
                 pdf_in: prev_pdf,

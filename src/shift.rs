@@ -46,7 +46,7 @@ pub fn reconnection_jacobian(x: Vec3, y: Vec3, z: Vec3, nz: Vec3) -> f32 {
 
 #[inline]
 fn is_diffuse(scene: &Scene, si_material: u32) -> bool {
-    scene.materials[si_material as usize].bsdf().min_roughness() > SPECULAR_ROUGHNESS_THRESHOLD
+    scene.materials[si_material as usize].bsdf(true).min_roughness() > SPECULAR_ROUGHNESS_THRESHOLD
 }
 
 /// Visibility from a surface point to a point (or, at infinity, along a direction).
@@ -77,7 +77,7 @@ fn event_from_y0(scene: &Scene, e: &Event, x0: Vec3, y0: &SurfaceInteraction, wo
     }
     let dir = if e.at_infinity { e.z } else { (e.z - y0.p).normalize() };
     let (le, pdf_l) = if e.light == u32::MAX { (scene.world, 0.0) } else { scene.light_eval(e.light, y0.p, e.z)? };
-    let bsdf = scene.materials[y0.material as usize].bsdf();
+    let bsdf = scene.materials[y0.material as usize].bsdf(y0.front);
     let wi = y0.frame.to_local(dir);
     let f = bsdf.eval(wo_y, wi);
     let pdf_b = if e.delta { 0.0 } else { bsdf.pdf(wo_y, wi) };
@@ -136,12 +136,13 @@ pub fn shift(scene: &Scene, base: &Path, offset_raster: Option<Vec2>) -> PairCon
             prim: x1v.prim,
             material: x1v.material,
             t: 0.0,
+            front: x1v.front,
         };
         if !visible(scene, &y0s, x1v.p, false) {
             return None;
         }
         let dir = (x1v.p - y0s.p).normalize();
-        let bsdf_y0 = scene.materials[y0s.material as usize].bsdf();
+        let bsdf_y0 = scene.materials[y0s.material as usize].bsdf(y0s.front);
         let wi = y0s.frame.to_local(dir);
         let wo = wo_y0?;
         let f = bsdf_y0.eval(wo, wi);
@@ -157,7 +158,7 @@ pub fn shift(scene: &Scene, base: &Path, offset_raster: Option<Vec2>) -> PairCon
         // At x1 the BSDF sees the offset's incoming direction; from x2 on all is shared.
         let (ratio2, r2) = match base.vertices.get(2) {
             Some(x2v) => {
-                let bsdf1 = scene.materials[x1v.material as usize].bsdf();
+                let bsdf1 = scene.materials[x1v.material as usize].bsdf(x1v.front);
                 let w12 = x1v.frame.to_local(-x2v.wo);
                 let wo_x1 = x1v.frame.to_local(x1v.wo);
                 let fx = bsdf1.eval(wo_x1, w12);
@@ -186,7 +187,7 @@ pub fn shift(scene: &Scene, base: &Path, offset_raster: Option<Vec2>) -> PairCon
             0 => y0.and_then(|(y, _)| event_from_y0(scene, e, x0v.p, &y, wo_y0.unwrap_or(Vec3::Z))),
             1 => connected.as_ref().and_then(|c| {
                 let x1v = &base.vertices[1];
-                let bsdf1 = scene.materials[x1v.material as usize].bsdf();
+                let bsdf1 = scene.materials[x1v.material as usize].bsdf(x1v.front);
                 let dir = if e.at_infinity { e.z } else { (e.z - x1v.p).normalize() };
                 let wi = x1v.frame.to_local(dir);
                 let fy = bsdf1.eval(c.wo1, wi);

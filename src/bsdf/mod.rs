@@ -3,10 +3,15 @@
 //! which kind of lobe produced a sample, which the shift mapping needs to decide between
 //! reconnection and half-vector copy (Kettunen et al. 2015).
 
+mod conductor;
+mod dielectric;
 mod lambert;
+pub mod microfacet;
 #[cfg(test)]
 pub(crate) mod testing;
 
+pub use conductor::Conductor;
+pub use dielectric::SmoothDielectric;
 pub use lambert::Lambert;
 
 use crate::math::Spectrum;
@@ -44,6 +49,16 @@ pub struct BsdfSample {
 #[derive(Clone, Copy, Debug)]
 pub enum Bsdf {
     Lambert(Lambert),
+    Conductor(Conductor),
+    Dielectric(SmoothDielectric),
+    /// Blender's Principled BSDF as a stochastic mixture of a diffuse base, a metal and a
+    /// glass lobe with weights (1−m)(1−t), m, (1−m)t (m = metallic, t = transmission).
+    Principled {
+        diffuse: Lambert,
+        metal: Conductor,
+        glass: SmoothDielectric,
+        w: [f32; 3],
+    },
 }
 
 impl Bsdf {
@@ -52,23 +67,74 @@ impl Bsdf {
     pub fn eval(&self, wo: Vec3, wi: Vec3) -> Spectrum {
         match self {
             Bsdf::Lambert(b) => b.eval(wo, wi),
+            Bsdf::Conductor(b) => b.eval(wo, wi),
+            Bsdf::Dielectric(_) => Spectrum::ZERO,
+            Bsdf::Principled { diffuse, metal, w, .. } => {
+                let mut f = Spectrum::ZERO;
+                if w[0] > 0.0 {
+                    f += diffuse.eval(wo, wi) * w[0];
+                }
+                if w[1] > 0.0 {
+                    f += metal.eval(wo, wi) * w[1];
+                }
+                f
+            }
         }
     }
 
-    /// Solid-angle density with which `sample` returns `wi` (non-delta lobes only).
+    /// Solid-angle density with which `sample` returns `wi` through a non-delta lobe.
     #[inline]
     pub fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
         match self {
             Bsdf::Lambert(b) => b.pdf(wo, wi),
+            Bsdf::Conductor(b) => b.pdf(wo, wi),
+            Bsdf::Dielectric(_) => 0.0,
+            Bsdf::Principled { diffuse, metal, w, .. } => {
+                let mut p = 0.0;
+                if w[0] > 0.0 {
+                    p += diffuse.pdf(wo, wi) * w[0];
+                }
+                if w[1] > 0.0 {
+                    p += metal.pdf(wo, wi) * w[1];
+                }
+                p
+            }
         }
     }
 
     /// Samples an incident direction from two primary samples plus one for lobe selection.
     #[inline]
     pub fn sample(&self, wo: Vec3, u_lobe: f32, u: Vec2) -> Option<BsdfSample> {
-        let _ = u_lobe;
         match self {
             Bsdf::Lambert(b) => b.sample(wo, u),
+            Bsdf::Conductor(b) => b.sample(wo, u),
+            Bsdf::Dielectric(b) => b.sample(wo, u_lobe),
+            Bsdf::Principled { diffuse, metal, glass, w } => {
+                // choose a lobe ∝ weight, reusing the rest of u_lobe inside the lobe
+                let (k, u_rest) = if u_lobe < w[0] {
+                    (0, u_lobe / w[0])
+                } else if u_lobe < w[0] + w[1] {
+                    (1, (u_lobe - w[0]) / w[1])
+                } else {
+                    (2, ((u_lobe - w[0] - w[1]) / w[2].max(1e-12)).min(0.999_999))
+                };
+                let mut bs = match k {
+                    0 => diffuse.sample(wo, u)?,
+                    1 => metal.sample(wo, u)?,
+                    _ => glass.sample(wo, u_rest)?,
+                };
+                if bs.lobe == LobeKind::Specular {
+                    bs.pdf *= w[k]; // discrete probability of this delta event; weight unchanged
+                } else {
+                    let pdf = self.pdf(wo, bs.wi);
+                    if !(pdf > 0.0) {
+                        return None;
+                    }
+                    bs.weight = self.eval(wo, bs.wi) / pdf;
+                    bs.pdf = pdf;
+                }
+                Some(bs)
+            }
         }
     }
 
@@ -77,15 +143,30 @@ impl Bsdf {
     pub fn is_delta(&self) -> bool {
         match self {
             Bsdf::Lambert(_) => false,
+            Bsdf::Conductor(b) => b.is_delta(),
+            Bsdf::Dielectric(_) => true,
+            Bsdf::Principled { metal, w, .. } => w[0] <= 0.0 && (w[1] <= 0.0 || metal.is_delta()),
         }
     }
 
-    /// Smallest roughness over the lobes (1 for Lambert); the shift mapping compares it with
-    /// [`SPECULAR_ROUGHNESS_THRESHOLD`].
+    /// Smallest roughness over the lobes that carry weight (delta lobes count as 0); the
+    /// shift mapping compares it with [`SPECULAR_ROUGHNESS_THRESHOLD`].
     #[inline]
     pub fn min_roughness(&self) -> f32 {
         match self {
             Bsdf::Lambert(_) => 1.0,
+            Bsdf::Conductor(b) => b.roughness,
+            Bsdf::Dielectric(_) => 0.0,
+            Bsdf::Principled { metal, w, .. } => {
+                let mut r: f32 = 1.0;
+                if w[1] > 0.0 {
+                    r = r.min(metal.roughness);
+                }
+                if w[2] > 0.0 {
+                    r = 0.0;
+                }
+                r
+            }
         }
     }
 
@@ -93,6 +174,11 @@ impl Bsdf {
     pub fn albedo(&self) -> Spectrum {
         match self {
             Bsdf::Lambert(b) => b.albedo,
+            Bsdf::Conductor(b) => b.f0,
+            Bsdf::Dielectric(b) => b.tint,
+            Bsdf::Principled { diffuse, metal, glass, w } => {
+                diffuse.albedo * w[0] + metal.f0 * w[1] + glass.tint * w[2]
+            }
         }
     }
 }

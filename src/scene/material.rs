@@ -1,9 +1,9 @@
 //! Materials: the parameters of the Principled-like uber-material, turned into a BSDF at a
-//! surface point. For now the BSDF is the diffuse part (Lambert with the base colour);
-//! metallic, transmission and roughness are stored and validated for the specular BSDFs.
+//! surface point: Lambertian base, GGX or mirror metal (metallic), smooth glass
+//! (transmission; roughness of glass is not modelled yet), mixed by their Principled weights.
 
 use super::desc::MaterialDesc;
-use crate::bsdf::{Bsdf, Lambert};
+use crate::bsdf::{Bsdf, Conductor, Lambert, SmoothDielectric};
 use crate::error::SceneError;
 use crate::math::Spectrum;
 use glam::Vec3;
@@ -37,7 +37,14 @@ impl Material {
             roughness: d.roughness.clamp(0.0, 1.0),
             metallic: d.metallic.clamp(0.0, 1.0),
             transmission: d.transmission.clamp(0.0, 1.0),
-            ior: if d.ior > 0.0 { d.ior } else { 1.0 },
+            // η = 1 exactly would make refraction a pass-through; keep it just off 1.
+            ior: if d.ior > 0.0 && (d.ior - 1.0).abs() > 1e-4 {
+                d.ior
+            } else if d.ior > 0.0 {
+                1.0 + 1e-4
+            } else {
+                1.5
+            },
         })
     }
 
@@ -45,11 +52,24 @@ impl Material {
         self.emission.max_element() > 0.0
     }
 
-    /// The BSDF at a surface point.
+    /// The BSDF at a surface point; `front` is true when the ray arrives on the side the
+    /// geometric normal points to (outside of a closed mesh), which orients refraction.
     #[inline]
-    pub fn bsdf(&self) -> Bsdf {
-        // Diffuse part of the Principled BSDF: a metal or a fully transmissive surface has none.
-        let diffuse = self.base_color * (1.0 - self.metallic) * (1.0 - self.transmission);
-        Bsdf::Lambert(Lambert { albedo: diffuse })
+    pub fn bsdf(&self, front: bool) -> Bsdf {
+        let (m, t) = (self.metallic, self.transmission);
+        let w = [(1.0 - m) * (1.0 - t), m, (1.0 - m) * t];
+        let diffuse = Lambert { albedo: self.base_color };
+        let metal = Conductor { f0: self.base_color, roughness: self.roughness };
+        let eta = if front { self.ior } else { 1.0 / self.ior };
+        let glass = SmoothDielectric { eta, tint: self.base_color };
+        if w[1] <= 0.0 && w[2] <= 0.0 {
+            Bsdf::Lambert(diffuse)
+        } else if w[0] <= 0.0 && w[2] <= 0.0 {
+            Bsdf::Conductor(metal)
+        } else if w[0] <= 0.0 && w[1] <= 0.0 {
+            Bsdf::Dielectric(glass)
+        } else {
+            Bsdf::Principled { diffuse, metal, glass, w }
+        }
     }
 }

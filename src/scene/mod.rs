@@ -29,6 +29,8 @@ pub struct SurfaceInteraction {
     pub prim: u32,
     pub material: u32,
     pub t: f32,
+    /// The ray arrived on the side the geometric normal points to (outside a closed mesh).
+    pub front: bool,
 }
 
 impl SurfaceInteraction {
@@ -255,7 +257,8 @@ impl Scene {
             Some(n) => (n[0] * b0 + n[1] * b1 + n[2] * b2).normalize_or(ng),
             None => ng,
         };
-        if ng.dot(d) > 0.0 {
+        let front = ng.dot(d) <= 0.0;
+        if !front {
             ng = -ng;
         }
         if ns.dot(ng) < 0.0 {
@@ -268,6 +271,7 @@ impl Scene {
             prim: hit.prim,
             material: self.tri_material[t],
             t: hit.t,
+            front,
         }
     }
 
