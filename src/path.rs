@@ -141,7 +141,8 @@ pub fn trace_path<S: Sampler>(
         };
 
         let from_vertex = if camera_ray { CAMERA_VERTEX } else { depth - 1 };
-        let pdf_l_if_nee = |pdf: f32| if use_nee { pdf } else { 0.0 };
+        // NEE cannot produce a path whose last bounce was specular: its light pdf is then 0.
+        let pdf_l_if_nee = |pdf: f32| if use_nee && !prev_delta { pdf } else { 0.0 };
         let push = |rec: &mut Option<&mut Path>, light: u32, z: Vec3, at_infinity: bool, le: Spectrum, pdf_l: f32| {
             if let Some(p) = rec.as_deref_mut() {
                 p.events.push(Event {
@@ -311,8 +312,11 @@ mod tests {
     /// the path tracer's own (power-heuristic) sum: they must agree in the mean.
     #[test]
     fn recorded_events_reproduce_the_radiance() {
-        let scene = Scene::build(&cornell_box(16, 16)).unwrap();
-        for nee in [true, false] {
+        for (scene, nee) in [
+            (Scene::build(&cornell_box(16, 16)).unwrap(), true),
+            (Scene::build(&cornell_box(16, 16)).unwrap(), false),
+            (Scene::build(&crate::scene::builtin::cornell_spheres(16, 16)).unwrap(), true),
+        ] {
             let cfg = PathSettings { max_bounces: 4, nee };
             let mut path = Path::default();
             let (mut a, mut b) = (0.0f64, 0.0f64);

@@ -331,3 +331,27 @@ fn metropolis_methods_converge_to_the_path_traced_image() {
         }
     }
 }
+
+/// The three other methods converge to path tracing on the scene with a glass and a mirror
+/// sphere (specular vertices: the shift falls back to the base path there) and on the scene
+/// lit only through a gap. Tolerances from the spread of four seeds, as above.
+#[test]
+fn all_methods_converge_on_specular_and_gap_scenes() {
+    use gdmlt::scene::builtin::{cornell_gap, cornell_spheres};
+    let k = 4usize;
+    for (name, desc) in [("spheres", cornell_spheres(16, 16)), ("gap", cornell_gap(16, 16))] {
+        let nee = true;
+        let ref_spp = 16384;
+        let ref_out = run_method(&desc, Method::Pt, Norm::L2, ref_spp, nee, 6, 100, 0);
+        let reference = block_means(ref_out.layer("Combined").unwrap(), 4);
+        for (method, spp) in [(Method::Gdpt, 128u32), (Method::Pssmlt, 512), (Method::Gdpssmlt, 512)] {
+            let runs: Vec<RenderOutput> =
+                (0..k).map(|s| run_method(&desc, method, Norm::L2, spp, nee, 6, s as u64 + 1, 0)).collect();
+            let est: Vec<Vec<f64>> = runs.iter().map(|r| block_means(r.layer("Combined").unwrap(), 4)).collect();
+            assert_converges(&format!("{name} {method:?}"), &est, &reference, spp as f64 / ref_spp as f64, 2.5);
+            for r in &runs {
+                assert!(r.layers.iter().all(|(_, img)| img.data.iter().all(|v| v.is_finite())));
+            }
+        }
+    }
+}

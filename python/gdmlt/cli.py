@@ -6,7 +6,7 @@ import sys
 import time
 from pathlib import Path
 
-BUILTIN = ("cornell", "furnace")
+BUILTIN = ("cornell", "spheres", "gap", "furnace")
 
 
 def _int_at_least(lowest):

@@ -182,3 +182,41 @@ impl Bsdf {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::testing::{chi2_test, white_furnace};
+    use super::*;
+
+    fn principled(w: [f32; 3], roughness: f32) -> Bsdf {
+        Bsdf::Principled {
+            diffuse: Lambert { albedo: Spectrum::ONE },
+            metal: Conductor { f0: Spectrum::ONE, roughness },
+            glass: SmoothDielectric { eta: 1.5, tint: Spectrum::ONE },
+            w,
+        }
+    }
+
+    /// The mixture's sample/pdf/eval agree (chi-square over its non-delta part).
+    #[test]
+    fn principled_mixture_chi2() {
+        let b = principled([0.6, 0.4, 0.0], 0.6);
+        for wo in [Vec3::Z, Vec3::new(0.6, 0.0, 0.8)] {
+            chi2_test(&b, wo, 21);
+        }
+    }
+
+    /// With white lobes the mixture's albedo is the weighted sum of its lobes' albedos.
+    #[test]
+    fn principled_mixture_furnace() {
+        let wo = Vec3::new(0.3, 0.1, 0.95).normalize();
+        let (diffuse, _) = white_furnace(&principled([1.0, 0.0, 0.0], 0.6), wo, 200_000, 1);
+        let (metal, _) = white_furnace(&principled([0.0, 1.0, 0.0], 0.6), wo, 200_000, 2);
+        let (glass, _) = white_furnace(&principled([0.0, 0.0, 1.0], 0.6), wo, 200_000, 3);
+        let (mix, _) = white_furnace(&principled([0.5, 0.3, 0.2], 0.6), wo, 400_000, 4);
+        let expect = 0.5 * diffuse + 0.3 * metal + 0.2 * glass;
+        assert!((mix - expect).abs() < 0.01, "mixture {mix} vs weighted lobes {expect}");
+        // glass with the 1/η² radiance factor: F + (1−F)/η² < 1
+        assert!(glass < 1.0 && glass > 0.4, "{glass}");
+    }
+}

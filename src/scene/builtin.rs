@@ -100,6 +100,75 @@ pub fn cornell_box(width: u32, height: u32) -> SceneDesc {
     }
 }
 
+/// A closed UV sphere mesh (flat-shaded facets).
+fn uv_sphere(name: &str, center: [f32; 3], radius: f32, nu: u32, nv: u32, mat: u32) -> MeshDesc {
+    let mut positions = Vec::new();
+    for j in 0..=nv {
+        let theta = std::f32::consts::PI * j as f32 / nv as f32;
+        for i in 0..nu {
+            let phi = 2.0 * std::f32::consts::PI * i as f32 / nu as f32;
+            positions.push([
+                center[0] + radius * theta.sin() * phi.cos(),
+                center[1] + radius * theta.sin() * phi.sin(),
+                center[2] + radius * theta.cos(),
+            ]);
+        }
+    }
+    let mut indices = Vec::new();
+    for j in 0..nv {
+        for i in 0..nu {
+            let a = j * nu + i;
+            let b = j * nu + (i + 1) % nu;
+            let c = (j + 1) * nu + i;
+            let d = (j + 1) * nu + (i + 1) % nu;
+            if j > 0 {
+                indices.push([a, b, d]);
+            }
+            if j + 1 < nv {
+                indices.push([a, d, c]);
+            }
+        }
+    }
+    let n = indices.len();
+    MeshDesc { name: name.into(), positions, indices, corner_normals: vec![], material_ids: vec![mat; n] }
+}
+
+/// The Cornell box with a glass sphere and a mirror sphere instead of the blocks (the
+/// specular test scene of the gradient-domain methods).
+pub fn cornell_spheres(width: u32, height: u32) -> SceneDesc {
+    let mut d = cornell_box(width, height);
+    d.meshes.retain(|m| !m.name.ends_with("Block"));
+    d.materials.push(MaterialDesc {
+        name: "Glass".into(),
+        base_color: [1.0; 3],
+        transmission: 1.0,
+        ior: 1.5,
+        roughness: 0.0,
+        ..Default::default()
+    });
+    d.materials.push(MaterialDesc {
+        name: "Mirror".into(),
+        base_color: [0.95; 3],
+        metallic: 1.0,
+        roughness: 0.0,
+        ..Default::default()
+    });
+    let (glass, mirror) = (d.materials.len() as u32 - 2, d.materials.len() as u32 - 1);
+    d.meshes.push(uv_sphere("GlassSphere", [0.4, -0.3, -0.6], 0.4, 32, 16, glass));
+    d.meshes.push(uv_sphere("MirrorSphere", [-0.4, 0.35, -0.6], 0.4, 32, 16, mirror));
+    d
+}
+
+/// The Cornell box with a plate under the light that has one narrow gap: the room is lit
+/// only through it (a hard case for path tracing, the kind MLT is for).
+pub fn cornell_gap(width: u32, height: u32) -> SceneDesc {
+    let mut d = cornell_box(width, height);
+    let (z, g0, g1) = (0.8f32, 0.05f32, 0.15f32);
+    d.meshes.push(quad("PlateFront", [[-1.0, -1.0, z], [1.0, -1.0, z], [1.0, g0, z], [-1.0, g0, z]], 0));
+    d.meshes.push(quad("PlateBack", [[-1.0, g1, z], [1.0, g1, z], [1.0, 1.0, z], [-1.0, 1.0, z]], 0));
+    d
+}
+
 /// A closed UV sphere of radius 1 with uniform albedo and emission, seen from its centre.
 /// Radiance inside is constant: L = Le·Σ_{k=0}^{B+1} ρ^k for B bounces (ρ = albedo).
 pub fn furnace_sphere(albedo: f32, emission: f32, width: u32, height: u32) -> SceneDesc {
@@ -139,11 +208,13 @@ pub fn furnace_sphere(albedo: f32, emission: f32, width: u32, height: u32) -> Sc
 }
 
 /// Names accepted by `builtin`.
-pub const BUILTIN_SCENES: &[&str] = &["cornell", "furnace"];
+pub const BUILTIN_SCENES: &[&str] = &["cornell", "spheres", "gap", "furnace"];
 
 pub fn builtin(name: &str, width: u32, height: u32) -> Option<SceneDesc> {
     match name {
         "cornell" => Some(cornell_box(width, height)),
+        "spheres" => Some(cornell_spheres(width, height)),
+        "gap" => Some(cornell_gap(width, height)),
         "furnace" => Some(furnace_sphere(0.8, 1.0, width, height)),
         _ => None,
     }
