@@ -123,6 +123,47 @@ impl Target<'_> {
     }
 }
 
+/// Mutations a chain runs before the next chain of its group gets its turn.
+const ROUND: u64 = 256;
+
+struct Chain {
+    s: PssSampler,
+    cur: Evaluated,
+    d: usize,
+    remaining: u64,
+}
+
+/// One Metropolis–Hastings step with expected-value splatting (ALGORITHM.md §2).
+fn mutate(target: &Target, c: &mut Chain, path: &mut Path, group: &mut Group, gradient: bool) {
+    c.s.start_iteration();
+    let d_new = if !gradient {
+        c.d
+    } else if c.s.is_large_step() || c.s.rng().next_1d() < DIRECTION_MUTATION_PROBABILITY {
+        ((c.s.rng().next_1d() * 4.0) as usize).min(3)
+    } else {
+        c.d
+    };
+    let prop = target.evaluate(&mut c.s, path, Some(d_new));
+    let (fc, fp) = (c.cur.f[c.d], prop.f[d_new]);
+    let a = if fc > 0.0 { (fp / fc).min(1.0) } else { 1.0 };
+    if fp > 0.0 {
+        splat(group, &prop.splats[d_new], a as f64 / fp as f64);
+    }
+    if fc > 0.0 {
+        splat(group, &c.cur.splats[c.d], (1.0 - a) as f64 / fc as f64);
+    }
+    if c.s.rng().next_1d() < a {
+        c.s.accept();
+        c.cur = prop;
+        c.d = d_new;
+        group.accepted += 1;
+    } else {
+        c.s.reject();
+    }
+    group.density[c.cur.splats[c.d].pixel] += 1.0;
+    group.mutations += 1;
+}
+
 struct Group {
     layers: [Vec<[f64; 3]>; 3],
     density: Vec<f64>,
@@ -152,6 +193,9 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl,
     let boot: Vec<(f32, [f32; 4])> = (0..BOOTSTRAP_SAMPLES)
         .into_par_iter()
         .map_init(Path::default, |path, i| {
+            if i % 512 == 0 && control.is_cancelled() {
+                return (0.0, [0.0; 4]); // Esc during the bootstrap: finish at once
+            }
             let mut s = PssSampler::new(boot_seed, i as u64, p_large);
             s.start_iteration();
             let ev = target.evaluate(&mut s, path, None);
@@ -179,56 +223,39 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl,
                 return group;
             }
             let mut path = Path::default();
-            for chain in (g..n_chains).step_by(GROUPS) {
-                let mutations = total / n_chains as u64 + u64::from((chain as u64) < total % n_chains as u64);
-                let mut pick = IndependentSampler::new(chain_seed, chain as u64);
-                let Some((start, _)) = starts.sample(pick.next_1d()) else { continue };
-                // Replay the bootstrap state, then choose its direction ∝ F.
-                let mut s = PssSampler::new(boot_seed, start as u64, p_large);
-                s.start_iteration();
-                let mut cur = target.evaluate(&mut s, &mut path, None);
-                s.accept();
-                let fsum: f32 = cur.f.iter().sum();
-                let mut d = 0;
-                let mut acc = pick.next_1d() * fsum;
-                while d < 3 && acc >= cur.f[d] {
-                    acc -= cur.f[d];
-                    d += 1;
-                }
-                for m in 0..mutations {
-                    if m % 256 == 0 && control.should_stop() {
-                        break;
-                    }
+            // Start every chain of the group (bootstrap replay, direction ∝ F) ...
+            let mut chains: Vec<Chain> = (g..n_chains)
+                .step_by(GROUPS)
+                .filter_map(|chain| {
+                    let mutations = total / n_chains as u64 + u64::from((chain as u64) < total % n_chains as u64);
+                    let mut pick = IndependentSampler::new(chain_seed, chain as u64);
+                    let (start, _) = starts.sample(pick.next_1d())?;
+                    let mut s = PssSampler::new(boot_seed, start as u64, p_large);
                     s.start_iteration();
-                    let d_new = if !gradient {
-                        d
-                    } else if s.is_large_step() || s.rng().next_1d() < DIRECTION_MUTATION_PROBABILITY {
-                        ((s.rng().next_1d() * 4.0) as usize).min(3)
-                    } else {
-                        d
-                    };
-                    let prop = target.evaluate(&mut s, &mut path, Some(d_new));
-                    let (fc, fp) = (cur.f[d], prop.f[d_new]);
-                    let a = if fc > 0.0 { (fp / fc).min(1.0) } else { 1.0 };
-                    if fp > 0.0 {
-                        splat(&mut group, &prop.splats[d_new], a as f64 / fp as f64);
+                    let cur = target.evaluate(&mut s, &mut path, None);
+                    s.accept();
+                    let fsum: f32 = cur.f.iter().sum();
+                    let (mut d, mut acc) = (0, pick.next_1d() * fsum);
+                    while d < 3 && acc >= cur.f[d] {
+                        acc -= cur.f[d];
+                        d += 1;
                     }
-                    if fc > 0.0 {
-                        splat(&mut group, &cur.splats[d], (1.0 - a) as f64 / fc as f64);
+                    Some(Chain { s, cur, d, remaining: mutations })
+                })
+                .collect();
+            // ... then advance them in rounds, so that a time limit or Esc stops all chains
+            // at about the same length instead of leaving most of them unstarted.
+            'rounds: while chains.iter().any(|c| c.remaining > 0) {
+                for c in chains.iter_mut() {
+                    if control.should_stop() {
+                        break 'rounds;
                     }
-                    if s.rng().next_1d() < a {
-                        s.accept();
-                        cur = prop;
-                        d = d_new;
-                        group.accepted += 1;
-                    } else {
-                        s.reject();
+                    let n = c.remaining.min(ROUND);
+                    for _ in 0..n {
+                        mutate(&target, c, &mut path, &mut group, gradient);
                     }
-                    group.density[cur.splats[d].pixel] += 1.0;
-                    group.mutations += 1;
-                    if m % 1024 == 1023 {
-                        control.work_done.fetch_add(1024, Ordering::Relaxed);
-                    }
+                    c.remaining -= n;
+                    control.work_done.fetch_add(n, Ordering::Relaxed);
                 }
             }
             group
