@@ -193,7 +193,7 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl,
     let boot: Vec<(f32, [f32; 4])> = (0..BOOTSTRAP_SAMPLES)
         .into_par_iter()
         .map_init(Path::default, |path, i| {
-            if i % 512 == 0 && control.is_cancelled() {
+            if control.is_cancelled() {
                 return (0.0, [0.0; 4]); // Esc during the bootstrap: finish at once
             }
             let mut s = PssSampler::new(boot_seed, i as u64, p_large);
