@@ -23,6 +23,15 @@ PASSES = (
 )
 
 
+# Passes each method writes (besides Combined).
+METHOD_PASSES = {
+    "PT": {"Denoising Albedo", "Denoising Normal"},
+    "GDPT": {"GD Primal", "GD Gradient X", "GD Gradient Y", "Denoising Albedo", "Denoising Normal"},
+    "PSSMLT": {"MLT Density"},
+    "GDPSSMLT": {"GD Primal", "GD Gradient X", "GD Gradient Y", "MLT Density"},
+}
+
+
 def _to_blender_rows(img, channels):
     """Core image (H, W, C), top row first → flat float32 buffer, bottom row first."""
     h, w = img.shape[:2]
@@ -73,37 +82,52 @@ class GDMLTRenderEngine(bpy.types.RenderEngine):
             self.update_stats("GDMLT", f"{s.method} | {fraction * 100:.0f}% | {elapsed:.1f} s")
             return self.test_break()
 
-        res = gdmlt.render(core_scene, method=method, spp=s.samples, time_limit=s.time_limit,
-                           max_bounces=s.max_bounces, nee=s.use_nee, seed=s.seed, threads=s.threads,
-                           reconstruction=s.reconstruction.lower(), alpha_rec=s.alpha_reconstruction,
-                           alpha_target=s.alpha_target, large_step_probability=s.large_step_probability,
-                           progress=progress)
-        st = res["stats"]
-        global last_stats
-        last_stats = dict(st, export_time=export_time)
-        for w in st["warnings"]:
-            if w not in core_scene.warnings:
-                self.report({"WARNING"}, f"GDMLT: {w}")
-        if st["invalid_samples"]:
-            self.report({"WARNING"}, f"GDMLT: {st['invalid_samples']} samples were NaN/Inf and were dropped")
         w, h = core_scene.size
-        layers = res["layers"]
         layer_name = depsgraph.view_layer.name
+        wanted = METHOD_PASSES.get(s.method, set())
         for name, channels, chan_id, _ in PASSES:
-            if name in layers:
+            if name in wanted:
                 self.add_pass(name, channels, chan_id, layer=layer_name)
         result = self.begin_result(0, 0, w, h, layer=layer_name)
-        r = scene.render
-        crop = (slice(None), slice(None))
-        if r.use_border:  # the result comes back clipped to the border rectangle
-            crop = (slice(round(r.border_min_y * h), round(r.border_max_y * h)),
-                    slice(round(r.border_min_x * w), round(r.border_max_x * w)))
-        passes = result.layers[0].passes
-        for name, channels in [("Combined", 4)] + [(p[0], p[1]) for p in PASSES]:
-            if name in layers and passes.get(name) is not None:
-                buf = _to_blender_rows(layers[name], channels)[crop]
-                passes[name].rect.foreach_set(np.ascontiguousarray(buf).ravel())
-        self.end_result(result)
+        try:
+            r = scene.render
+            crop = (slice(None), slice(None))
+            if r.use_border:  # the result comes back clipped to the border rectangle
+                crop = (slice(round(r.border_min_y * h), round(r.border_max_y * h)),
+                        slice(round(r.border_min_x * w), round(r.border_max_x * w)))
+            passes = result.layers[0].passes
+            channels_of = dict([("Combined", 4)] + [(p[0], p[1]) for p in PASSES])
+            previews = 0
+
+            def write(name, img):
+                if passes.get(name) is not None:
+                    buf = _to_blender_rows(img, channels_of[name])[crop]
+                    passes[name].rect.foreach_set(np.ascontiguousarray(buf).ravel())
+
+            def preview(img):  # intermediate image: shown while the render goes on
+                nonlocal previews
+                write("Combined", img)
+                self.update_result(result)
+                previews += 1
+
+            res = gdmlt.render(core_scene, method=method, spp=s.samples, time_limit=s.time_limit,
+                               max_bounces=s.max_bounces, nee=s.use_nee, seed=s.seed, threads=s.threads,
+                               reconstruction=s.reconstruction.lower(), alpha_rec=s.alpha_reconstruction,
+                               alpha_target=s.alpha_target, large_step_probability=s.large_step_probability,
+                               progress=progress, preview=preview)
+            for name, img in res["layers"].items():
+                if name in channels_of:
+                    write(name, img)
+        finally:
+            self.end_result(result)
+        st = res["stats"]
+        global last_stats
+        last_stats = dict(st, export_time=export_time, previews=previews)
+        for w_ in st["warnings"]:
+            if w_ not in core_scene.warnings:
+                self.report({"WARNING"}, f"GDMLT: {w_}")
+        if st["invalid_samples"]:
+            self.report({"WARNING"}, f"GDMLT: {st['invalid_samples']} samples were NaN/Inf and were dropped")
         extra = f" | acceptance {st['acceptance'] * 100:.0f}%" if st.get("chains") else ""
         self.update_stats("GDMLT", f"{s.method} | {st['spp_max']} per pixel | render {st['elapsed']:.2f} s, "
                           f"export {export_time:.2f} s{extra}" + (" | cancelled" if st["cancelled"] else ""))

@@ -275,7 +275,7 @@ fn numpy_to_image(obj: &Bound<'_, PyAny>) -> PyResult<Image> {
 /// Renders a scene. `progress(fraction, elapsed_seconds)` is called about every 50 ms from
 /// the calling thread; if it returns True the render stops and keeps what it has.
 #[pyfunction]
-#[pyo3(signature = (scene, method="pt", spp=16, time_limit=0.0, max_bounces=8, nee=true, seed=0, threads=0, reconstruction="l1", alpha_rec=0.2, large_step_probability=0.3, alpha_target=0.25, progress=None))]
+#[pyo3(signature = (scene, method="pt", spp=16, time_limit=0.0, max_bounces=8, nee=true, seed=0, threads=0, reconstruction="l1", alpha_rec=0.2, large_step_probability=0.3, alpha_target=0.25, progress=None, preview=None))]
 #[allow(clippy::too_many_arguments)]
 fn render<'py>(
     py: Python<'py>,
@@ -292,6 +292,7 @@ fn render<'py>(
     large_step_probability: f32,
     alpha_target: f32,
     progress: Option<Bound<'py, PyAny>>,
+    preview: Option<Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let method = Method::parse(method).map_err(|e| verr(e.to_string()))?;
     let reconstruction = crate::reconstruct::Norm::parse(reconstruction)
@@ -312,6 +313,10 @@ fn render<'py>(
     let control = RenderControl::new(time_limit);
     let sc = self::Scene { inner: scene.inner.clone() };
     let progress = progress.map(|p| p.unbind());
+    let preview = preview.map(|p| p.unbind());
+    // First intermediate image after 1 s, then at intervals that grow with the render time
+    // (a quarter of the time so far, 1 to 10 s), so that previews never slow a long render.
+    let mut next_preview = 1.0f64;
     let mut callback_error: Option<PyErr> = None;
     let result = py.detach(|| {
         std::thread::scope(|s| {
@@ -322,6 +327,22 @@ fn render<'py>(
             });
             while !worker.is_finished() {
                 std::thread::sleep(Duration::from_millis(50));
+                if let Some(cb) = &preview {
+                    let t = control.elapsed();
+                    if t >= next_preview {
+                        control.request_preview();
+                        next_preview = t + (0.25 * t).clamp(1.0, 10.0);
+                    }
+                    if let Some(img) = control.take_preview() {
+                        Python::attach(|py| {
+                            let r = image_to_numpy(py, &img).and_then(|a| cb.call1(py, (a,)));
+                            if let Err(e) = r {
+                                control.cancel();
+                                callback_error.get_or_insert(e);
+                            }
+                        });
+                    }
+                }
                 if let Some(cb) = &progress {
                     Python::attach(|py| match cb.call1(py, (control.progress(), control.elapsed())) {
                         Ok(r) => {

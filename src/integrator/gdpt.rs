@@ -15,7 +15,7 @@ use crate::reconstruct::reconstruct_rgb;
 use crate::sampler::Sampler;
 use crate::scene::Scene;
 use crate::shift::shift;
-use glam::{Vec2, Vec3};
+use glam::Vec2;
 use rayon::prelude::*;
 use std::sync::atomic::Ordering;
 
@@ -132,6 +132,27 @@ fn f32_image(w: usize, h: usize, data: &[f64]) -> Image {
     Image { width: w, height: h, channels: 3, data: data.iter().map(|&v| v as f32).collect() }
 }
 
+/// Normalises the accumulators of `spp` samples and reconstructs:
+/// (combined, primal + very direct, dx, dy).
+fn resolve(
+    rows: &[GdRow],
+    w: usize,
+    h: usize,
+    spp: u32,
+    alpha: f64,
+    norm: crate::reconstruct::Norm,
+) -> (Image, Image, Image, Image) {
+    let scale = 1.0 / spp.max(1) as f64;
+    let primal = to_image(rows, |r| &r.primal, scale);
+    let dx = to_image(rows, |r| &r.dx, scale);
+    let dy = to_image(rows, |r| &r.dy, scale);
+    let direct = to_image(rows, |r| &r.direct, scale);
+    let recon = reconstruct_rgb(w, h, &primal, &dx, &dy, alpha, norm);
+    let combined: Vec<f64> = recon.iter().zip(&direct).map(|(a, b)| a + b).collect();
+    let primal_full: Vec<f64> = primal.iter().zip(&direct).map(|(a, b)| a + b).collect();
+    (f32_image(w, h, &combined), f32_image(w, h, &primal_full), f32_image(w, h, &dx), f32_image(w, h, &dy))
+}
+
 pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl) -> RenderOutput {
     let (w, h) = (scene.camera.width as usize, scene.camera.height as usize);
     let mut rows = vec![GdRow::new(w); h];
@@ -146,28 +167,22 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl)
         }
         control.work_done.fetch_add(w as u64 * h as u64 * (to - done) as u64, Ordering::Relaxed);
         done = to;
+        control.offer_preview(|| resolve(&rows, w, h, done, settings.alpha_rec, crate::reconstruct::Norm::L2).0);
         if t0.elapsed().as_secs_f64() < 0.1 {
             batch = (batch * 2).min(64);
         }
     }
+    let (combined, primal_full, dx, dy) = resolve(&rows, w, h, done, settings.alpha_rec, settings.reconstruction);
     let scale = 1.0 / done.max(1) as f64;
-    let primal = to_image(&rows, |r| &r.primal, scale);
-    let dx = to_image(&rows, |r| &r.dx, scale);
-    let dy = to_image(&rows, |r| &r.dy, scale);
-    let direct = to_image(&rows, |r| &r.direct, scale);
-    let recon = reconstruct_rgb(w, h, &primal, &dx, &dy, settings.alpha_rec, settings.reconstruction);
-    let combined: Vec<f64> = recon.iter().zip(&direct).map(|(a, b)| a + b).collect();
-    let primal_full: Vec<f64> = primal.iter().zip(&direct).map(|(a, b)| a + b).collect();
     let n = |v: &[f64]| f32_image(w, h, v);
     let albedo = to_image(&rows, |r| &r.albedo, scale);
     let normal = to_image(&rows, |r| &r.normal, scale);
-    let _ = Vec3::ZERO;
     RenderOutput {
         layers: vec![
-            ("Combined".into(), n(&combined)),
-            ("GD Primal".into(), n(&primal_full)),
-            ("GD Gradient X".into(), n(&dx)),
-            ("GD Gradient Y".into(), n(&dy)),
+            ("Combined".into(), combined),
+            ("GD Primal".into(), primal_full),
+            ("GD Gradient X".into(), dx),
+            ("GD Gradient Y".into(), dy),
             ("Denoising Albedo".into(), n(&albedo)),
             ("Denoising Normal".into(), n(&normal)),
         ],

@@ -18,7 +18,7 @@ use crate::distribution::Distribution1D;
 use crate::film::Image;
 use crate::math::{abs_luminance, is_finite_spectrum, Spectrum};
 use crate::path::{trace_path, very_direct, Path};
-use crate::reconstruct::reconstruct_rgb;
+use crate::reconstruct::{reconstruct_rgb, Norm};
 use crate::sampler::{mix64, IndependentSampler, PssSampler, Sampler};
 use crate::scene::Scene;
 use crate::shift::shift;
@@ -210,21 +210,21 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl,
     control.work_total.store(total, Ordering::Relaxed);
     let chain_seed = mix64(settings.seed ^ 0xC4A1);
 
-    let groups: Vec<Group> = (0..GROUPS)
+    // Very-direct light of gdpssmlt by plain Monte Carlo (first, so previews include it).
+    let direct: Vec<f64> = if gradient { very_direct_image(scene, settings, w, h) } else { vec![0.0; w * h * 3] };
+
+    // Every group starts its chains (bootstrap replay, direction ∝ F) ...
+    let mut states: Vec<(Group, Vec<Chain>)> = (0..GROUPS)
         .into_par_iter()
         .map(|g| {
-            let mut group = Group {
+            let group = Group {
                 layers: [vec![[0.0; 3]; w * h], vec![[0.0; 3]; w * h], vec![[0.0; 3]; w * h]],
                 density: vec![0.0; w * h],
                 mutations: 0,
                 accepted: 0,
             };
-            if starts.is_empty() {
-                return group;
-            }
             let mut path = Path::default();
-            // Start every chain of the group (bootstrap replay, direction ∝ F) ...
-            let mut chains: Vec<Chain> = (g..n_chains)
+            let chains: Vec<Chain> = (g..n_chains)
                 .step_by(GROUPS)
                 .filter_map(|chain| {
                     let mutations = total / n_chains as u64 + u64::from((chain as u64) < total % n_chains as u64);
@@ -243,50 +243,35 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl,
                     Some(Chain { s, cur, d, remaining: mutations })
                 })
                 .collect();
-            // ... then advance them in rounds, so that a time limit or Esc stops all chains
-            // at about the same length instead of leaving most of them unstarted.
-            'rounds: while chains.iter().any(|c| c.remaining > 0) {
-                for c in chains.iter_mut() {
-                    if control.should_stop() {
-                        break 'rounds;
-                    }
-                    let n = c.remaining.min(ROUND);
-                    for _ in 0..n {
-                        mutate(&target, c, &mut path, &mut group, gradient);
-                    }
-                    c.remaining -= n;
-                    control.work_done.fetch_add(n, Ordering::Relaxed);
-                }
-            }
-            group
+            (group, chains)
         })
         .collect();
-
+    // ... and all chains advance in rounds of ROUND mutations, so that a time limit or Esc
+    // stops them at about the same length, and intermediate images can be taken in between.
+    while !control.should_stop() && states.iter().any(|(_, chains)| chains.iter().any(|c| c.remaining > 0)) {
+        states.par_iter_mut().for_each(|(group, chains)| {
+            let mut path = Path::default();
+            for c in chains.iter_mut() {
+                if control.should_stop() {
+                    return;
+                }
+                let n = c.remaining.min(ROUND);
+                for _ in 0..n {
+                    mutate(&target, c, &mut path, group, gradient);
+                }
+                c.remaining -= n;
+                control.work_done.fetch_add(n, Ordering::Relaxed);
+            }
+        });
+        control.offer_preview(|| {
+            let groups: Vec<&Group> = states.iter().map(|(g, _)| g).collect();
+            resolve(&groups, b, w, h, gradient, &direct, settings.alpha_rec, Norm::L2).remove(0).1
+        });
+    }
+    let groups: Vec<&Group> = states.iter().map(|(g, _)| g).collect();
     let mutations: u64 = groups.iter().map(|g| g.mutations).sum();
     let accepted: u64 = groups.iter().map(|g| g.accepted).sum();
     let mpp = mutations as f64 / (w * h) as f64;
-    let scale = if mpp > 0.0 { b / mpp } else { 0.0 };
-    let sum_layer = |l: usize| -> Vec<f64> {
-        let mut out = vec![0.0; w * h * 3];
-        for g in &groups {
-            for (i, v) in g.layers[l].iter().enumerate() {
-                for c in 0..3 {
-                    out[i * 3 + c] += v[c] * scale;
-                }
-            }
-        }
-        out
-    };
-    let primal = sum_layer(PRIMAL);
-    let mut density = vec![0.0; w * h];
-    for g in &groups {
-        for (a, b) in density.iter_mut().zip(&g.density) {
-            *a += b;
-        }
-    }
-    let dmean = density.iter().sum::<f64>() / (w * h) as f64;
-    let density_img: Vec<f64> = density.iter().flat_map(|v| [v / dmean.max(1e-300); 3]).collect();
-    let img = |v: &[f64]| Image { width: w, height: h, channels: 3, data: v.iter().map(|&x| x as f32).collect() };
     let mut stats = RenderStats {
         method: if gradient { "gdpssmlt" } else { "pssmlt" },
         spp_min: mpp as u32,
@@ -299,38 +284,80 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl,
     if starts.is_empty() {
         stats.warnings.push("no light reaches the camera in the bootstrap: the image is black".into());
     }
-    let layers = if !gradient {
-        vec![("Combined".into(), img(&primal)), ("MLT Density".into(), img(&density_img))]
-    } else {
-        let dx = sum_layer(DX);
-        let dy = sum_layer(DY);
-        // Very-direct light by plain Monte Carlo, added after reconstruction.
-        let direct: Vec<f64> = (0..h)
-            .into_par_iter()
-            .flat_map_iter(|y| {
-                (0..w).flat_map(move |x| {
-                    let mut acc = Spectrum::ZERO;
-                    for s in 0..VERY_DIRECT_SPP {
-                        let mut smp = super::pt::pixel_sampler(settings.seed ^ 0xD1, y * w + x, s);
-                        let raster = Vec2::new(x as f32, y as f32) + smp.next_2d();
-                        acc += very_direct(scene, raster, smp.next_2d());
-                    }
-                    let v = acc / VERY_DIRECT_SPP as f32;
-                    [v.x as f64, v.y as f64, v.z as f64]
-                })
-            })
-            .collect();
-        let recon = reconstruct_rgb(w, h, &primal, &dx, &dy, settings.alpha_rec, settings.reconstruction);
-        let combined: Vec<f64> = recon.iter().zip(&direct).map(|(a, b)| a + b).collect();
-        let primal_full: Vec<f64> = primal.iter().zip(&direct).map(|(a, b)| a + b).collect();
-        vec![
-            ("Combined".into(), img(&combined)),
-            ("GD Primal".into(), img(&primal_full)),
-            ("GD Gradient X".into(), img(&dx)),
-            ("GD Gradient Y".into(), img(&dy)),
-            ("MLT Density".into(), img(&density_img)),
-        ]
-    };
+    let layers = resolve(&groups, b, w, h, gradient, &direct, settings.alpha_rec, settings.reconstruction);
     stats.elapsed = control.elapsed();
     RenderOutput { layers, stats }
+}
+
+/// Camera-visible emission by plain Monte Carlo (VERY_DIRECT_SPP jittered samples per pixel).
+fn very_direct_image(scene: &Scene, settings: &RenderSettings, w: usize, h: usize) -> Vec<f64> {
+    (0..h)
+        .into_par_iter()
+        .flat_map_iter(|y| {
+            (0..w).flat_map(move |x| {
+                let mut acc = Spectrum::ZERO;
+                for s in 0..VERY_DIRECT_SPP {
+                    let mut smp = super::pt::pixel_sampler(settings.seed ^ 0xD1, y * w + x, s);
+                    let raster = Vec2::new(x as f32, y as f32) + smp.next_2d();
+                    acc += very_direct(scene, raster, smp.next_2d());
+                }
+                let v = acc / VERY_DIRECT_SPP as f32;
+                [v.x as f64, v.y as f64, v.z as f64]
+            })
+        })
+        .collect()
+}
+
+/// The output layers from the group buffers so far: splats × b/mpp; for gdpssmlt the
+/// screened Poisson reconstruction plus the very-direct image.
+#[allow(clippy::too_many_arguments)]
+fn resolve(
+    groups: &[&Group],
+    b: f64,
+    w: usize,
+    h: usize,
+    gradient: bool,
+    direct: &[f64],
+    alpha_rec: f64,
+    norm: Norm,
+) -> Vec<(String, Image)> {
+    let mutations: u64 = groups.iter().map(|g| g.mutations).sum();
+    let mpp = mutations as f64 / (w * h) as f64;
+    let scale = if mpp > 0.0 { b / mpp } else { 0.0 };
+    let sum_layer = |l: usize| -> Vec<f64> {
+        let mut out = vec![0.0; w * h * 3];
+        for g in groups {
+            for (i, v) in g.layers[l].iter().enumerate() {
+                for c in 0..3 {
+                    out[i * 3 + c] += v[c] * scale;
+                }
+            }
+        }
+        out
+    };
+    let primal = sum_layer(PRIMAL);
+    let mut density = vec![0.0; w * h];
+    for g in groups {
+        for (a, d) in density.iter_mut().zip(&g.density) {
+            *a += d;
+        }
+    }
+    let dmean = density.iter().sum::<f64>() / (w * h) as f64;
+    let density_img: Vec<f64> = density.iter().flat_map(|v| [v / dmean.max(1e-300); 3]).collect();
+    let img = |v: &[f64]| Image { width: w, height: h, channels: 3, data: v.iter().map(|&x| x as f32).collect() };
+    if !gradient {
+        return vec![("Combined".into(), img(&primal)), ("MLT Density".into(), img(&density_img))];
+    }
+    let dx = sum_layer(DX);
+    let dy = sum_layer(DY);
+    let recon = reconstruct_rgb(w, h, &primal, &dx, &dy, alpha_rec, norm);
+    let combined: Vec<f64> = recon.iter().zip(direct).map(|(a, b)| a + b).collect();
+    let primal_full: Vec<f64> = primal.iter().zip(direct).map(|(a, b)| a + b).collect();
+    vec![
+        ("Combined".into(), img(&combined)),
+        ("GD Primal".into(), img(&primal_full)),
+        ("GD Gradient X".into(), img(&dx)),
+        ("GD Gradient Y".into(), img(&dy)),
+        ("MLT Density".into(), img(&density_img)),
+    ]
 }

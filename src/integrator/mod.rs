@@ -12,6 +12,7 @@ use crate::path::PathSettings;
 use crate::reconstruct::Norm;
 use crate::scene::Scene;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -115,6 +116,10 @@ pub struct RenderControl {
     pub work_total: AtomicU64,
     start: Instant,
     time_limit: Option<Duration>,
+    /// Set by a watcher that wants an intermediate image; the integrator answers between
+    /// passes (rounds) by putting one into `preview`.
+    preview_requested: AtomicBool,
+    preview: Mutex<Option<Image>>,
 }
 
 impl RenderControl {
@@ -125,6 +130,25 @@ impl RenderControl {
             work_total: AtomicU64::new(1),
             start: Instant::now(),
             time_limit: if time_limit > 0.0 { Some(Duration::from_secs_f64(time_limit)) } else { None },
+            preview_requested: AtomicBool::new(false),
+            preview: Mutex::new(None),
+        }
+    }
+    /// Asks the render for an intermediate "Combined" image at its next pass boundary.
+    pub fn request_preview(&self) {
+        self.preview_requested.store(true, Ordering::Relaxed);
+    }
+    /// The intermediate image produced since the last call, if any.
+    pub fn take_preview(&self) -> Option<Image> {
+        self.preview.lock().ok()?.take()
+    }
+    /// For integrators: if a preview is wanted, build it with `make` and hand it over.
+    pub fn offer_preview(&self, make: impl FnOnce() -> Image) {
+        if self.preview_requested.swap(false, Ordering::Relaxed) {
+            let img = make();
+            if let Ok(mut slot) = self.preview.lock() {
+                *slot = Some(img);
+            }
         }
     }
     pub fn cancel(&self) {

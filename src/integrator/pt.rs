@@ -59,6 +59,7 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl)
             }
         });
         done = to;
+        control.offer_preview(|| film.color());
         let dt = t0.elapsed().as_secs_f64();
         if dt < 0.1 {
             batch = (batch * 2).min(64);

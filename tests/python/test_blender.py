@@ -308,3 +308,20 @@ def test_mirror_and_glass_agree_with_cycles(bpy_mod, tmp_out):
     assert rms_diff < 2.0 * np.sqrt(var)
     # image means: 4σ of the mean over blocks, plus 0.5% for modelling differences
     assert abs(g.mean() - c.mean()) < 4 * np.sqrt(var / c.size) + 0.005 * c.mean()
+
+
+@pytest.mark.parametrize("method", ["PT", "GDPSSMLT"])
+def test_long_render_shows_intermediate_images(bpy_mod, tmp_out, method):
+    """A render that runs for a while updates the result before it ends (the first
+    intermediate image comes after 1 s), then writes the final image."""
+    bpy = bpy_mod
+    from gdmlt_blender import engine
+
+    bpy.ops.wm.open_mainfile(filepath=str(ROOT / "examples" / "cornell.blend"))
+    scene = bpy.context.scene
+    scene.render.resolution_x = scene.render.resolution_y = 64
+    s = scene.gdmlt
+    s.method, s.samples, s.time_limit = method, 100000, 2.5
+    img = render_to_exr(bpy, scene, tmp_out / "long.exr")
+    assert engine.last_stats["previews"] >= 1, engine.last_stats
+    assert np.isfinite(img).all() and img.mean() > 0.05
