@@ -325,3 +325,46 @@ def test_long_render_shows_intermediate_images(bpy_mod, tmp_out, method):
     img = render_to_exr(bpy, scene, tmp_out / "long.exr")
     assert engine.last_stats["previews"] >= 1, engine.last_stats
     assert np.isfinite(img).all() and img.mean() > 0.05
+
+
+def _single_light_scene(bpy, engine, spp, seed, kind):
+    """The lights scene with only a spot light, a sun, or a coloured world."""
+    scene = _lights_scene(bpy, engine, spp, seed, size=40, bounces=2)
+    bpy.data.objects["Point"].data.energy = 0.0
+    bpy.data.objects["Area"].data.energy = 0.0
+    ob = None
+    if kind == "spot":
+        light = bpy.data.lights.new("Spot", "SPOT")
+        light.energy, light.spot_size, light.spot_blend, light.shadow_soft_size = 300.0, math.radians(50), 0.3, 0.1
+        ob = bpy.data.objects.new("Spot", light)
+        ob.location, ob.rotation_euler = (0.3, -1.5, 2.5), (math.radians(20), 0, 0)
+    elif kind == "sun":
+        light = bpy.data.lights.new("Sun", "SUN")
+        light.energy, light.angle = 3.0, math.radians(5)
+        ob = bpy.data.objects.new("Sun", light)
+        ob.rotation_euler = (math.radians(40), math.radians(20), 0)
+    else:
+        bg = scene.world.node_tree.nodes["Background"]
+        bg.inputs["Color"].default_value = (0.3, 0.5, 0.8, 1)
+        bg.inputs["Strength"].default_value = 1.5
+    if ob is not None:
+        scene.collection.objects.link(ob)
+    return scene
+
+
+@pytest.mark.parametrize("kind", ["spot", "sun", "world"])
+def test_spot_sun_and_world_agree_with_cycles(bpy_mod, tmp_out, kind):
+    bpy = bpy_mod
+    imgs = {}
+    for engine, spp in (("CYCLES", 128), ("GDMLT", 256)):
+        for seed in (1, 2):
+            scene = _single_light_scene(bpy, engine, spp, seed, kind)
+            imgs[engine, seed] = block_means(render_to_exr(bpy, scene, tmp_out / f"{kind}{engine}{seed}.exr"), 5)
+    c = (imgs["CYCLES", 1] + imgs["CYCLES", 2]) / 2
+    g = (imgs["GDMLT", 1] + imgs["GDMLT", 2]) / 2
+    var = (np.mean((imgs["CYCLES", 1] - imgs["CYCLES", 2]) ** 2) + np.mean((imgs["GDMLT", 1] - imgs["GDMLT", 2]) ** 2)) / 4
+    rms_diff = np.sqrt(np.mean((c - g) ** 2))
+    print(f"{kind}: rms block difference {rms_diff:.4g}, noise {np.sqrt(var):.4g}, means {c.mean():.4g} vs {g.mean():.4g}")
+    assert c.mean() > 1e-3
+    assert rms_diff < 2.0 * np.sqrt(var) + 1e-3 * c.mean()
+    assert abs(g.mean() - c.mean()) < 4 * np.sqrt(var / c.size) + 0.005 * c.mean()
