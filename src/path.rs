@@ -177,7 +177,7 @@ pub fn trace_path<S: Sampler>(
             }
             break;
         };
-        let si: SurfaceInteraction = scene.interaction(&hit, o, d);
+        let si: SurfaceInteraction = scene.interaction(&hit, d);
         let wo_world = -d;
         if let Some((le, pdf_light)) = scene.surface_emission(&si, prev_p, d) {
             add(&mut out, beta * le * mis(pdf_light), camera_ray);
@@ -285,7 +285,7 @@ pub fn very_direct(scene: &Scene, raster: Vec2, lens: Vec2) -> Spectrum {
     match hit {
         None => l += scene.world,
         Some(h) => {
-            let si = scene.interaction(&h, cam.origin, cam.dir);
+            let si = scene.interaction(&h, cam.dir);
             if let Some((le, _)) = scene.surface_emission(&si, cam.origin, cam.dir) {
                 l += le;
             }

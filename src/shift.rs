@@ -110,7 +110,7 @@ pub fn shift(scene: &Scene, base: &Path, offset_raster: Option<Vec2>) -> PairCon
     let y0 = offset_raster.and_then(|r| {
         let ray = scene.camera.generate_ray(r, base.lens);
         let hit = scene.intersect(ray.origin, ray.dir, ray.tmin, ray.tmax)?;
-        Some((scene.interaction(&hit, ray.origin, ray.dir), -ray.dir))
+        Some((scene.interaction(&hit, ray.dir), -ray.dir))
     });
     let y0 = y0.filter(|(y, _)| is_diffuse(scene, y.material) && is_diffuse(scene, x0v.material));
     let wo_y0 = y0.map(|(y, wo)| y.frame.to_local(wo));

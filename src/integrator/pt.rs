@@ -39,7 +39,6 @@ fn render_row(
         }
     }
     control.work_done.fetch_add(w as u64 * (to - from) as u64, Ordering::Relaxed);
-    let _ = control;
 }
 
 pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl) -> RenderOutput {

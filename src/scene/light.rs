@@ -383,9 +383,7 @@ impl Light {
                 if t >= tmax {
                     return None;
                 }
-                let hp = o + d * t;
                 let att = spot.map_or(1.0, |s| s.attenuation((o - *center).normalize_or_zero()));
-                let _ = hp;
                 if att <= 0.0 {
                     return None;
                 }

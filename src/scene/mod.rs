@@ -245,13 +245,12 @@ impl Scene {
     }
 
     /// Surface data at a hit, with normals facing the incoming ray direction `d`.
-    pub fn interaction(&self, hit: &TriHit, o: Vec3, d: Vec3) -> SurfaceInteraction {
+    pub fn interaction(&self, hit: &TriHit, d: Vec3) -> SurfaceInteraction {
         let t = hit.prim as usize;
         let v = &self.positions[t];
         let (b1, b2) = (hit.b1, hit.b2);
         let b0 = 1.0 - b1 - b2;
         let p = v[0] * b0 + v[1] * b1 + v[2] * b2;
-        let _ = o;
         let mut ng = self.geo_normals[t];
         let mut ns = match &self.normals[t] {
             Some(n) => (n[0] * b0 + n[1] * b1 + n[2] * b2).normalize_or(ng),
