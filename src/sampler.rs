@@ -173,6 +173,12 @@ impl PssSampler {
         self.iteration -= 1;
     }
 
+    /// Gives the state a new random stream (keeping its coordinates): chains that start from
+    /// the same bootstrap state must not then make the same proposals.
+    pub fn reseed(&mut self, seed: u64, stream: u64) {
+        self.rng = IndependentSampler::new(seed, stream);
+    }
+
     /// The chain's own random numbers (acceptance tests, discrete mutations).
     pub fn rng(&mut self) -> &mut IndependentSampler {
         &mut self.rng

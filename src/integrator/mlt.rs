@@ -234,6 +234,8 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl,
                     s.start_iteration();
                     let cur = target.evaluate(&mut s, &mut path, None);
                     s.accept();
+                    // its own proposal stream (two chains may start from the same bootstrap state)
+                    s.reseed(chain_seed ^ 0x5EED, chain as u64);
                     let fsum: f32 = cur.f.iter().sum();
                     let (mut d, mut acc) = (0, pick.next_1d() * fsum);
                     while d < 3 && acc >= cur.f[d] {
