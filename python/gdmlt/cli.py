@@ -146,7 +146,9 @@ def main(argv=None):
         print(f"gdmlt: warning: {w}", file=sys.stderr)
     total = time.perf_counter() - t0
     print(f"wrote {out}" + ("" if args.no_png else f" and {out.with_suffix('.png')}"))
-    print(f"render {stats.get('elapsed', 0.0):.2f} s ({stats.get('spp_max', '?')} spp), total {total:.2f} s")
+    unit = "mutations" if stats.get("chains") else "samples"
+    print(f"render {stats.get('elapsed', 0.0):.2f} s ({stats.get('spp_max', '?')} {unit} per pixel"
+          f"{', method ' + stats['method'] if 'method' in stats else ''}), total {total:.2f} s")
     return 0
 
 
