@@ -236,43 +236,9 @@ fn gdpt_converges_to_the_path_traced_image() {
         let runs: Vec<RenderOutput> =
             (0..k).map(|s| run_method(&desc, Method::Gdpt, Norm::L2, spp, nee, 4, s as u64 + 1, 0)).collect();
         let ref_frac = spp as f64 / ref_spp as f64; // reference variance relative to one run
-        let check = |name: &str, est: Vec<Vec<f64>>, refv: Vec<f64>| {
-            let n = refv.len();
-            let mean: Vec<f64> = (0..n).map(|i| est.iter().map(|e| e[i]).sum::<f64>() / k as f64).collect();
-            let var: Vec<f64> =
-                (0..n).map(|i| est.iter().map(|e| (e[i] - mean[i]).powi(2)).sum::<f64>() / (k - 1) as f64).collect();
-            // expected squared error per entry: var/K (our mean) + var·ref_frac (reference)
-            let expected = (var.iter().sum::<f64>() / n as f64 * (1.0 / k as f64 + ref_frac)).sqrt();
-            let err = rms(&diff(&mean, &refv));
-            assert!(err < 2.0 * expected + 1e-4, "{name} nee={nee}: rms error {err} vs expected noise {expected}");
-            let gm = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
-            let means: Vec<f64> = est.iter().map(|e| gm(e)).collect();
-            let mm = gm(&means);
-            let sd = (means.iter().map(|m| (m - mm).powi(2)).sum::<f64>() / (k - 1) as f64).sqrt();
-            // Student-t quantile (two-sided, 1e-3) for K−1 degrees of freedom: σ comes from K runs.
-            let t = match k - 1 {
-                1 => 636.6,
-                2 => 31.6,
-                3 => 12.92,
-                4 => 8.61,
-                5 => 6.87,
-                6 => 5.96,
-                7 => 5.41,
-                _ => 4.5,
-            };
-            let tol = t * sd * (1.0 / k as f64 + ref_frac).sqrt() + 1e-5;
-            assert!(
-                (mm - gm(&refv)).abs() < tol,
-                "{name} nee={nee}: image mean {mm} vs {} (tolerance {tol})",
-                gm(&refv)
-            );
-        };
         for layer in ["GD Primal", "Combined"] {
-            check(
-                layer,
-                runs.iter().map(|r| block_means(r.layer(layer).unwrap(), 4)).collect(),
-                block_means(&reference, 4),
-            );
+            let est: Vec<Vec<f64>> = runs.iter().map(|r| block_means(r.layer(layer).unwrap(), 4)).collect();
+            assert_converges(&format!("gdpt {layer} nee={nee}"), &est, &block_means(&reference, 4), ref_frac, 2.0);
         }
         check_gradients(&format!("gdpt nee={nee}"), &runs, &ref_out, ref_frac, 2.0);
     }

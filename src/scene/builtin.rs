@@ -172,34 +172,8 @@ pub fn cornell_gap(width: u32, height: u32) -> SceneDesc {
 /// A closed UV sphere of radius 1 with uniform albedo and emission, seen from its centre.
 /// Radiance inside is constant: L = Le·Σ_{k=0}^{B+1} ρ^k for B bounces (ρ = albedo).
 pub fn furnace_sphere(albedo: f32, emission: f32, width: u32, height: u32) -> SceneDesc {
-    let (nu, nv) = (48u32, 24u32);
-    let mut positions = Vec::new();
-    for j in 0..=nv {
-        let theta = std::f32::consts::PI * j as f32 / nv as f32;
-        for i in 0..nu {
-            let phi = 2.0 * std::f32::consts::PI * i as f32 / nu as f32;
-            positions.push([theta.sin() * phi.cos(), theta.sin() * phi.sin(), theta.cos()]);
-        }
-    }
-    let mut indices = Vec::new();
-    for j in 0..nv {
-        for i in 0..nu {
-            let a = j * nu + i;
-            let b = j * nu + (i + 1) % nu;
-            let c = (j + 1) * nu + i;
-            let d = (j + 1) * nu + (i + 1) % nu;
-            if j > 0 {
-                indices.push([a, b, d]);
-            }
-            if j + 1 < nv {
-                indices.push([a, d, c]);
-            }
-        }
-    }
-    let n = indices.len();
-    let mesh = MeshDesc { name: "Sphere".into(), positions, indices, corner_normals: vec![], material_ids: vec![0; n] };
     SceneDesc {
-        meshes: vec![mesh],
+        meshes: vec![uv_sphere("Sphere", [0.0; 3], 1.0, 48, 24, 0)],
         materials: vec![material("Furnace", [albedo; 3], [emission; 3])],
         lights: vec![],
         camera: camera_looking_along_y([0.0, 0.0, 0.0], 20.0, width, height),
