@@ -30,30 +30,29 @@ fn get_or<'py, T: FromPyObjectOwned<'py>>(d: &Bound<'py, PyDict>, key: &str, def
     }
 }
 
-fn floats(obj: &Bound<'_, PyAny>, cols: usize, what: &str) -> PyResult<Vec<f32>> {
-    let arr: PyReadonlyArrayDyn<f32> =
-        obj.extract().map_err(|_| verr(format!("{what}: expected a float32 numpy array")))?;
+/// A numpy array of dtype T, shape (N, cols) or flat with a multiple of `cols` entries.
+fn flat_array<T: numpy::Element + Copy>(
+    obj: &Bound<'_, PyAny>,
+    cols: usize,
+    what: &str,
+    dtype: &str,
+) -> PyResult<Vec<T>> {
+    let arr: PyReadonlyArrayDyn<T> =
+        obj.extract().map_err(|_| verr(format!("{what}: expected a {dtype} numpy array")))?;
     let shape = arr.shape();
-    let ok = (cols == 0 && shape.len() == 1)
-        || (shape.len() == 2 && shape[1] == cols)
-        || (shape.len() == 1 && cols > 0 && shape[0] % cols == 0);
+    let ok = (shape.len() == 2 && shape[1] == cols) || (shape.len() == 1 && shape[0] % cols == 0);
     if !ok {
         return Err(verr(format!("{what}: unexpected shape {shape:?} (need N×{cols})")));
     }
     Ok(arr.as_array().iter().copied().collect())
 }
 
+fn floats(obj: &Bound<'_, PyAny>, cols: usize, what: &str) -> PyResult<Vec<f32>> {
+    flat_array(obj, cols, what, "float32")
+}
+
 fn uints(obj: &Bound<'_, PyAny>, cols: usize, what: &str) -> PyResult<Vec<u32>> {
-    let arr: PyReadonlyArrayDyn<u32> =
-        obj.extract().map_err(|_| verr(format!("{what}: expected a uint32 numpy array")))?;
-    let shape = arr.shape();
-    let ok = (cols == 1 && shape.len() == 1)
-        || (shape.len() == 2 && shape[1] == cols)
-        || (shape.len() == 1 && shape[0] % cols == 0);
-    if !ok {
-        return Err(verr(format!("{what}: unexpected shape {shape:?} (need N×{cols})")));
-    }
-    Ok(arr.as_array().iter().copied().collect())
+    flat_array(obj, cols, what, "uint32")
 }
 
 fn vec3s(v: Vec<f32>) -> Vec<[f32; 3]> {

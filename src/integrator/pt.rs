@@ -5,7 +5,7 @@
 
 use super::{RenderControl, RenderOutput, RenderSettings, RenderStats};
 use crate::film::{Film, FilmRow};
-use crate::path::{trace_path, Path};
+use crate::path::trace_path;
 use crate::sampler::{IndependentSampler, Sampler};
 use crate::scene::Scene;
 use glam::Vec2;
@@ -29,12 +29,12 @@ fn render_row(
     to: u32,
 ) {
     let w = row.count.len();
-    let mut path = Path::default();
     for x in 0..w {
         for s in from..to {
             let mut sampler = pixel_sampler(settings.seed, y * w + x, s);
             let raster = Vec2::new(x as f32, y as f32) + sampler.next_2d();
-            let c = trace_path(scene, &settings.path, raster, &mut sampler, Some(&mut path));
+            // PT needs no recorded vertices or events: nothing is recorded on its hot path.
+            let c = trace_path(scene, &settings.path, raster, &mut sampler, None);
             row.add(x, c.radiance, c.very_direct, c.albedo, c.normal);
         }
     }
