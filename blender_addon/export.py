@@ -63,8 +63,6 @@ def material_params(mat, warnings):
         col = _input_value(node, "Emission Color", warnings, what, (0, 0, 0, 1))[:3]
         strength = _input_value(node, "Emission Strength", warnings, what, 0.0)
         out["emission"] = tuple(c * strength for c in col)
-        if out["transmission"] > 0 and out["roughness"] > 0.001:
-            warnings.append(f"{what}: rough glass is rendered as smooth glass (roughness of transmission is not modelled yet)")
     elif t == "BSDF_DIFFUSE":
         out["base_color"] = _input_value(node, "Color", warnings, what, (0.8, 0.8, 0.8, 1))[:3]
         out["roughness"] = 1.0
@@ -79,8 +77,6 @@ def material_params(mat, warnings):
         out["ior"] = _input_value(node, "IOR", warnings, what, 1.5)
         out["roughness"] = _input_value(node, "Roughness", warnings, what, 0.0)
         out["transmission"] = 1.0
-        if out["roughness"] > 0.001:
-            warnings.append(f"{what}: rough glass is rendered as smooth glass")
         if t == "BSDF_REFRACTION":
             warnings.append(f"{what}: Refraction BSDF is rendered as Glass (with Fresnel reflection)")
     elif t == "EMISSION":

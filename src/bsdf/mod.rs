@@ -11,7 +11,7 @@ pub mod microfacet;
 pub(crate) mod testing;
 
 pub use conductor::Conductor;
-pub use dielectric::SmoothDielectric;
+pub use dielectric::{refraction_half_vector, Dielectric};
 pub use lambert::Lambert;
 
 use crate::math::Spectrum;
@@ -50,13 +50,13 @@ pub struct BsdfSample {
 pub enum Bsdf {
     Lambert(Lambert),
     Conductor(Conductor),
-    Dielectric(SmoothDielectric),
+    Dielectric(Dielectric),
     /// Blender's Principled BSDF as a stochastic mixture of a diffuse base, a metal and a
     /// glass lobe with weights (1−m)(1−t), m, (1−m)t (m = metallic, t = transmission).
     Principled {
         diffuse: Lambert,
         metal: Conductor,
-        glass: SmoothDielectric,
+        glass: Dielectric,
         w: [f32; 3],
     },
 }
@@ -68,14 +68,17 @@ impl Bsdf {
         match self {
             Bsdf::Lambert(b) => b.eval(wo, wi),
             Bsdf::Conductor(b) => b.eval(wo, wi),
-            Bsdf::Dielectric(_) => Spectrum::ZERO,
-            Bsdf::Principled { diffuse, metal, w, .. } => {
+            Bsdf::Dielectric(b) => b.eval(wo, wi),
+            Bsdf::Principled { diffuse, metal, glass, w } => {
                 let mut f = Spectrum::ZERO;
                 if w[0] > 0.0 {
                     f += diffuse.eval(wo, wi) * w[0];
                 }
                 if w[1] > 0.0 {
                     f += metal.eval(wo, wi) * w[1];
+                }
+                if w[2] > 0.0 {
+                    f += glass.eval(wo, wi) * w[2];
                 }
                 f
             }
@@ -88,14 +91,17 @@ impl Bsdf {
         match self {
             Bsdf::Lambert(b) => b.pdf(wo, wi),
             Bsdf::Conductor(b) => b.pdf(wo, wi),
-            Bsdf::Dielectric(_) => 0.0,
-            Bsdf::Principled { diffuse, metal, w, .. } => {
+            Bsdf::Dielectric(b) => b.pdf(wo, wi),
+            Bsdf::Principled { diffuse, metal, glass, w } => {
                 let mut p = 0.0;
                 if w[0] > 0.0 {
                     p += diffuse.pdf(wo, wi) * w[0];
                 }
                 if w[1] > 0.0 {
                     p += metal.pdf(wo, wi) * w[1];
+                }
+                if w[2] > 0.0 {
+                    p += glass.pdf(wo, wi) * w[2];
                 }
                 p
             }
@@ -108,7 +114,7 @@ impl Bsdf {
         match self {
             Bsdf::Lambert(b) => b.sample(wo, u),
             Bsdf::Conductor(b) => b.sample(wo, u),
-            Bsdf::Dielectric(b) => b.sample(wo, u_lobe),
+            Bsdf::Dielectric(b) => b.sample(wo, u_lobe, u),
             Bsdf::Principled { diffuse, metal, glass, w } => {
                 // choose a lobe ∝ weight, reusing the rest of u_lobe inside the lobe
                 let (k, u_rest) = if u_lobe < w[0] {
@@ -121,7 +127,7 @@ impl Bsdf {
                 let mut bs = match k {
                     0 => diffuse.sample(wo, u)?,
                     1 => metal.sample(wo, u)?,
-                    _ => glass.sample(wo, u_rest)?,
+                    _ => glass.sample(wo, u_rest, u)?,
                 };
                 if bs.lobe == LobeKind::Specular {
                     bs.pdf *= w[k]; // discrete probability of this delta event; weight unchanged
@@ -144,8 +150,10 @@ impl Bsdf {
         match self {
             Bsdf::Lambert(_) => false,
             Bsdf::Conductor(b) => b.is_delta(),
-            Bsdf::Dielectric(_) => true,
-            Bsdf::Principled { metal, w, .. } => w[0] <= 0.0 && (w[1] <= 0.0 || metal.is_delta()),
+            Bsdf::Dielectric(b) => b.is_delta(),
+            Bsdf::Principled { metal, glass, w, .. } => {
+                w[0] <= 0.0 && (w[1] <= 0.0 || metal.is_delta()) && (w[2] <= 0.0 || glass.is_delta())
+            }
         }
     }
 
@@ -156,16 +164,51 @@ impl Bsdf {
         match self {
             Bsdf::Lambert(_) => 1.0,
             Bsdf::Conductor(b) => b.roughness,
-            Bsdf::Dielectric(_) => 0.0,
-            Bsdf::Principled { metal, w, .. } => {
+            Bsdf::Dielectric(b) => b.roughness,
+            Bsdf::Principled { metal, glass, w, .. } => {
                 let mut r: f32 = 1.0;
                 if w[1] > 0.0 {
                     r = r.min(metal.roughness);
                 }
                 if w[2] > 0.0 {
-                    r = 0.0;
+                    r = r.min(glass.roughness);
                 }
                 r
+            }
+        }
+    }
+
+    /// Relative IOR η_t/η_i of the transmission lobe (1 when there is none).
+    #[inline]
+    pub fn eta(&self) -> f32 {
+        match self {
+            Bsdf::Dielectric(b) => b.eta,
+            Bsdf::Principled { glass, w, .. } if w[2] > 0.0 => glass.eta,
+            _ => 1.0,
+        }
+    }
+
+    /// The delta lobes towards the mirror direction of `wo` (or, with `refraction`, its
+    /// refracted direction), as the half-vector shift evaluates them at a specular offset
+    /// vertex: (f as a discrete measure = weight·probability, discrete probability, wi).
+    /// None when the BSDF has no delta lobe of that kind.
+    pub fn delta_eval(&self, wo: Vec3, refraction: bool) -> Option<(Spectrum, f32, Vec3)> {
+        match self {
+            Bsdf::Lambert(_) => None,
+            Bsdf::Conductor(b) if !refraction => b.delta_eval(wo),
+            Bsdf::Conductor(_) => None,
+            Bsdf::Dielectric(b) => b.delta_eval(wo, refraction),
+            Bsdf::Principled { metal, glass, w, .. } => {
+                let m = if w[1] > 0.0 && !refraction { metal.delta_eval(wo) } else { None };
+                let g = if w[2] > 0.0 { glass.delta_eval(wo, refraction) } else { None };
+                match (m, g) {
+                    (None, None) => None,
+                    (Some((f, p, wi)), None) => Some((f * w[1], p * w[1], wi)),
+                    (None, Some((f, p, wi))) => Some((f * w[2], p * w[2], wi)),
+                    (Some((fm, pm, wi)), Some((fg, pg, _))) => {
+                        Some((fm * w[1] + fg * w[2], pm * w[1] + pg * w[2], wi))
+                    }
+                }
             }
         }
     }
@@ -192,7 +235,7 @@ mod tests {
         Bsdf::Principled {
             diffuse: Lambert { albedo: Spectrum::ONE },
             metal: Conductor { f0: Spectrum::ONE, roughness },
-            glass: SmoothDielectric { eta: 1.5, tint: Spectrum::ONE },
+            glass: Dielectric { eta: 1.5, tint: Spectrum::ONE, roughness: 0.0 },
             w,
         }
     }

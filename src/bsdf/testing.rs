@@ -19,7 +19,7 @@ fn bin_of(w: Vec3) -> usize {
 }
 
 /// Chi-square test with bins uniform in (cos θ, φ) (equal solid angle); expected counts
-/// integrate `pdf` with a 16×16 midpoint rule per bin. Bins with expected count < 5 are
+/// integrate `pdf` with a 48×16 (θ, φ) midpoint rule per bin. Bins with expected count < 5 are
 /// pooled. Fails at significance 1e-3 (Wilson–Hilferty approximation of the quantile).
 pub fn chi2_test(bsdf: &Bsdf, wo: Vec3, seed: u64) {
     let n = 500_000usize;
@@ -35,23 +35,30 @@ pub fn chi2_test(bsdf: &Bsdf, wo: Vec3, seed: u64) {
             observed[bin_of(bs.wi)] += 1.0;
         }
     }
-    let sub = 16;
+    // Expected counts: midpoint rule per bin with sub-cells uniform in θ (not in cos θ) so
+    // that lobes squeezed against a pole (refraction into a denser medium) are resolved;
+    // each sub-cell is weighted by its exact solid angle.
+    let (sub_t, sub_p) = (48, 16);
     let mut expected = vec![0.0f64; THETA_BINS * PHI_BINS];
     let dz = 2.0 / THETA_BINS as f64;
     let dphi = 2.0 * PI / PHI_BINS as f64;
     for i in 0..THETA_BINS {
+        let (z0, z1) = (-1.0 + i as f64 * dz, -1.0 + (i + 1) as f64 * dz);
+        let (t_hi, t_lo) = (z0.clamp(-1.0, 1.0).acos(), z1.clamp(-1.0, 1.0).acos());
         for j in 0..PHI_BINS {
             let mut acc = 0.0;
-            for a in 0..sub {
-                for b in 0..sub {
-                    let z = -1.0 + (i as f64 + (a as f64 + 0.5) / sub as f64) * dz;
-                    let phi = (j as f64 + (b as f64 + 0.5) / sub as f64) * dphi;
-                    let r = (1.0 - z * z).max(0.0).sqrt();
-                    let w = Vec3::new((r * phi.cos()) as f32, (r * phi.sin()) as f32, z as f32);
-                    acc += bsdf.pdf(wo, w) as f64;
+            for a in 0..sub_t {
+                let ta = t_lo + (t_hi - t_lo) * a as f64 / sub_t as f64;
+                let tb = t_lo + (t_hi - t_lo) * (a + 1) as f64 / sub_t as f64;
+                let area = (ta.cos() - tb.cos()) * dphi / sub_p as f64;
+                let (st, ct) = ((0.5 * (ta + tb)).sin(), (0.5 * (ta + tb)).cos());
+                for b in 0..sub_p {
+                    let phi = (j as f64 + (b as f64 + 0.5) / sub_p as f64) * dphi;
+                    let w = Vec3::new((st * phi.cos()) as f32, (st * phi.sin()) as f32, ct as f32);
+                    acc += bsdf.pdf(wo, w) as f64 * area;
                 }
             }
-            expected[i * PHI_BINS + j] = acc / (sub * sub) as f64 * dz * dphi * n as f64;
+            expected[i * PHI_BINS + j] = acc * n as f64;
         }
     }
     let (mut chi2, mut dof, mut pool_o, mut pool_e) = (0.0, 0usize, 0.0, 0.0);

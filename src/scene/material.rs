@@ -1,9 +1,9 @@
 //! Materials: the parameters of the Principled-like uber-material, turned into a BSDF at a
 //! surface point: Lambertian base, GGX or mirror metal (metallic), smooth glass
-//! (transmission; roughness of glass is not modelled yet), mixed by their Principled weights.
+//! or rough GGX glass (transmission), mixed by their Principled weights.
 
 use super::desc::MaterialDesc;
-use crate::bsdf::{Bsdf, Conductor, Lambert, SmoothDielectric};
+use crate::bsdf::{Bsdf, Conductor, Lambert, Dielectric};
 use crate::error::SceneError;
 use crate::math::Spectrum;
 use glam::Vec3;
@@ -61,7 +61,7 @@ impl Material {
         let diffuse = Lambert { albedo: self.base_color };
         let metal = Conductor { f0: self.base_color, roughness: self.roughness };
         let eta = if front { self.ior } else { 1.0 / self.ior };
-        let glass = SmoothDielectric { eta, tint: self.base_color };
+        let glass = Dielectric { eta, tint: self.base_color, roughness: self.roughness };
         if w[1] <= 0.0 && w[2] <= 0.0 {
             Bsdf::Lambert(diffuse)
         } else if w[0] <= 0.0 && w[2] <= 0.0 {
