@@ -48,6 +48,16 @@ pub struct Vertex {
     pub throughput: Spectrum,
     /// Solid-angle pdf of the direction that reached this vertex (0 for the camera ray).
     pub pdf_in: f32,
+    /// The direction sampled here (world; zero when the path ended at this vertex), with
+    /// its f·|cos| (for a delta lobe: weight·probability), pdf (for a delta lobe: the
+    /// discrete probability), whether a delta lobe produced it, the relative IOR crossed
+    /// (1 for reflection) and the Russian-roulette survival probability applied after it.
+    pub wi: Vec3,
+    pub f_out: Spectrum,
+    pub pdf_out: f32,
+    pub delta_out: bool,
+    pub eta_out: f32,
+    pub rr: f32,
 }
 
 /// Index used for events whose last segment starts at the camera (very-direct light).
@@ -201,6 +211,12 @@ pub fn trace_path<S: Sampler>(
                 wo: wo_world,
                 throughput: beta,
                 pdf_in: prev_pdf,
+                wi: Vec3::ZERO,
+                f_out: Spectrum::ZERO,
+                pdf_out: 0.0,
+                delta_out: false,
+                eta_out: 1.0,
+                rr: 1.0,
             });
         }
         // Consume this vertex's primary samples in their fixed order.
@@ -253,8 +269,16 @@ pub fn trace_path<S: Sampler>(
         }
         beta *= bs.weight;
         depth += 1;
-        if depth >= RR_START_DEPTH {
-            let q = beta.max_element().min(1.0);
+        let q = if depth >= RR_START_DEPTH { beta.max_element().min(1.0) } else { 1.0 };
+        if let Some(v) = record.as_deref_mut().and_then(|p| p.vertices.last_mut()) {
+            v.wi = wi_world;
+            v.f_out = bs.weight * bs.pdf;
+            v.pdf_out = bs.pdf;
+            v.delta_out = bs.lobe == crate::bsdf::LobeKind::Specular;
+            v.eta_out = bs.eta;
+            v.rr = q;
+        }
+        if q < 1.0 {
             if !(q > 0.0) || u_rr >= q {
                 break;
             }

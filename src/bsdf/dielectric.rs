@@ -113,11 +113,7 @@ impl Dielectric {
         }
         let h = self.ggx().sample_visible(wo, u);
         let f = fresnel_dielectric(wo.dot(h), self.eta);
-        let (wi, eta) = if u_lobe < f {
-            (reflect(wo, h), 1.0)
-        } else {
-            (refract(wo, h, self.eta)?, self.eta)
-        };
+        let (wi, eta) = if u_lobe < f { (reflect(wo, h), 1.0) } else { (refract(wo, h, self.eta)?, self.eta) };
         if (eta == 1.0) != (wi.z > 0.0) {
             return None; // the microfacet sent the ray to the wrong side of the macro surface
         }

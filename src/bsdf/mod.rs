@@ -205,9 +205,7 @@ impl Bsdf {
                     (None, None) => None,
                     (Some((f, p, wi)), None) => Some((f * w[1], p * w[1], wi)),
                     (None, Some((f, p, wi))) => Some((f * w[2], p * w[2], wi)),
-                    (Some((fm, pm, wi)), Some((fg, pg, _))) => {
-                        Some((fm * w[1] + fg * w[2], pm * w[1] + pg * w[2], wi))
-                    }
+                    (Some((fm, pm, wi)), Some((fg, pg, _))) => Some((fm * w[1] + fg * w[2], pm * w[1] + pg * w[2], wi)),
                 }
             }
         }

@@ -3,7 +3,7 @@
 //! or rough GGX glass (transmission), mixed by their Principled weights.
 
 use super::desc::MaterialDesc;
-use crate::bsdf::{Bsdf, Conductor, Lambert, Dielectric};
+use crate::bsdf::{Bsdf, Conductor, Dielectric, Lambert};
 use crate::error::SceneError;
 use crate::math::Spectrum;
 use glam::Vec3;

@@ -354,14 +354,28 @@ impl Scene {
         mut f: impl FnMut(u32, f32, Spectrum, f32),
     ) {
         for &li in &self.hittable_lights {
-            let light = &self.lights[li as usize];
-            if camera_ray && !light.visible_camera {
+            if camera_ray && !self.lights[li as usize].visible_camera {
                 continue;
             }
-            if let Some((t, le, pdf)) = light.intersect(o, d, tmax) {
-                f(li, t, le, pdf * self.light_distribution.pmf(li as usize));
+            if let Some((t, le, pdf)) = self.light_crossed(li, o, d, tmax) {
+                f(li, t, le, pdf);
             }
         }
+    }
+
+    /// Where the ray crosses analytic light `li` before `tmax`: (t, radiance, NEE pdf with
+    /// selection). None for emissive triangles (they are surfaces) and for a miss.
+    #[inline]
+    pub fn light_crossed(&self, li: u32, o: Vec3, d: Vec3, tmax: f32) -> Option<(f32, Spectrum, f32)> {
+        let light = self.lights.get(li as usize)?;
+        let (t, le, pdf) = light.intersect(o, d, tmax)?;
+        Some((t, le, pdf * self.light_distribution.pmf(li as usize)))
+    }
+
+    /// True when light `li` is an emissive triangle.
+    #[inline]
+    pub fn is_triangle_light(&self, li: u32) -> bool {
+        matches!(self.lights.get(li as usize).map(|l| &l.shape), Some(LightShape::Triangle { .. }))
     }
 
     /// Radiance that light `li` sends from its point `z` (or, for distant lights, from
