@@ -11,7 +11,7 @@ export PATH := $(abspath $(VENV))/bin:$(PATH)
 # Keep Blender's user config out of $HOME during demos and tests.
 export BLENDER_USER_RESOURCES := $(abspath out/blender-user)
 
-.PHONY: all setup build demo test test-rust test-python examples clean
+.PHONY: all setup build demo test test-rust test-python examples bench bench-monastery clean
 
 all: demo
 
@@ -38,6 +38,19 @@ test-rust:
 
 test-python: build
 	$(PY) -m pytest -q tests/python
+
+# Error over time on the built-in Cornell box (prints a table, draws out/bench-cornell.png).
+bench: build
+	$(PY) -m pip install -q -r requirements-bench.txt
+	$(VENV)/bin/gdmlt bench --scene cornell --size 128 --budgets 1,2,4,8 --plot out/bench-cornell.png
+
+# The seed paper's setting: a large scene lit by one small light (pybullet's monastery),
+# naive and NEE, every method; table + out/bench-monastery.png. About 5 minutes on 2 cores.
+bench-monastery: build
+	$(PY) -m pip install -q -r requirements-bench.txt
+	$(PY) tools/make_monastery.py out/monastery.blend --size 192 108
+	$(VENV)/bin/gdmlt bench --scene out/monastery.blend --budgets 1,2,4,8 --reference-spp 8192 \
+		--plot out/bench-monastery.png
 
 # Regenerates examples/*.blend from the built-in scene definitions (needs bpy).
 examples: build

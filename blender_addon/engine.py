@@ -113,7 +113,7 @@ class GDMLTRenderEngine(bpy.types.RenderEngine):
             res = gdmlt.render(core_scene, method=method, spp=s.samples, time_limit=s.time_limit,
                                max_bounces=s.max_bounces, nee=s.use_nee, seed=s.seed, threads=s.threads,
                                reconstruction=s.reconstruction.lower(), alpha_rec=s.alpha_reconstruction,
-                               alpha_target=s.alpha_target, large_step_probability=s.large_step_probability,
+                               alpha_target=s.alpha_target, large_step_probability=s.large_step_probability, chains=s.chains,
                                progress=progress, preview=preview)
             for name, img in res["layers"].items():
                 if name in channels_of:

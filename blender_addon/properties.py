@@ -35,10 +35,12 @@ class GDMLTRenderSettings(bpy.types.PropertyGroup):
                                  description="Norm of the screened Poisson reconstruction (gradient-domain methods)")
     alpha_reconstruction: FloatProperty(name="Alpha", default=0.2, min=1e-4, soft_max=2.0,
                                         description="Weight of the primal image against the gradients in the reconstruction")
-    alpha_target: FloatProperty(name="Target Alpha", default=0.25, min=0.0, soft_max=1.0,
+    alpha_target: FloatProperty(name="Target Alpha", default=1.0, min=0.0, soft_max=4.0,
                                 description="Gradient-domain Metropolis: weight of the primal image in the target function")
     large_step_probability: FloatProperty(name="Large Step Probability", default=0.3, min=0.0, max=1.0,
                                           description="Metropolis methods: probability of a fresh independent sample per mutation")
+    chains: IntProperty(name="Chains", default=0, min=0, max=1000000,
+                        description="Metropolis methods: number of Markov chains (0 = automatic, one per 2000 mutations up to 1024)")
     threads: IntProperty(name="Threads", default=0, min=0, max=1024, description="Render threads (0 = all cores)")
 
 

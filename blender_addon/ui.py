@@ -35,6 +35,7 @@ class GDMLT_PT_sampling(GDMLTRenderPanel, bpy.types.Panel):
         if s.method in {"PSSMLT", "GDPSSMLT"}:
             col = layout.column(align=True)
             col.prop(s, "large_step_probability")
+            col.prop(s, "chains")
             if s.method == "GDPSSMLT":
                 col.prop(s, "alpha_target")
 

@@ -274,7 +274,7 @@ fn numpy_to_image(obj: &Bound<'_, PyAny>) -> PyResult<Image> {
 /// Renders a scene. `progress(fraction, elapsed_seconds)` is called about every 50 ms from
 /// the calling thread; if it returns True the render stops and keeps what it has.
 #[pyfunction]
-#[pyo3(signature = (scene, method="pt", spp=16, time_limit=0.0, max_bounces=8, nee=true, seed=0, threads=0, reconstruction="l1", alpha_rec=0.2, large_step_probability=0.3, alpha_target=0.25, progress=None, preview=None))]
+#[pyo3(signature = (scene, method="pt", spp=16, time_limit=0.0, max_bounces=8, nee=true, seed=0, threads=0, reconstruction="l1", alpha_rec=0.2, large_step_probability=0.3, alpha_target=1.0, chains=0, progress=None, preview=None))]
 #[allow(clippy::too_many_arguments)]
 fn render<'py>(
     py: Python<'py>,
@@ -290,6 +290,7 @@ fn render<'py>(
     alpha_rec: f64,
     large_step_probability: f32,
     alpha_target: f32,
+    chains: u32,
     progress: Option<Bound<'py, PyAny>>,
     preview: Option<Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyDict>> {
@@ -307,6 +308,8 @@ fn render<'py>(
         alpha_rec,
         large_step_probability,
         alpha_target,
+        chains,
+        ..RenderSettings::default()
     };
     settings.validate().map_err(|e| verr(e.to_string()))?;
     let control = RenderControl::new(time_limit);

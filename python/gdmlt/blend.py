@@ -8,7 +8,8 @@ from pathlib import Path
 PROPERTY_OF = {"method": "method", "spp": "samples", "time_limit": "time_limit", "max_bounces": "max_bounces",
                "nee": "use_nee", "seed": "seed", "threads": "threads",
                "reconstruction": "reconstruction", "alpha_rec": "alpha_reconstruction",
-               "alpha_target": "alpha_target", "large_step_probability": "large_step_probability"}
+               "alpha_target": "alpha_target", "large_step_probability": "large_step_probability",
+               "chains": "chains"}
 
 
 def import_bpy():

@@ -7,6 +7,7 @@ import time
 from pathlib import Path
 
 BUILTIN = ("cornell", "spheres", "gap", "furnace")
+METHODS = ("pt", "gdpt", "pssmlt", "gdpssmlt")
 
 
 def _int_at_least(lowest):
@@ -51,14 +52,16 @@ def build_parser():
                                    "Options left out keep the .blend file's own GDMLT settings.")
     r.add_argument("scene", help="path to a .blend file, or a built-in scene name (" + ", ".join(BUILTIN) + ")")
     r.add_argument("-o", "--output", required=True, help="output EXR path; a PNG is written next to it")
-    r.add_argument("--method", choices=["pt", "gdpt", "pssmlt", "gdpssmlt"], type=str.lower,
+    r.add_argument("--method", choices=METHODS, type=str.lower,
                    help="light transport method: pt (path tracing), gdpt (gradient-domain path tracing), "
                         "pssmlt (primary-sample-space Metropolis), gdpssmlt (gradient-domain Metropolis); "
                         "default: the file's, else gdpssmlt")
     r.add_argument("--alpha-target", type=_nonneg_float, dest="alpha_target",
-                   help="gdpssmlt: weight of the primal term in the target function (default 0.25)")
+                   help="gdpssmlt: weight of the primal term in the target function (default 1.0)")
     r.add_argument("--large-step", type=_nonneg_float, dest="large_step_probability",
                    help="Metropolis methods: probability of a large step (default 0.3)")
+    r.add_argument("--chains", type=_nonneg_int,
+                   help="Metropolis methods: number of Markov chains (default 0 = one per 2000 mutations, up to 1024)")
     r.add_argument("--recon", choices=["l1", "l2"], type=str.lower, dest="reconstruction",
                    help="gradient-domain reconstruction norm (default l1: robust; l2: unbiased)")
     r.add_argument("--alpha-rec", type=_pos_float, dest="alpha_rec",
@@ -75,13 +78,20 @@ def build_parser():
     r.add_argument("--threads", type=_nonneg_int, help="render threads, 0 = all cores (default)")
     r.add_argument("--no-png", action="store_true", help="write only the EXR")
     b = sub.add_parser("bench", help="error against a converged reference at equal time budgets, per method",
-                       description="Renders a built-in scene with every method for the same wall-clock budgets and "
-                                   "prints relMSE and SMAPE against a converged path-traced reference.")
-    b.add_argument("--scene", default="cornell", choices=BUILTIN)
-    b.add_argument("--size", type=_positive_int, default=128)
+                       description="Renders a built-in scene or a .blend file with every method for the same "
+                                   "wall-clock budgets and prints relMSE and SMAPE against a converged path-traced "
+                                   "reference (and, with --plot, draws them).")
+    b.add_argument("--scene", default="cornell", help="built-in name (" + ", ".join(BUILTIN) + ") or a .blend file")
+    b.add_argument("--size", type=_positive_int, nargs="+", metavar="N",
+                   help="image size: N (square) or W H (default: 128 for built-ins, the file's own for .blend)")
     b.add_argument("--budgets", default="1,2,4", help="comma-separated seconds (default 1,2,4)")
+    b.add_argument("--methods", default="pt,gdpt,pssmlt,gdpssmlt", help="comma-separated methods")
+    b.add_argument("--modes", default="nee,naive", help="light modes: nee, naive or both (default nee,naive)")
     b.add_argument("--reference-spp", type=_positive_int, default=8192)
+    b.add_argument("--max-bounces", type=_nonneg_int, default=8)
+    b.add_argument("--alpha-target", type=float, help="GDPSSMLT's α_target for every run")
     b.add_argument("--threads", type=_nonneg_int, default=0)
+    b.add_argument("--plot", help="write a PNG of relMSE against time (needs matplotlib)")
     return p
 
 
@@ -90,7 +100,8 @@ def _settings(args):
         "method": args.method, "spp": args.spp, "time_limit": args.time_limit, "max_bounces": args.max_bounces,
         "nee": args.nee, "seed": args.seed, "threads": args.threads,
         "reconstruction": args.reconstruction, "alpha_rec": args.alpha_rec,
-        "alpha_target": args.alpha_target, "large_step_probability": args.large_step_probability}.items() if v is not None}
+        "alpha_target": args.alpha_target, "large_step_probability": args.large_step_probability,
+        "chains": args.chains}.items() if v is not None}
 
 
 def render_builtin(args, out: Path):
@@ -100,7 +111,8 @@ def render_builtin(args, out: Path):
     desc = gdmlt.builtin_scene(args.scene, w, h)
     scene = gdmlt.Scene(desc)
     opts = {"method": "gdpssmlt", "spp": 64, "time_limit": 0.0, "max_bounces": 8, "nee": True, "seed": 0, "threads": 0,
-            "reconstruction": "l1", "alpha_rec": 0.2, "alpha_target": 0.25, "large_step_probability": 0.3}
+            "reconstruction": "l1", "alpha_rec": 0.2, "alpha_target": 1.0, "large_step_probability": 0.3,
+            "chains": 0}
     opts.update(_settings(args))
     res = gdmlt.render(scene, **opts)
     layers = res["layers"]
@@ -119,7 +131,24 @@ def main(argv=None):
             budgets = tuple(float(x) for x in args.budgets.split(","))
         except ValueError:
             parser.error(f"--budgets: '{args.budgets}' is not a comma-separated list of seconds")
-        run(args.scene, args.size, budgets, reference_spp=args.reference_spp, threads=args.threads)
+        methods = tuple(m.strip() for m in args.methods.split(","))
+        bad = [m for m in methods if m not in METHODS]
+        if bad:
+            parser.error(f"--methods: unknown {', '.join(bad)} (choose from {', '.join(METHODS)})")
+        mode_of = {"nee": True, "naive": False}
+        modes = tuple(mode_of.get(m.strip()) for m in args.modes.split(","))
+        if None in modes:
+            parser.error(f"--modes: '{args.modes}' must list nee and/or naive")
+        if args.size and len(args.size) > 2:
+            parser.error("--size takes N or W H")
+        size = None if not args.size else (args.size[0], args.size[-1])
+        extra = {} if args.alpha_target is None else {"alpha_target": args.alpha_target}
+        try:
+            run(args.scene, size, budgets, methods, modes, reference_spp=args.reference_spp,
+                max_bounces=args.max_bounces, threads=args.threads, plot=args.plot, extra=extra)
+        except (ValueError, RuntimeError, FileNotFoundError) as e:
+            print(f"gdmlt: error: {e}", file=sys.stderr)
+            return 1
         return 0
     out = Path(args.output)
     if out.suffix.lower() != ".exr":

@@ -13,7 +13,7 @@
 //! fixed number of groups with their own buffers, summed in order: the image depends only on
 //! the seed (not on the thread count) unless a time limit stops chains early.
 
-use super::{RenderControl, RenderOutput, RenderSettings, RenderStats};
+use super::{ChainStart, RenderControl, RenderOutput, RenderSettings, RenderStats};
 use crate::distribution::Distribution1D;
 use crate::film::Image;
 use crate::math::{abs_luminance, is_finite_spectrum, Spectrum};
@@ -206,7 +206,12 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl,
     let starts = Distribution1D::new(&boot.iter().map(|(f, _)| *f).collect::<Vec<_>>());
 
     let total = settings.spp as u64 * (w * h) as u64;
-    let n_chains = (total / 2000).clamp(1, 1024) as usize;
+    let n_chains = match settings.chains {
+        0 => (total / 2000).clamp(1, 1024) as usize,
+        n => (n as u64).min(total.max(1)) as usize,
+    };
+    let dimmest =
+        boot.iter().enumerate().filter(|(_, (f, _))| *f > 0.0).min_by(|a, b| a.1 .0.total_cmp(&b.1 .0)).map(|(i, _)| i);
     control.work_total.store(total, Ordering::Relaxed);
     let chain_seed = mix64(settings.seed ^ 0xC4A1);
 
@@ -230,6 +235,10 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl,
                     let mutations = total / n_chains as u64 + u64::from((chain as u64) < total % n_chains as u64);
                     let mut pick = IndependentSampler::new(chain_seed, chain as u64);
                     let (start, _) = starts.sample(pick.next_1d())?;
+                    let start = match settings.chain_start {
+                        ChainStart::Proportional => start,
+                        ChainStart::Dimmest => dimmest?,
+                    };
                     let mut s = PssSampler::new(boot_seed, start as u64, p_large);
                     s.start_iteration();
                     let cur = target.evaluate(&mut s, &mut path, None);

@@ -63,6 +63,21 @@ pub struct RenderSettings {
     /// primal term in gdpssmlt's target function.
     pub large_step_probability: f32,
     pub alpha_target: f32,
+    /// Metropolis methods: number of Markov chains; 0 = one per 2000 mutations (1 to 1024).
+    pub chains: u32,
+    /// Metropolis methods: how chains pick their start among the bootstrap samples.
+    pub chain_start: ChainStart,
+}
+
+/// Where Metropolis chains start.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum ChainStart {
+    /// A bootstrap sample drawn ∝ its target value (unbiased start, the default).
+    #[default]
+    Proportional,
+    /// The dimmest bootstrap sample that carries any light (a test of ergodicity: the
+    /// chains must still find the bright parts of the image).
+    Dimmest,
 }
 
 impl Default for RenderSettings {
@@ -77,7 +92,9 @@ impl Default for RenderSettings {
             reconstruction: Norm::L1,
             alpha_rec: 0.2,
             large_step_probability: 0.3,
-            alpha_target: 0.25,
+            alpha_target: 1.0,
+            chains: 0,
+            chain_start: ChainStart::Proportional,
         }
     }
 }
@@ -101,6 +118,9 @@ impl RenderSettings {
         }
         if !(self.alpha_target.is_finite() && self.alpha_target >= 0.0) {
             return Err(RenderError::Settings("target alpha must be a finite number ≥ 0".into()));
+        }
+        if self.chains > 1_000_000 {
+            return Err(RenderError::Settings("chains must be at most 1000000".into()));
         }
         if self.threads > 1024 {
             return Err(RenderError::Settings("threads must be at most 1024".into()));
