@@ -45,12 +45,13 @@ bench: build
 	$(VENV)/bin/gdmlt bench --scene cornell --size 128 --budgets 1,2,4,8 --plot out/bench-cornell.png
 
 # The seed paper's setting: a large scene lit by one small light (pybullet's monastery),
-# naive and NEE, every method; table + out/bench-monastery.png. About 5 minutes on 2 cores.
+# naive and NEE, every method, also after OIDN; table + out/bench-monastery.png. About 5
+# minutes on 2 cores.
 bench-monastery: build
 	$(PY) -m pip install -q -r requirements-bench.txt
 	$(PY) tools/make_monastery.py out/monastery.blend --size 192 108
 	$(VENV)/bin/gdmlt bench --scene out/monastery.blend --budgets 1,2,4,8 --reference-spp 8192 \
-		--plot out/bench-monastery.png
+		--denoise --plot out/bench-monastery.png
 
 # Regenerates examples/*.blend from the built-in scene definitions (needs bpy).
 examples: build

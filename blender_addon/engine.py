@@ -27,8 +27,8 @@ PASSES = (
 METHOD_PASSES = {
     "PT": {"Denoising Albedo", "Denoising Normal"},
     "GDPT": {"GD Primal", "GD Gradient X", "GD Gradient Y", "Denoising Albedo", "Denoising Normal"},
-    "PSSMLT": {"MLT Density"},
-    "GDPSSMLT": {"GD Primal", "GD Gradient X", "GD Gradient Y", "MLT Density"},
+    "PSSMLT": {"MLT Density", "Denoising Albedo", "Denoising Normal"},
+    "GDPSSMLT": {"GD Primal", "GD Gradient X", "GD Gradient Y", "MLT Density", "Denoising Albedo", "Denoising Normal"},
 }
 
 

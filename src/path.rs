@@ -299,23 +299,35 @@ pub fn trace_path<S: Sampler>(
     out
 }
 
-/// Emission seen directly along the camera ray through `raster` (the very-direct image of
-/// the gradient-domain methods, estimated by plain Monte Carlo).
-pub fn very_direct(scene: &Scene, raster: Vec2, lens: Vec2) -> Spectrum {
+/// What the camera ray through `raster` sees first.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct FirstHit {
+    /// Emission seen directly (the very-direct image of the gradient-domain methods,
+    /// estimated by plain Monte Carlo).
+    pub very_direct: Spectrum,
+    /// Albedo and shading normal of the first surface (denoising passes; zero on a miss).
+    pub albedo: Spectrum,
+    pub normal: Vec3,
+}
+
+pub fn first_hit(scene: &Scene, raster: Vec2, lens: Vec2) -> FirstHit {
     let cam = scene.camera.generate_ray(raster, lens);
     let hit = scene.intersect(cam.origin, cam.dir, cam.tmin, cam.tmax);
-    let mut l = Spectrum::ZERO;
-    scene.for_each_light_crossed(cam.origin, cam.dir, hit.map_or(cam.tmax, |h| h.t), true, |_, _, le, _| l += le);
+    let mut out = FirstHit::default();
+    let l = &mut out.very_direct;
+    scene.for_each_light_crossed(cam.origin, cam.dir, hit.map_or(cam.tmax, |h| h.t), true, |_, _, le, _| *l += le);
     match hit {
-        None => l += scene.world,
+        None => out.very_direct += scene.world,
         Some(h) => {
             let si = scene.interaction(&h, cam.dir);
             if let Some((le, _)) = scene.surface_emission(&si, cam.origin, cam.dir) {
-                l += le;
+                out.very_direct += le;
             }
+            out.albedo = scene.material(&si).bsdf(si.front).albedo();
+            out.normal = si.frame.n;
         }
     }
-    l
+    out
 }
 
 #[inline]

@@ -1,7 +1,10 @@
 """`gdmlt bench`: error against a converged reference at equal wall-clock budgets, per
 method and light mode, on a built-in scene or a .blend file. Prints a table (relMSE and
 SMAPE as defined in ALGORITHM.md §5b) and, with --plot, draws error against time (PNG,
-needs matplotlib). It measures; it does not pass or fail."""
+needs matplotlib). With --denoise, every render is also passed through Intel Open Image
+Denoise (pyoidn, with the albedo and normal passes) and reported as its own row — the
+question the paper leaves open (is GD-MLT better than MLT + a denoiser?); the denoiser's own
+time is printed, not charged to the budget. It measures; it does not pass or fail."""
 
 import time
 from pathlib import Path
@@ -50,7 +53,8 @@ def scene_desc(scene: str, size):
 
 
 def run(scene="cornell", size=None, budgets=(1.0, 2.0, 4.0), methods=("pt", "gdpt", "pssmlt", "gdpssmlt"),
-        modes=(True, False), reference_spp=8192, max_bounces=8, threads=0, plot=None, extra=None, out=print):
+        modes=(True, False), reference_spp=8192, max_bounces=8, threads=0, plot=None, extra=None, denoise=False,
+        out=print):
     """extra: more render settings for every run (alpha_target, reconstruction, ...)."""
     import gdmlt
 
@@ -64,18 +68,35 @@ def run(scene="cornell", size=None, budgets=(1.0, 2.0, 4.0), methods=("pt", "gdp
     ref = gdmlt.render(sc, method="pt", spp=reference_spp, nee=True, seed=12345, threads=threads,
                        max_bounces=max_bounces)["layers"]["Combined"]
     out(f"# reference took {time.perf_counter() - t0:.1f} s")
-    out(f"{'method':10} {'nee':5} " + " ".join(f"{'relMSE@' + f'{b:g}' + 's':>14} {'SMAPE':>7}" for b in budgets))
+    out(f"{'method':14} {'nee':5} " + " ".join(f"{'relMSE@' + f'{b:g}' + 's':>14} {'SMAPE':>7}" for b in budgets))
+    if denoise:
+        try:
+            import pyoidn
+        except ImportError as e:
+            raise RuntimeError("--denoise needs pyoidn (pip install pyoidn)") from e
     rows = []
+    denoise_time = []
     for nee in modes:
         for m in methods:
-            cells = []
+            cells, dcells = [], []
             for b in budgets:
                 res = gdmlt.render(sc, method=m, spp=10 ** 7, time_limit=b, nee=nee, seed=1, threads=threads,
                                    max_bounces=max_bounces, **extra)
-                img = res["layers"]["Combined"]
+                layers = res["layers"]
+                img = layers["Combined"]
                 cells.append((rel_mse(img, ref), smape(img, ref)))
-            rows.append((m, nee, cells))
-            out(f"{m:10} {str(nee):5} " + " ".join(f"{r:14.4g} {s:7.4f}" for r, s in cells))
+                if denoise:
+                    t1 = time.perf_counter()
+                    d = pyoidn.denoise(np.ascontiguousarray(img, dtype=np.float32),
+                                       albedo=layers.get("Denoising Albedo"), normal=layers.get("Denoising Normal"),
+                                       hdr=True, quality="high")
+                    denoise_time.append(time.perf_counter() - t1)
+                    dcells.append((rel_mse(d, ref), smape(d, ref)))
+            for name, cs in [(m, cells)] + ([(m + "+oidn", dcells)] if denoise else []):
+                rows.append((name, nee, cs))
+                out(f"{name:14} {str(nee):5} " + " ".join(f"{r:14.4g} {s:7.4f}" for r, s in cs))
+    if denoise_time:
+        out(f"# denoiser time per image: {np.median(denoise_time):.2f} s (median, not charged to the budget)")
     if plot:
         draw(rows, budgets, f"{label}: relMSE against time", plot)
         out(f"# plot: {plot}")

@@ -92,6 +92,8 @@ def build_parser():
     b.add_argument("--alpha-target", type=float, help="GDPSSMLT's α_target for every run")
     b.add_argument("--threads", type=_nonneg_int, default=0)
     b.add_argument("--plot", help="write a PNG of relMSE against time (needs matplotlib)")
+    b.add_argument("--denoise", action="store_true",
+                   help="also report every render after Intel Open Image Denoise (needs pyoidn)")
     return p
 
 
@@ -145,7 +147,8 @@ def main(argv=None):
         extra = {} if args.alpha_target is None else {"alpha_target": args.alpha_target}
         try:
             run(args.scene, size, budgets, methods, modes, reference_spp=args.reference_spp,
-                max_bounces=args.max_bounces, threads=args.threads, plot=args.plot, extra=extra)
+                max_bounces=args.max_bounces, threads=args.threads, plot=args.plot, extra=extra,
+                denoise=args.denoise)
         except (ValueError, RuntimeError, FileNotFoundError) as e:
             print(f"gdmlt: error: {e}", file=sys.stderr)
             return 1

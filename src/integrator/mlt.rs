@@ -17,7 +17,7 @@ use super::{ChainStart, RenderControl, RenderOutput, RenderSettings, RenderStats
 use crate::distribution::Distribution1D;
 use crate::film::Image;
 use crate::math::{abs_luminance, is_finite_spectrum, Spectrum};
-use crate::path::{trace_path, very_direct, Path};
+use crate::path::{first_hit, trace_path, Path};
 use crate::reconstruct::{reconstruct_rgb, Norm};
 use crate::sampler::{mix64, IndependentSampler, PssSampler, Sampler};
 use crate::scene::Scene;
@@ -215,8 +215,12 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl,
     control.work_total.store(total, Ordering::Relaxed);
     let chain_seed = mix64(settings.seed ^ 0xC4A1);
 
-    // Very-direct light of gdpssmlt by plain Monte Carlo (first, so previews include it).
-    let direct: Vec<f64> = if gradient { very_direct_image(scene, settings, w, h) } else { vec![0.0; w * h * 3] };
+    // Very-direct light of gdpssmlt by plain Monte Carlo (first, so previews include it),
+    // and the denoising albedo and normal of every Metropolis render.
+    let [mut direct, albedo, normal] = first_hit_images(scene, settings, w, h);
+    if !gradient {
+        direct.iter_mut().for_each(|v| *v = 0.0); // pssmlt's chains carry that light themselves
+    }
 
     // Every group starts its chains (bootstrap replay, direction ∝ F) ...
     let mut states: Vec<(Group, Vec<Chain>)> = (0..GROUPS)
@@ -295,28 +299,36 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl,
     if starts.is_empty() {
         stats.warnings.push("no light reaches the camera in the bootstrap: the image is black".into());
     }
-    let layers = resolve(&groups, b, w, h, gradient, &direct, settings.alpha_rec, settings.reconstruction);
+    let mut layers = resolve(&groups, b, w, h, gradient, &direct, settings.alpha_rec, settings.reconstruction);
+    let img = |v: Vec<f64>| Image { width: w, height: h, channels: 3, data: v.into_iter().map(|x| x as f32).collect() };
+    layers.push(("Denoising Albedo".into(), img(albedo)));
+    layers.push(("Denoising Normal".into(), img(normal)));
     stats.elapsed = control.elapsed();
     RenderOutput { layers, stats }
 }
 
-/// Camera-visible emission by plain Monte Carlo (VERY_DIRECT_SPP jittered samples per pixel).
-fn very_direct_image(scene: &Scene, settings: &RenderSettings, w: usize, h: usize) -> Vec<f64> {
-    (0..h)
+/// Camera-visible emission, first-surface albedo and normal by plain Monte Carlo
+/// (VERY_DIRECT_SPP jittered samples per pixel): [very direct, albedo, normal], each RGB.
+fn first_hit_images(scene: &Scene, settings: &RenderSettings, w: usize, h: usize) -> [Vec<f64>; 3] {
+    let per_pixel: Vec<[Spectrum; 3]> = (0..h)
         .into_par_iter()
         .flat_map_iter(|y| {
-            (0..w).flat_map(move |x| {
-                let mut acc = Spectrum::ZERO;
+            (0..w).map(move |x| {
+                let mut acc = [Spectrum::ZERO; 3];
                 for s in 0..VERY_DIRECT_SPP {
                     let mut smp = super::pt::pixel_sampler(settings.seed ^ 0xD1, y * w + x, s);
                     let raster = Vec2::new(x as f32, y as f32) + smp.next_2d();
-                    acc += very_direct(scene, raster, smp.next_2d());
+                    let f = first_hit(scene, raster, smp.next_2d());
+                    acc[0] += f.very_direct;
+                    acc[1] += f.albedo;
+                    acc[2] += f.normal;
                 }
-                let v = acc / VERY_DIRECT_SPP as f32;
-                [v.x as f64, v.y as f64, v.z as f64]
+                acc.map(|v| v / VERY_DIRECT_SPP as f32)
             })
         })
-        .collect()
+        .collect();
+    let channel = |k: usize| per_pixel.iter().flat_map(|p| [p[k].x as f64, p[k].y as f64, p[k].z as f64]).collect();
+    [channel(0), channel(1), channel(2)]
 }
 
 /// The output layers from the group buffers so far: splats × b/mpp; for gdpssmlt the

@@ -137,3 +137,20 @@ def test_cli_bad_values_exit_2(args):
 def test_cli_missing_blend_file_is_an_error():
     r = _cli("render", "missing.blend", "-o", "x.exr")
     assert r.returncode == 1 and "not found" in r.stderr
+
+
+@pytest.mark.parametrize("method", ["gdpt", "pssmlt", "gdpssmlt"])
+def test_every_method_writes_denoising_passes(method):
+    """Blender's compositor Denoise node needs albedo and normal from every method: each
+    method's passes estimate the same first-hit albedo and normal as path tracing's (pixel
+    by pixel, within the jitter noise of a few samples per pixel), albedo in [0, 1], normals
+    at most unit length (shorter where a pixel straddles an edge)."""
+    scene = gdmlt.Scene(gdmlt.builtin_scene("cornell", 24, 24))
+    ref = gdmlt.render(scene, method="pt", spp=64, seed=3)["layers"]
+    layers = gdmlt.render(scene, method=method, spp=4, seed=3)["layers"]
+    for name in ("Denoising Albedo", "Denoising Normal"):
+        got, want = layers[name], ref[name]
+        assert got.shape == want.shape == (24, 24, 3)
+        assert np.abs(got - want).mean() < 0.03, (name, np.abs(got - want).mean())
+    assert 0.0 <= layers["Denoising Albedo"].min() and layers["Denoising Albedo"].max() <= 1.0 + 1e-6
+    assert np.linalg.norm(layers["Denoising Normal"], axis=2).max() <= 1.0 + 1e-4
