@@ -11,7 +11,7 @@ export PATH := $(abspath $(VENV))/bin:$(PATH)
 # Keep Blender's user config out of $HOME during demos and tests.
 export BLENDER_USER_RESOURCES := $(abspath out/blender-user)
 
-.PHONY: all setup build demo test test-rust test-python examples bench bench-monastery clean
+.PHONY: all setup build demo test test-rust test-python examples addon bench bench-monastery clean
 
 all: demo
 
@@ -38,6 +38,12 @@ test-rust:
 
 test-python: build
 	$(PY) -m pytest -q tests/python
+
+# The Blender extension: dist/gdmlt-<version>.zip with the core bundled as an abi3 wheel.
+# Install it in Blender with Edit > Preferences > Get Extensions > Install from Disk, or
+# blender --command extension install-file -r user_default -e dist/gdmlt-<version>.zip
+addon: $(STAMP)
+	$(PY) tools/build_addon.py
 
 # Error over time on the built-in Cornell box (prints a table, draws out/bench-cornell.png).
 bench: build

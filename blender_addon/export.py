@@ -36,8 +36,95 @@ def _input_value(node, name, warnings, what, default=None):
         return float(v)
 
 
-def material_params(mat, warnings):
-    """Principled-like parameters of a Blender material (nodes followed from the Cycles output)."""
+LINEAR_COLORSPACES = {"Non-Color", "Linear Rec.709", "Linear", "Linear CIE-XYZ E", "Raw", "Linear Rec.2020"}
+
+
+class Textures:
+    """The scene's image textures, each Blender image (with its sampling settings) once."""
+
+    def __init__(self):
+        self.items = []
+        self.index = {}
+
+    def add(self, node, warnings, what):
+        """Index of the texture of Image Texture node `node`, or None (with a warning) if it
+        cannot be used: no image, a missing file, an empty image."""
+        img = node.image
+        if img is None:
+            warnings.append(f"{what}: Image Texture node '{node.name}' has no image; its input uses the socket value")
+            return None
+        key = (img.name, node.interpolation, node.extension)
+        if key in self.index:
+            return self.index[key]
+        w, h = img.size
+        if w == 0 or h == 0 or not img.has_data and not _load(img):
+            warnings.append(f"{what}: image '{img.name}' has no pixels (missing file '{img.filepath}'?); "
+                            f"its input uses the socket value")
+            return None
+        buf = np.empty(w * h * img.channels, np.float32)
+        img.pixels.foreach_get(buf)
+        px = buf.reshape(-1, img.channels)
+        rgb = np.repeat(px[:, :1], 3, axis=1) if img.channels < 3 else px[:, :3]
+        cs = img.colorspace_settings.name
+        # byte images hold sRGB-encoded values, decoded after interpolation as Cycles does;
+        # float images are linear
+        srgb = cs == "sRGB" and not img.is_float
+        if cs not in LINEAR_COLORSPACES and cs != "sRGB":
+            warnings.append(f"{what}: image '{img.name}' colour space '{cs}' is treated as linear")
+        if node.projection != "FLAT":
+            warnings.append(f"{what}: Image Texture '{node.name}' projection {node.projection} is rendered as FLAT")
+        if node.inputs["Vector"].is_linked:
+            warnings.append(f"{what}: the Vector input of Image Texture '{node.name}' (mapping, other UV maps) is "
+                            f"ignored; the active render UV map is used")
+        ext = node.extension
+        if ext not in ("REPEAT", "EXTEND", "CLIP"):
+            warnings.append(f"{what}: Image Texture '{node.name}' extension {ext} is rendered as REPEAT")
+            ext = "REPEAT"
+        self.index[key] = len(self.items)
+        self.items.append({"name": img.name, "width": w, "height": h, "channels": 3,
+                           "pixels": np.ascontiguousarray(rgb, dtype=np.float32),
+                           "interpolation": "Closest" if node.interpolation == "Closest" else "Linear",
+                           "extension": ext, "srgb": srgb})
+        return self.index[key]
+
+
+def _load(img):
+    try:
+        img.reload()
+    except RuntimeError:
+        return False
+    return img.has_data and img.size[0] > 0
+
+
+def _linked_texture(node, name, textures, warnings, what):
+    """If input `name` of `node` is fed by an Image Texture (Color output), its texture index."""
+    sock = node.inputs.get(name)
+    if sock is None or not sock.is_linked or textures is None:
+        return None
+    link = sock.links[0]
+    src = link.from_node
+    if src.type != "TEX_IMAGE" or link.from_socket.name != "Color":
+        return None
+    return textures.add(src, warnings, what)
+
+
+def _color_or_texture(node, name, out, key, textures, warnings, what, default):
+    """Sets out[key] from an unlinked colour input, or out[key + '_texture'] from an image."""
+    tex = _linked_texture(node, name, textures, warnings, what)
+    if tex is not None:
+        out[key + "_texture"] = tex
+        return
+    if node.inputs.get(name) is not None and node.inputs[name].is_linked:
+        _input_value(node, name, warnings, what, default)  # the warning about the link
+    sock = node.inputs.get(name)
+    v = getattr(sock, "default_value", default) if sock is not None else default
+    out[key] = tuple(v)[:3] if key == "base_color" else float(v)
+
+
+def material_params(mat, warnings, textures=None):
+    """Principled-like parameters of a Blender material (nodes followed from the Cycles output).
+    `textures`: a Textures registry; image textures linked into Base Color / Color and
+    Roughness are added to it."""
     if mat is None:
         return dict(DEFAULT_MATERIAL)
     what = f"material '{mat.name}'"
@@ -55,27 +142,27 @@ def material_params(mat, warnings):
     node = surface.links[0].from_node
     t = node.type
     if t == "BSDF_PRINCIPLED":
-        out["base_color"] = _input_value(node, "Base Color", warnings, what, (0.8, 0.8, 0.8, 1))[:3]
+        _color_or_texture(node, "Base Color", out, "base_color", textures, warnings, what, (0.8, 0.8, 0.8, 1))
         out["metallic"] = _input_value(node, "Metallic", warnings, what, 0.0)
-        out["roughness"] = _input_value(node, "Roughness", warnings, what, 0.5)
+        _color_or_texture(node, "Roughness", out, "roughness", textures, warnings, what, 0.5)
         out["ior"] = _input_value(node, "IOR", warnings, what, 1.5)
         out["transmission"] = _input_value(node, "Transmission Weight", warnings, what, 0.0)
         col = _input_value(node, "Emission Color", warnings, what, (0, 0, 0, 1))[:3]
         strength = _input_value(node, "Emission Strength", warnings, what, 0.0)
         out["emission"] = tuple(c * strength for c in col)
     elif t == "BSDF_DIFFUSE":
-        out["base_color"] = _input_value(node, "Color", warnings, what, (0.8, 0.8, 0.8, 1))[:3]
+        _color_or_texture(node, "Color", out, "base_color", textures, warnings, what, (0.8, 0.8, 0.8, 1))
         out["roughness"] = 1.0
     elif t == "BSDF_GLOSSY" or t == "BSDF_ANISOTROPIC":
-        out["base_color"] = _input_value(node, "Color", warnings, what, (0.8, 0.8, 0.8, 1))[:3]
-        out["roughness"] = _input_value(node, "Roughness", warnings, what, 0.5)
+        _color_or_texture(node, "Color", out, "base_color", textures, warnings, what, (0.8, 0.8, 0.8, 1))
+        _color_or_texture(node, "Roughness", out, "roughness", textures, warnings, what, 0.5)
         out["metallic"] = 1.0
         if t == "BSDF_ANISOTROPIC":
             warnings.append(f"{what}: anisotropy is ignored (rendered as isotropic glossy)")
     elif t == "BSDF_GLASS" or t == "BSDF_REFRACTION":
-        out["base_color"] = _input_value(node, "Color", warnings, what, (1, 1, 1, 1))[:3]
+        _color_or_texture(node, "Color", out, "base_color", textures, warnings, what, (1, 1, 1, 1))
         out["ior"] = _input_value(node, "IOR", warnings, what, 1.5)
-        out["roughness"] = _input_value(node, "Roughness", warnings, what, 0.0)
+        _color_or_texture(node, "Roughness", out, "roughness", textures, warnings, what, 0.0)
         out["transmission"] = 1.0
         if t == "BSDF_REFRACTION":
             warnings.append(f"{what}: Refraction BSDF is rendered as Glass (with Fresnel reflection)")
@@ -117,7 +204,13 @@ def _mesh_local_arrays(ob):
         cn = np.empty(len(me.loops) * 3, np.float32)
         me.corner_normals.foreach_get("vector", cn)
         normals = cn.reshape(-1, 3)[tl]  # smooth, flat and custom split normals per corner
-        return co.reshape(-1, 3), tv.reshape(-1, 3), normals, mi
+        uvs = None
+        uv_layer = next((l for l in me.uv_layers if l.active_render), None) or me.uv_layers.active
+        if uv_layer is not None:
+            uv = np.empty(len(me.loops) * 2, np.float32)
+            uv_layer.uv.foreach_get("vector", uv)
+            uvs = np.ascontiguousarray(uv.reshape(-1, 2)[tl])
+        return co.reshape(-1, 3), tv.reshape(-1, 3), normals, mi, uvs
     finally:
         ob.to_mesh_clear()
 
@@ -211,6 +304,7 @@ def export_scene(depsgraph, test_break=lambda: False):
     if scene.camera is None:
         raise ValueError("the scene has no active camera")
     materials = [dict(DEFAULT_MATERIAL)]
+    textures = Textures()
     mat_index = {}
     meshes, lights = [], []
     cache = {}
@@ -233,7 +327,7 @@ def export_scene(depsgraph, test_break=lambda: False):
                 cache[key] = arrays
         if arrays is None:
             continue
-        co, tris, normals, mat_local = arrays
+        co, tris, normals, mat_local, uvs = arrays
         slot_to_global = []
         for slot in ob.material_slots:
             mat = slot.material
@@ -242,7 +336,7 @@ def export_scene(depsgraph, test_break=lambda: False):
                 continue
             if mat.name not in mat_index:
                 mat_index[mat.name] = len(materials)
-                materials.append(material_params(mat, warnings))
+                materials.append(material_params(mat, warnings, textures))
             slot_to_global.append(mat_index[mat.name])
         table = np.array(slot_to_global or [0], dtype=np.uint32)
         mat_ids = table[np.clip(mat_local, 0, len(table) - 1)]
@@ -253,9 +347,9 @@ def export_scene(depsgraph, test_break=lambda: False):
         name = ob.name if not inst.is_instance else f"{inst.parent.name if inst.parent else ''}/{ob.name}"
         meshes.append({"name": name, "positions": np.ascontiguousarray(pos),
                        "indices": np.ascontiguousarray(tris, dtype=np.uint32),
-                       "normals": np.ascontiguousarray(nrm), "material_ids": mat_ids})
+                       "normals": np.ascontiguousarray(nrm), "material_ids": mat_ids, "uvs": uvs})
     cam_ob = scene.camera.evaluated_get(depsgraph)
-    desc = {"meshes": meshes, "materials": materials, "lights": lights,
+    desc = {"meshes": meshes, "materials": materials, "textures": textures.items, "lights": lights,
             "camera": camera_dict(scene, cam_ob), "world": _world(scene, warnings)}
     # the same warning once
     seen = set()

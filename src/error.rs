@@ -10,6 +10,8 @@ pub enum SceneError {
     Material { material: String, what: String },
     #[error("light '{light}': {what}")]
     Light { light: String, what: String },
+    #[error("texture '{texture}': {what}")]
+    Texture { texture: String, what: String },
     #[error("camera: {0}")]
     Camera(String),
     #[error("world: {0}")]

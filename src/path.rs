@@ -42,6 +42,8 @@ pub struct Vertex {
     pub material: u32,
     pub prim: u32,
     pub front: bool,
+    /// Texture coordinates.
+    pub uv: Vec2,
     /// Unit direction towards the previous vertex (world).
     pub wo: Vec3,
     /// Path throughput arriving at this vertex (product of f·cos/pdf and 1/RR so far).
@@ -194,8 +196,7 @@ pub fn trace_path<S: Sampler>(
             let li = scene.triangle_light(si.prim).unwrap_or(u32::MAX);
             push(&mut record, li, si.p, false, le, pdf_light);
         }
-        let material = scene.material(&si);
-        let bsdf = material.bsdf(si.front);
+        let bsdf = scene.bsdf_at(&si);
         if depth == 0 {
             out.albedo = bsdf.albedo();
             out.normal = si.frame.n;
@@ -208,6 +209,7 @@ pub fn trace_path<S: Sampler>(
                 material: si.material,
                 prim: si.prim,
                 front: si.front,
+                uv: si.uv,
                 wo: wo_world,
                 throughput: beta,
                 pdf_in: prev_pdf,
@@ -323,7 +325,7 @@ pub fn first_hit(scene: &Scene, raster: Vec2, lens: Vec2) -> FirstHit {
             if let Some((le, _)) = scene.surface_emission(&si, cam.origin, cam.dir) {
                 out.very_direct += le;
             }
-            out.albedo = scene.material(&si).bsdf(si.front).albedo();
+            out.albedo = scene.bsdf_at(&si).albedo();
             out.normal = si.frame.n;
         }
     }

@@ -5,7 +5,10 @@
 use crate::film::Image;
 use crate::integrator::{self, Method, RenderControl, RenderSettings};
 use crate::path::PathSettings;
-use crate::scene::{self, AreaShape, CameraDesc, LightDesc, MaterialDesc, MeshDesc, Projection, SceneDesc, SensorFit};
+use crate::scene::{
+    self, AreaShape, CameraDesc, LightDesc, MaterialDesc, MeshDesc, Projection, SceneDesc, SensorFit, TextureDesc,
+    TextureExtension,
+};
 use numpy::{PyArray1, PyArrayMethods, PyReadonlyArrayDyn, PyUntypedArrayMethods};
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
@@ -85,7 +88,13 @@ fn parse_mesh(d: &Bound<'_, PyDict>) -> PyResult<MeshDesc> {
         Some(m) if !m.is_none() => uints(&m, 1, &format!("{ctx}: material_ids"))?,
         _ => vec![],
     };
-    Ok(MeshDesc { name, positions, indices, corner_normals, material_ids })
+    let corner_uvs = match d.get_item("uvs")? {
+        Some(u) if !u.is_none() => {
+            floats(&u, 2, &format!("{ctx}: uvs"))?.chunks_exact(2).map(|c| [c[0], c[1]]).collect()
+        }
+        _ => vec![],
+    };
+    Ok(MeshDesc { name, positions, indices, corner_normals, material_ids, corner_uvs })
 }
 
 fn parse_material(d: &Bound<'_, PyDict>) -> PyResult<MaterialDesc> {
@@ -99,7 +108,43 @@ fn parse_material(d: &Bound<'_, PyDict>) -> PyResult<MaterialDesc> {
         metallic: get_or(d, "metallic", def.metallic, &ctx)?,
         transmission: get_or(d, "transmission", def.transmission, &ctx)?,
         ior: get_or(d, "ior", def.ior, &ctx)?,
+        base_color_texture: get_or(d, "base_color_texture", None, &ctx)?,
+        roughness_texture: get_or(d, "roughness_texture", None, &ctx)?,
         name,
+    })
+}
+
+/// {"name", "width", "height", "pixels": float32 RGBA or RGB, row 0 at the bottom (as
+/// Blender's Image.pixels), "interpolation": "Linear"|"Closest", "extension": "REPEAT"|
+/// "EXTEND"|"CLIP", "srgb": the values are sRGB-encoded (decoded after interpolation)}
+fn parse_texture(d: &Bound<'_, PyDict>) -> PyResult<TextureDesc> {
+    let name: String = get_or(d, "name", "texture".to_string(), "texture")?;
+    let ctx = format!("texture '{name}'");
+    let width: usize = get_or(d, "width", 0, &ctx)?;
+    let height: usize = get_or(d, "height", 0, &ctx)?;
+    let channels: usize = get_or(d, "channels", 4, &ctx)?;
+    if !(channels == 3 || channels == 4) {
+        return Err(verr(format!("{ctx}: channels must be 3 or 4")));
+    }
+    let px = floats(&get(d, "pixels", &ctx)?, channels, &format!("{ctx}: pixels"))?;
+    let pixels = px.chunks_exact(channels).map(|c| [c[0], c[1], c[2]]).collect();
+    let interpolation: String = get_or(d, "interpolation", "Linear".to_string(), &ctx)?;
+    let extension: String = get_or(d, "extension", "REPEAT".to_string(), &ctx)?;
+    let extension = match extension.to_ascii_uppercase().as_str() {
+        "REPEAT" => TextureExtension::Repeat,
+        "EXTEND" => TextureExtension::Extend,
+        "CLIP" => TextureExtension::Clip,
+        other => return Err(verr(format!("{ctx}: unknown extension '{other}' (REPEAT, EXTEND or CLIP)"))),
+    };
+    let srgb: bool = get_or(d, "srgb", false, &ctx)?;
+    Ok(TextureDesc {
+        name,
+        width,
+        height,
+        pixels,
+        closest: interpolation.eq_ignore_ascii_case("closest"),
+        extension,
+        srgb,
     })
 }
 
@@ -212,6 +257,7 @@ fn parse_scene(d: &Bound<'_, PyDict>) -> PyResult<SceneDesc> {
     Ok(SceneDesc {
         meshes: list("meshes")?.iter().map(parse_mesh).collect::<PyResult<_>>()?,
         materials: list("materials")?.iter().map(parse_material).collect::<PyResult<_>>()?,
+        textures: list("textures")?.iter().map(parse_texture).collect::<PyResult<_>>()?,
         lights: list("lights")?.iter().map(parse_light).collect::<PyResult<_>>()?,
         camera: parse_camera(
             &get(d, "camera", "scene")?.cast_into::<PyDict>().map_err(|_| verr("scene: camera must be a dict"))?,

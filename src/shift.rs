@@ -99,14 +99,14 @@ pub fn half_vector_copy(wo_x: Vec3, wi_x: Vec3, eta_x: f32, wo_y: Vec3, eta_y: f
 }
 
 #[inline]
-fn bsdf_at(scene: &Scene, material: u32, front: bool) -> Bsdf {
-    scene.materials[material as usize].bsdf(front)
+fn bsdf_at(scene: &Scene, material: u32, front: bool, uv: Vec2) -> Bsdf {
+    scene.bsdf(material, front, uv)
 }
 
 /// The shift's vertex class: diffuse (reconnectable) or not.
 #[inline]
-fn is_diffuse(scene: &Scene, material: u32, front: bool) -> bool {
-    bsdf_at(scene, material, front).min_roughness() > SPECULAR_ROUGHNESS_THRESHOLD
+fn is_diffuse(scene: &Scene, material: u32, front: bool, uv: Vec2) -> bool {
+    bsdf_at(scene, material, front, uv).min_roughness() > SPECULAR_ROUGHNESS_THRESHOLD
 }
 
 /// Visibility from a surface point to a point (or, at infinity, along a direction).
@@ -196,8 +196,8 @@ impl<'a> Offset<'a> {
             let ray = scene.camera.generate_ray(offset_raster?, base.lens);
             let hit = scene.intersect(ray.origin, ray.dir, ray.tmin, ray.tmax)?;
             let y = scene.interaction(&hit, ray.dir);
-            let diffuse = is_diffuse(scene, x0.material, x0.front);
-            (diffuse == is_diffuse(scene, y.material, y.front)).then_some(State::Free(Free {
+            let diffuse = is_diffuse(scene, x0.material, x0.front, x0.uv);
+            (diffuse == is_diffuse(scene, y.material, y.front, y.uv)).then_some(State::Free(Free {
                 y,
                 wo: -ray.dir,
                 beta: Spectrum::ONE,
@@ -228,7 +228,7 @@ impl<'a> Offset<'a> {
             (State::Joined { wo, beta, r }, Some(_)) => {
                 // x_k's BSDF towards x_{k+1} with the offset's incoming direction
                 let x = &base.vertices[k];
-                let bsdf = bsdf_at(scene, x.material, x.front);
+                let bsdf = bsdf_at(scene, x.material, x.front, x.uv);
                 let wi = x.frame.to_local(x.wi);
                 let fy = bsdf.eval(wo, wi);
                 let safe = |a: f32, b: f32| if b > 0.0 { a / b } else { 0.0 };
@@ -239,13 +239,13 @@ impl<'a> Offset<'a> {
             }
             (State::Free(f), Some(xn)) => {
                 let xk = &base.vertices[k];
-                let next_diffuse = is_diffuse(scene, xn.material, xn.front);
+                let next_diffuse = is_diffuse(scene, xn.material, xn.front, xn.uv);
                 if f.diffuse && next_diffuse {
                     reconnect(scene, xk, xn, &f).unwrap_or(State::Failed)
                 } else {
                     match self.step(&f) {
                         Some(Step { hit: Some(y), dir, f: fy, pdf, j, .. })
-                            if is_diffuse(scene, y.material, y.front) == next_diffuse =>
+                            if is_diffuse(scene, y.material, y.front, y.uv) == next_diffuse =>
                         {
                             State::Free(Free {
                                 y,
@@ -273,7 +273,7 @@ impl<'a> Offset<'a> {
             State::Same { ratio, r } => Some((e.numerator * ratio, r * (e.pdf_b + e.pdf_l))),
             State::Joined { wo, beta, r } => {
                 let x = &base.vertices[k];
-                let bsdf = bsdf_at(scene, x.material, x.front);
+                let bsdf = bsdf_at(scene, x.material, x.front, x.uv);
                 let dir = if e.at_infinity { e.z } else { (e.z - x.p).normalize() };
                 let wi = x.frame.to_local(dir);
                 let pdf_b = if e.delta { 0.0 } else { bsdf.pdf(wo, wi) };
@@ -311,7 +311,7 @@ fn half_vector_step(scene: &Scene, x: &Vertex, f: &Free) -> Option<Step> {
     if !(x.pdf_out > 0.0) {
         return None;
     }
-    let bsdf = bsdf_at(scene, f.y.material, f.y.front);
+    let bsdf = bsdf_at(scene, f.y.material, f.y.front, f.y.uv);
     let (wo_x, wi_x) = (x.frame.to_local(x.wo), x.frame.to_local(x.wi));
     let wo_y = f.y.frame.to_local(f.wo);
     let refraction = wi_x.z < 0.0;
@@ -345,7 +345,7 @@ fn reconnect(scene: &Scene, xk: &Vertex, xn: &Vertex, f: &Free) -> Option<State>
     if (-dir).dot(xn.ng) <= 0.0 {
         return None; // the offset would arrive at x_{k+1} from its other side
     }
-    let bsdf = bsdf_at(scene, f.y.material, f.y.front);
+    let bsdf = bsdf_at(scene, f.y.material, f.y.front, f.y.uv);
     let (wo, wi) = (f.y.frame.to_local(f.wo), f.y.frame.to_local(dir));
     let j = reconnection_jacobian(xk.p, f.y.p, xn.p, xn.ng);
     if !(j > 0.0 && j.is_finite() && xk.pdf_out > 0.0) {
@@ -366,7 +366,7 @@ fn reconnect_event(scene: &Scene, e: &Event, xk: Vec3, f: &Free) -> Option<(Spec
     }
     let dir = if e.at_infinity { e.z } else { (e.z - f.y.p).normalize() };
     let (le, pdf_l) = if e.light == u32::MAX { (scene.world, 0.0) } else { scene.light_eval(e.light, f.y.p, e.z)? };
-    let bsdf = bsdf_at(scene, f.y.material, f.y.front);
+    let bsdf = bsdf_at(scene, f.y.material, f.y.front, f.y.uv);
     let (wo, wi) = (f.y.frame.to_local(f.wo), f.y.frame.to_local(dir));
     let fy = bsdf.eval(wo, wi);
     let pdf_b = if e.delta { 0.0 } else { bsdf.pdf(wo, wi) };
@@ -437,7 +437,8 @@ pub fn offset_path(scene: &Scene, base: &Path, offset_raster: Vec2) -> Path {
                     pdf_in: own_pdf_in,
                     ..x
                 };
-                let next_diffuse = base.vertices.get(offset.k + 1).map(|n| is_diffuse(scene, n.material, n.front));
+                let next_diffuse =
+                    base.vertices.get(offset.k + 1).map(|n| is_diffuse(scene, n.material, n.front, n.uv));
                 if !(f.diffuse && next_diffuse == Some(true)) {
                     if let Some(s) = offset.step(&f) {
                         v.wi = s.dir;
@@ -449,7 +450,7 @@ pub fn offset_path(scene: &Scene, base: &Path, offset_raster: Vec2) -> Path {
                         own_pdf_in = s.pdf;
                     }
                 } else if let Some(n) = base.vertices.get(offset.k + 1) {
-                    let bsdf = bsdf_at(scene, f.y.material, f.y.front);
+                    let bsdf = bsdf_at(scene, f.y.material, f.y.front, f.y.uv);
                     let dir = (n.p - f.y.p).normalize();
                     let (wo, wi) = (f.y.frame.to_local(f.wo), f.y.frame.to_local(dir));
                     let (fv, pdf) = (bsdf.eval(wo, wi), bsdf.pdf(wo, wi));
@@ -464,7 +465,7 @@ pub fn offset_path(scene: &Scene, base: &Path, offset_raster: Vec2) -> Path {
                 out.vertices.push(v);
             }
             State::Joined { wo, .. } => {
-                let bsdf = bsdf_at(scene, x.material, x.front);
+                let bsdf = bsdf_at(scene, x.material, x.front, x.uv);
                 let wo_world = x.frame.to_world(wo);
                 let wi = x.frame.to_local(x.wi);
                 let (fv, pdf) =

@@ -16,6 +16,7 @@ fn quad(name: &str, p: [[f32; 3]; 4], mat: u32) -> MeshDesc {
         indices: vec![[0, 1, 2], [0, 2, 3]],
         corner_normals: vec![],
         material_ids: vec![mat, mat],
+        corner_uvs: vec![],
     }
 }
 
@@ -39,7 +40,14 @@ fn block(name: &str, center: [f32; 3], half: [f32; 3], angle: f32, mat: u32) -> 
         indices.push([f[0], f[2], f[3]]);
     }
     let n = indices.len();
-    MeshDesc { name: name.into(), positions, indices, corner_normals: vec![], material_ids: vec![mat; n] }
+    MeshDesc {
+        name: name.into(),
+        positions,
+        indices,
+        corner_normals: vec![],
+        material_ids: vec![mat; n],
+        corner_uvs: vec![],
+    }
 }
 
 fn material(name: &str, base_color: [f32; 3], emission: [f32; 3]) -> MaterialDesc {
@@ -95,6 +103,7 @@ pub fn cornell_box(width: u32, height: u32) -> SceneDesc {
         meshes,
         materials,
         lights: vec![],
+        textures: vec![],
         camera: camera_looking_along_y([0.0, -3.4, 0.0], 35.0, width, height),
         world: [0.0; 3],
     }
@@ -130,7 +139,14 @@ fn uv_sphere(name: &str, center: [f32; 3], radius: f32, nu: u32, nv: u32, mat: u
         }
     }
     let n = indices.len();
-    MeshDesc { name: name.into(), positions, indices, corner_normals: vec![], material_ids: vec![mat; n] }
+    MeshDesc {
+        name: name.into(),
+        positions,
+        indices,
+        corner_normals: vec![],
+        material_ids: vec![mat; n],
+        corner_uvs: vec![],
+    }
 }
 
 /// The Cornell box with a glass sphere and a mirror sphere instead of the blocks (the
@@ -176,6 +192,7 @@ pub fn furnace_sphere(albedo: f32, emission: f32, width: u32, height: u32) -> Sc
         meshes: vec![uv_sphere("Sphere", [0.0; 3], 1.0, 48, 24, 0)],
         materials: vec![material("Furnace", [albedo; 3], [emission; 3])],
         lights: vec![],
+        textures: vec![],
         camera: camera_looking_along_y([0.0, 0.0, 0.0], 20.0, width, height),
         world: [0.0; 3],
     }

@@ -14,6 +14,33 @@ pub struct MeshDesc {
     pub corner_normals: Vec<[f32; 3]>,
     /// Per-triangle index into the scene material table (empty = all 0).
     pub material_ids: Vec<u32>,
+    /// Optional per-corner texture coordinates (3 per triangle, in triangle order; Blender's
+    /// active render UV map); empty = all (0, 0).
+    pub corner_uvs: Vec<[f32; 2]>,
+}
+
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum TextureExtension {
+    #[default]
+    Repeat,
+    Extend,
+    Clip,
+}
+
+/// An image texture, row 0 at the bottom: linear values, or sRGB-encoded values (8-bit sRGB
+/// images) that are decoded after interpolation, as Cycles does.
+#[derive(Clone, Debug, Default)]
+pub struct TextureDesc {
+    pub name: String,
+    pub width: usize,
+    pub height: usize,
+    /// width × height RGB values, row-major from the bottom row.
+    pub pixels: Vec<[f32; 3]>,
+    /// Blender's "Closest" interpolation (else "Linear", bilinear).
+    pub closest: bool,
+    pub extension: TextureExtension,
+    /// The pixels are sRGB-encoded: decode after interpolating.
+    pub srgb: bool,
 }
 
 /// A material, as the parameters of one uber-material close to Blender's Principled BSDF.
@@ -28,6 +55,10 @@ pub struct MaterialDesc {
     pub metallic: f32,
     pub transmission: f32,
     pub ior: f32,
+    /// Image textures (indices into `SceneDesc::textures`) that replace the base colour, and
+    /// the roughness (the texture's luminance), where the material links them.
+    pub base_color_texture: Option<u32>,
+    pub roughness_texture: Option<u32>,
 }
 
 impl Default for MaterialDesc {
@@ -40,6 +71,8 @@ impl Default for MaterialDesc {
             metallic: 0.0,
             transmission: 0.0,
             ior: 1.5,
+            base_color_texture: None,
+            roughness_texture: None,
         }
     }
 }
@@ -155,6 +188,7 @@ impl Default for CameraDesc {
 pub struct SceneDesc {
     pub meshes: Vec<MeshDesc>,
     pub materials: Vec<MaterialDesc>,
+    pub textures: Vec<TextureDesc>,
     pub lights: Vec<LightDesc>,
     pub camera: CameraDesc,
     /// World background radiance: Color × Strength.

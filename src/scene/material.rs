@@ -17,11 +17,18 @@ pub struct Material {
     pub metallic: f32,
     pub transmission: f32,
     pub ior: f32,
+    pub base_color_texture: Option<u32>,
+    pub roughness_texture: Option<u32>,
 }
 
 impl Material {
-    pub fn from_desc(d: &MaterialDesc) -> Result<Material, SceneError> {
+    pub fn from_desc(d: &MaterialDesc, textures: usize) -> Result<Material, SceneError> {
         let bad = |what: &str| SceneError::Material { material: d.name.clone(), what: what.to_string() };
+        for t in [d.base_color_texture, d.roughness_texture].into_iter().flatten() {
+            if t as usize >= textures {
+                return Err(bad(&format!("uses texture {t} but the scene has {textures}")));
+            }
+        }
         let scalars = [d.roughness, d.metallic, d.transmission, d.ior];
         if d.base_color.iter().chain(d.emission.iter()).chain(scalars.iter()).any(|x| !x.is_finite()) {
             return Err(bad("NaN or Inf parameter"));
@@ -45,6 +52,8 @@ impl Material {
             } else {
                 1.5
             },
+            base_color_texture: d.base_color_texture,
+            roughness_texture: d.roughness_texture,
         })
     }
 
@@ -56,12 +65,18 @@ impl Material {
     /// geometric normal points to (outside of a closed mesh), which orients refraction.
     #[inline]
     pub fn bsdf(&self, front: bool) -> Bsdf {
+        self.bsdf_with(front, self.base_color, self.roughness)
+    }
+
+    /// The BSDF with base colour and roughness given (where textures replace them).
+    #[inline]
+    pub fn bsdf_with(&self, front: bool, base_color: Spectrum, roughness: f32) -> Bsdf {
         let (m, t) = (self.metallic, self.transmission);
         let w = [(1.0 - m) * (1.0 - t), m, (1.0 - m) * t];
-        let diffuse = Lambert { albedo: self.base_color };
-        let metal = Conductor { f0: self.base_color, roughness: self.roughness };
+        let diffuse = Lambert { albedo: base_color };
+        let metal = Conductor { f0: base_color, roughness };
         let eta = if front { self.ior } else { 1.0 / self.ior };
-        let glass = Dielectric { eta, tint: self.base_color, roughness: self.roughness };
+        let glass = Dielectric { eta, tint: base_color, roughness };
         if w[1] <= 0.0 && w[2] <= 0.0 {
             Bsdf::Lambert(diffuse)
         } else if w[0] <= 0.0 && w[2] <= 0.0 {

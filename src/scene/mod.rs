@@ -6,13 +6,16 @@ pub mod camera;
 pub mod desc;
 pub mod light;
 pub mod material;
+pub mod texture;
 
 pub use camera::Camera;
 pub use desc::*;
 pub use light::{Light, LightSample, LightShape};
 pub use material::Material;
+pub use texture::Texture;
 
 use crate::accel::{Accel, TriHit};
+use crate::bsdf::Bsdf;
 use crate::distribution::Distribution1D;
 use crate::error::SceneError;
 use crate::math::{ray_epsilon, square_to_triangle, Frame, Spectrum};
@@ -31,6 +34,8 @@ pub struct SurfaceInteraction {
     pub t: f32,
     /// The ray arrived on the side the geometric normal points to (outside a closed mesh).
     pub front: bool,
+    /// Texture coordinates (zero when the mesh has none).
+    pub uv: Vec2,
 }
 
 impl SurfaceInteraction {
@@ -59,10 +64,13 @@ pub struct Scene {
     pub positions: Vec<[Vec3; 3]>,
     /// Per-triangle corner normals; `None` when the triangle is flat-shaded.
     normals: Vec<Option<[Vec3; 3]>>,
+    /// Per-triangle corner texture coordinates; `None` without a UV map.
+    uvs: Vec<Option<[Vec2; 3]>>,
     geo_normals: Vec<Vec3>,
     areas: Vec<f32>,
     tri_material: Vec<u32>,
     pub materials: Vec<Material>,
+    pub textures: Vec<Texture>,
     pub lights: Vec<Light>,
     light_distribution: Distribution1D,
     /// Light index of each emissive triangle (u32::MAX if not emissive).
@@ -81,15 +89,18 @@ impl Scene {
     pub fn build(desc: &SceneDesc) -> Result<Scene, SceneError> {
         let camera = Camera::new(&desc.camera)?;
         let mut report = SceneReport::default();
-        let mut materials: Vec<Material> = desc.materials.iter().map(Material::from_desc).collect::<Result<_, _>>()?;
+        let textures: Vec<Texture> = desc.textures.iter().map(Texture::from_desc).collect::<Result<_, _>>()?;
+        let mut materials: Vec<Material> =
+            desc.materials.iter().map(|m| Material::from_desc(m, textures.len())).collect::<Result<_, _>>()?;
         if materials.is_empty() {
-            materials.push(Material::from_desc(&MaterialDesc::default())?);
+            materials.push(Material::from_desc(&MaterialDesc::default(), 0)?);
         }
         if desc.world.iter().any(|x| !x.is_finite() || *x < 0.0) {
             return Err(SceneError::World("background colour × strength must be finite and ≥ 0".into()));
         }
         let mut positions = Vec::new();
         let mut normals = Vec::new();
+        let mut uvs = Vec::new();
         let mut tri_material = Vec::new();
         for m in &desc.meshes {
             let bad = |what: String| SceneError::Mesh { mesh: m.name.clone(), what };
@@ -105,6 +116,16 @@ impl Scene {
                     m.corner_normals.len(),
                     m.indices.len()
                 )));
+            }
+            if !m.corner_uvs.is_empty() && m.corner_uvs.len() != 3 * m.indices.len() {
+                return Err(bad(format!(
+                    "{} corner UVs for {} triangles (need 3 per triangle)",
+                    m.corner_uvs.len(),
+                    m.indices.len()
+                )));
+            }
+            if m.corner_uvs.iter().flatten().any(|x| !x.is_finite()) {
+                return Err(bad("has a NaN or Inf texture coordinate".into()));
             }
             if !m.material_ids.is_empty() && m.material_ids.len() != m.indices.len() {
                 return Err(bad(format!("{} material ids for {} triangles", m.material_ids.len(), m.indices.len())));
@@ -136,6 +157,9 @@ impl Scene {
                 };
                 positions.push(v);
                 normals.push(n);
+                uvs.push(
+                    (!m.corner_uvs.is_empty()).then(|| [0, 1, 2].map(|k| Vec2::from_array(m.corner_uvs[3 * t + k]))),
+                );
                 tri_material.push(mat);
             }
         }
@@ -200,10 +224,12 @@ impl Scene {
         Ok(Scene {
             positions,
             normals,
+            uvs,
             geo_normals,
             areas,
             tri_material,
             materials,
+            textures,
             lights,
             light_distribution,
             tri_light,
@@ -271,7 +297,29 @@ impl Scene {
             material: self.tri_material[t],
             t: hit.t,
             front,
+            uv: self.uvs[t].map_or(Vec2::ZERO, |u| u[0] * b0 + u[1] * b1 + u[2] * b2),
         }
+    }
+
+    /// The BSDF of `material` at texture coordinates `uv` (textures replace the base colour
+    /// and the roughness where the material links them).
+    #[inline]
+    pub fn bsdf(&self, material: u32, front: bool, uv: Vec2) -> Bsdf {
+        let m = &self.materials[material as usize];
+        if m.base_color_texture.is_none() && m.roughness_texture.is_none() {
+            return m.bsdf(front);
+        }
+        let base = m.base_color_texture.map_or(m.base_color, |t| self.textures[t as usize].eval(uv).min(Spectrum::ONE));
+        let rough = m
+            .roughness_texture
+            .map_or(m.roughness, |t| crate::math::luminance(self.textures[t as usize].eval(uv)).clamp(0.0, 1.0));
+        m.bsdf_with(front, base, rough)
+    }
+
+    /// The BSDF at a surface point.
+    #[inline]
+    pub fn bsdf_at(&self, si: &SurfaceInteraction) -> Bsdf {
+        self.bsdf(si.material, si.front, si.uv)
     }
 
     #[inline]

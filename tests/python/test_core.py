@@ -61,6 +61,10 @@ def test_nan_vertex_is_a_value_error_naming_the_mesh():
     (lambda d: d["camera"].__setitem__("resolution_x", 0), "nothing to render"),
     (lambda d: d["materials"][0].__setitem__("base_color", (np.inf, 0, 0)), "White"),
     (lambda d: d.__setitem__("lights", [{"type": "BLOB", "name": "L"}]), "BLOB"),
+    (lambda d: d["materials"][0].__setitem__("base_color_texture", 3), "White.*texture 3"),
+    (lambda d: d.__setitem__("textures", [{"name": "Bricks", "width": 4, "height": 4,
+                                           "pixels": np.zeros((15, 4), np.float32)}]), "Bricks"),
+    (lambda d: d["meshes"][0].__setitem__("uvs", np.zeros((5, 2), np.float32)), "Floor.*UV"),
 ])
 def test_bad_input_is_a_clear_value_error(mutate, match):
     d = _cornell_desc()

@@ -1,0 +1,75 @@
+"""Builds the Blender extension zip: dist/gdmlt-<version>.zip, the addon of blender_addon/ with
+the compiled core bundled as an abi3 wheel (one wheel serves Blender's Python 3.11 and 3.13;
+nothing is fetched at enable time). No Blender binary is needed: Blender's own extension
+builder (blender_ext.py, shipped in the bpy package) validates the manifest and writes the zip.
+
+Usage: python tools/build_addon.py [--wheel PATH] [--out-dir dist]"""
+
+import argparse
+import importlib.util
+import re
+import shutil
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def blender_ext_cli() -> Path:
+    spec = importlib.util.find_spec("bpy")
+    if spec is None or not spec.submodule_search_locations:
+        raise SystemExit("build_addon: the bpy package is needed for Blender's extension builder (pip install bpy)")
+    base = Path(list(spec.submodule_search_locations)[0])
+    found = sorted(base.glob("*/scripts/addons_core/bl_pkg/cli/blender_ext.py"))
+    if not found:
+        raise SystemExit(f"build_addon: blender_ext.py not found under {base}")
+    return found[-1]
+
+
+def build_wheel(out: Path) -> Path:
+    out.mkdir(parents=True, exist_ok=True)
+    for old in out.glob("gdmlt-*.whl"):
+        old.unlink()
+    local = Path(sys.executable).parent / "maturin"  # the venv's, when not on PATH
+    maturin = str(local) if local.exists() else "maturin"
+    subprocess.run([maturin, "build", "--release", "--quiet", "--out", str(out)], cwd=ROOT, check=True)
+    wheels = sorted(out.glob("gdmlt-*.whl"))
+    if len(wheels) != 1:
+        raise SystemExit(f"build_addon: expected one wheel in {out}, found {wheels}")
+    return wheels[0]
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--wheel", type=Path, help="use this wheel instead of building one with maturin")
+    ap.add_argument("--out-dir", type=Path, default=ROOT / "dist")
+    args = ap.parse_args(argv)
+
+    manifest_src = (ROOT / "blender_addon" / "blender_manifest.toml").read_text()
+    version = re.search(r'^version\s*=\s*"([^"]+)"', manifest_src, re.M).group(1)
+    py_version = re.search(r'^version\s*=\s*"([^"]+)"', (ROOT / "pyproject.toml").read_text(), re.M).group(1)
+    if version != py_version:
+        raise SystemExit(f"build_addon: manifest version {version} differs from pyproject version {py_version}")
+    wheel = args.wheel or build_wheel(ROOT / "target" / "addon-wheels")
+
+    with tempfile.TemporaryDirectory() as tmp:
+        stage = Path(tmp) / "gdmlt"
+        shutil.copytree(ROOT / "blender_addon", stage, ignore=shutil.ignore_patterns("__pycache__", "*.pyc"))
+        (stage / "wheels").mkdir()
+        shutil.copy2(wheel, stage / "wheels" / wheel.name)
+        (stage / "blender_manifest.toml").write_text(
+            manifest_src.rstrip() + f'\n\n# added by tools/build_addon.py\nwheels = ["./wheels/{wheel.name}"]\n')
+        args.out_dir.mkdir(parents=True, exist_ok=True)
+        subprocess.run([sys.executable, str(blender_ext_cli()), "build", "--source-dir", str(stage),
+                        "--output-dir", str(args.out_dir)], check=True)
+    zips = sorted(args.out_dir.glob(f"gdmlt-{version}*.zip"))
+    if not zips:
+        raise SystemExit(f"build_addon: no zip was written to {args.out_dir}")
+    print(f"wrote {zips[-1]}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
