@@ -47,13 +47,15 @@ class Textures:
         self.index = {}
 
     def add(self, node, warnings, what):
-        """Index of the texture of Image Texture node `node`, or None (with a warning) if it
-        cannot be used: no image, a missing file, an empty image."""
+        """Index of the texture of an Image (or Environment) Texture node, or None (with a
+        warning) if it cannot be used: no image, a missing file, an empty image."""
         img = node.image
         if img is None:
-            warnings.append(f"{what}: Image Texture node '{node.name}' has no image; its input uses the socket value")
+            warnings.append(f"{what}: texture node '{node.name}' has no image; its input uses the socket value")
             return None
-        key = (img.name, node.interpolation, node.extension)
+        env = node.type == "TEX_ENVIRONMENT"
+        ext = "REPEAT" if env else node.extension
+        key = (img.name, node.interpolation, ext)
         if key in self.index:
             return self.index[key]
         w, h = img.size
@@ -71,12 +73,12 @@ class Textures:
         srgb = cs == "sRGB" and not img.is_float
         if cs not in LINEAR_COLORSPACES and cs != "sRGB":
             warnings.append(f"{what}: image '{img.name}' colour space '{cs}' is treated as linear")
-        if node.projection != "FLAT":
-            warnings.append(f"{what}: Image Texture '{node.name}' projection {node.projection} is rendered as FLAT")
+        if node.projection != ("EQUIRECTANGULAR" if env else "FLAT"):
+            warnings.append(f"{what}: texture '{node.name}' projection {node.projection} is not supported "
+                            f"(rendered as {'EQUIRECTANGULAR' if env else 'FLAT'})")
         if node.inputs["Vector"].is_linked:
-            warnings.append(f"{what}: the Vector input of Image Texture '{node.name}' (mapping, other UV maps) is "
-                            f"ignored; the active render UV map is used")
-        ext = node.extension
+            warnings.append(f"{what}: the Vector input of texture '{node.name}' (mapping, other UV maps) is "
+                            f"ignored; {'the world direction' if env else 'the active render UV map'} is used")
         if ext not in ("REPEAT", "EXTEND", "CLIP"):
             warnings.append(f"{what}: Image Texture '{node.name}' extension {ext} is rendered as REPEAT")
             ext = "REPEAT"
@@ -250,24 +252,33 @@ def _light(ob, matrix, warnings):
     return None
 
 
-def _world(scene, warnings):
+def _world(scene, warnings, textures):
+    """(colour × strength, or strength alone with an environment texture; texture index or None)."""
     world = scene.world
+    black = ((0.0, 0.0, 0.0), None)
     if world is None:
-        return (0.0, 0.0, 0.0)
+        return black
     tree = world.node_tree
     node_out = tree.get_output_node("CYCLES") if tree is not None else None
     if node_out is None:
-        return tuple(world.color[:3])
+        return tuple(world.color[:3]), None
     surface = node_out.inputs.get("Surface")
     if surface is None or not surface.is_linked:
-        return (0.0, 0.0, 0.0)
+        return black
     node = surface.links[0].from_node
+    what = f"world '{world.name}'"
     if node.type != "BACKGROUND":
-        warnings.append(f"world '{world.name}': node '{node.name}' ({node.type}) is not supported; world is black")
-        return (0.0, 0.0, 0.0)
-    col = _input_value(node, "Color", warnings, f"world '{world.name}'", (0.05, 0.05, 0.05, 1))[:3]
-    strength = _input_value(node, "Strength", warnings, f"world '{world.name}'", 1.0)
-    return tuple(c * strength for c in col)
+        warnings.append(f"{what}: node '{node.name}' ({node.type}) is not supported; world is black")
+        return black
+    strength = _input_value(node, "Strength", warnings, what, 1.0)
+    color_in = node.inputs["Color"]
+    if color_in.is_linked and color_in.links[0].from_node.type == "TEX_ENVIRONMENT" \
+            and color_in.links[0].from_socket.name == "Color":
+        tex = textures.add(color_in.links[0].from_node, warnings, what)
+        if tex is not None:
+            return (strength, strength, strength), tex
+    col = _input_value(node, "Color", warnings, what, (0.05, 0.05, 0.05, 1))[:3]
+    return tuple(c * strength for c in col), None
 
 
 def camera_dict(scene, cam_ob):
@@ -349,8 +360,9 @@ def export_scene(depsgraph, test_break=lambda: False):
                        "indices": np.ascontiguousarray(tris, dtype=np.uint32),
                        "normals": np.ascontiguousarray(nrm), "material_ids": mat_ids, "uvs": uvs})
     cam_ob = scene.camera.evaluated_get(depsgraph)
+    world, world_texture = _world(scene, warnings, textures)
     desc = {"meshes": meshes, "materials": materials, "textures": textures.items, "lights": lights,
-            "camera": camera_dict(scene, cam_ob), "world": _world(scene, warnings)}
+            "camera": camera_dict(scene, cam_ob), "world": world, "world_texture": world_texture}
     # the same warning once
     seen = set()
     warnings = [w for w in warnings if not (w in seen or seen.add(w))]

@@ -60,6 +60,17 @@ impl Distribution1D {
     pub fn pmf(&self, i: usize) -> f32 {
         self.pmf.get(i).copied().unwrap_or(0.0)
     }
+
+    /// Samples the piecewise-constant density on [0, 1) with one bin per weight (pbrt's
+    /// Distribution1D::SampleContinuous): (x, density at x, bin).
+    #[inline]
+    pub fn sample_continuous(&self, u: f32) -> Option<(f32, f32, usize)> {
+        let (i, p) = self.sample(u)?;
+        let lo = if i == 0 { 0.0 } else { self.cdf[i - 1] };
+        let t = ((u - lo) / p).clamp(0.0, 0.999_999);
+        let n = self.pmf.len() as f32;
+        Some(((i as f32 + t) / n, p * n, i))
+    }
 }
 
 #[cfg(test)]
@@ -81,6 +92,24 @@ mod tests {
         assert_eq!(counts[4], 0);
         for (i, &c) in counts.iter().enumerate() {
             assert!((c as f32 / n as f32 - d.pmf(i)).abs() < 1e-3);
+        }
+    }
+
+    /// Continuous samples fall in the chosen bin, uniformly, with density pmf·n.
+    #[test]
+    fn continuous_samples_follow_the_density() {
+        let d = Distribution1D::new(&[1.0, 0.0, 3.0]);
+        let mut hist = [0usize; 6];
+        let n = 60_000;
+        for k in 0..n {
+            let (x, pdf, i) = d.sample_continuous((k as f32 + 0.5) / n as f32).unwrap();
+            assert!((0.0..1.0).contains(&x) && (x * 3.0) as usize == i);
+            assert!((pdf - d.pmf(i) * 3.0).abs() < 1e-6);
+            hist[(x * 6.0) as usize] += 1;
+        }
+        let expect = [0.125, 0.125, 0.0, 0.0, 0.375, 0.375];
+        for (h, e) in hist.iter().zip(expect) {
+            assert!((*h as f32 / n as f32 - e).abs() < 2e-3, "{hist:?}");
         }
     }
 

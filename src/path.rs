@@ -73,7 +73,7 @@ pub struct Event {
     pub nee: bool,
     /// The vertex the last segment leaves from (`CAMERA_VERTEX` for camera rays).
     pub vertex: u32,
-    /// Light index, or u32::MAX for the world background.
+    /// Light index (`Scene::env_light()` for the world background).
     pub light: u32,
     /// Point on the light; for lights at infinity the unit direction towards them.
     pub z: Vec3,
@@ -183,9 +183,10 @@ pub fn trace_path<S: Sampler>(
         add(&mut out, beta * crossed, camera_ray);
 
         let Some(hit) = hit else {
-            add(&mut out, beta * scene.world, camera_ray); // the world is found by BSDF sampling only
-            if scene.world.max_element() > 0.0 {
-                push(&mut record, u32::MAX, d, true, scene.world, 0.0);
+            let (le, pdf_light) = scene.world_eval(d);
+            if le.max_element() > 0.0 {
+                add(&mut out, beta * le * mis(pdf_light), camera_ray);
+                push(&mut record, scene.env_light(), d, true, le, pdf_light);
             }
             break;
         };
@@ -319,7 +320,7 @@ pub fn first_hit(scene: &Scene, raster: Vec2, lens: Vec2) -> FirstHit {
     let l = &mut out.very_direct;
     scene.for_each_light_crossed(cam.origin, cam.dir, hit.map_or(cam.tmax, |h| h.t), true, |_, _, le, _| *l += le);
     match hit {
-        None => out.very_direct += scene.world,
+        None => out.very_direct += scene.world_eval(cam.dir).0,
         Some(h) => {
             let si = scene.interaction(&h, cam.dir);
             if let Some((le, _)) = scene.surface_emission(&si, cam.origin, cam.dir) {

@@ -263,6 +263,7 @@ fn parse_scene(d: &Bound<'_, PyDict>) -> PyResult<SceneDesc> {
             &get(d, "camera", "scene")?.cast_into::<PyDict>().map_err(|_| verr("scene: camera must be a dict"))?,
         )?,
         world: get_or(d, "world", [0.0; 3], "scene")?,
+        world_texture: get_or(d, "world_texture", None, "scene")?,
     })
 }
 

@@ -283,12 +283,12 @@ impl<'a> Offset<'a> {
             State::Free(f) if e.nee || f.diffuse => reconnect_event(scene, e, base.vertices[k].p, &f),
             State::Free(f) => {
                 let s = self.step(&f)?;
-                let (le, pdf_l) = if e.light == u32::MAX {
+                let (le, pdf_l) = if e.light == scene.env_light() {
                     // the base escaped: so must the offset
                     if s.hit.is_some() {
                         return None;
                     }
-                    (scene.world, 0.0)
+                    scene.world_eval(s.dir)
                 } else if scene.is_triangle_light(e.light) {
                     // the base hit an emitting surface: so must the offset's ray (if it hits a
                     // surface that does not emit, the offset has no such event: the base would
@@ -365,7 +365,7 @@ fn reconnect_event(scene: &Scene, e: &Event, xk: Vec3, f: &Free) -> Option<(Spec
         return None;
     }
     let dir = if e.at_infinity { e.z } else { (e.z - f.y.p).normalize() };
-    let (le, pdf_l) = if e.light == u32::MAX { (scene.world, 0.0) } else { scene.light_eval(e.light, f.y.p, e.z)? };
+    let (le, pdf_l) = scene.light_eval(e.light, f.y.p, e.z)?;
     let bsdf = bsdf_at(scene, f.y.material, f.y.front, f.y.uv);
     let (wo, wi) = (f.y.frame.to_local(f.wo), f.y.frame.to_local(dir));
     let fy = bsdf.eval(wo, wi);
@@ -374,7 +374,7 @@ fn reconnect_event(scene: &Scene, e: &Event, xk: Vec3, f: &Free) -> Option<(Spec
     let j = if e.at_infinity || e.delta {
         1.0
     } else {
-        let nz = if e.light == u32::MAX { Vec3::ZERO } else { scene.light_normal(e.light, e.z) };
+        let nz = scene.light_normal(e.light, e.z); // zero for points, the world and suns
         if nz == Vec3::ZERO {
             1.0
         } else {

@@ -104,6 +104,7 @@ pub fn cornell_box(width: u32, height: u32) -> SceneDesc {
         materials,
         lights: vec![],
         textures: vec![],
+        world_texture: None,
         camera: camera_looking_along_y([0.0, -3.4, 0.0], 35.0, width, height),
         world: [0.0; 3],
     }
@@ -193,6 +194,7 @@ pub fn furnace_sphere(albedo: f32, emission: f32, width: u32, height: u32) -> Sc
         materials: vec![material("Furnace", [albedo; 3], [emission; 3])],
         lights: vec![],
         textures: vec![],
+        world_texture: None,
         camera: camera_looking_along_y([0.0, 0.0, 0.0], 20.0, width, height),
         world: [0.0; 3],
     }

@@ -191,6 +191,9 @@ pub struct SceneDesc {
     pub textures: Vec<TextureDesc>,
     pub lights: Vec<LightDesc>,
     pub camera: CameraDesc,
-    /// World background radiance: Color × Strength.
+    /// World background radiance: Color × Strength (with `world_texture`: the factor that
+    /// multiplies the texture, i.e. Strength).
     pub world: [f32; 3],
+    /// Equirectangular environment texture (index into `textures`) for the background.
+    pub world_texture: Option<u32>,
 }

@@ -4,6 +4,7 @@
 pub mod builtin;
 pub mod camera;
 pub mod desc;
+pub mod environment;
 pub mod light;
 pub mod material;
 pub mod texture;
@@ -19,6 +20,7 @@ use crate::bsdf::Bsdf;
 use crate::distribution::Distribution1D;
 use crate::error::SceneError;
 use crate::math::{ray_epsilon, square_to_triangle, Frame, Spectrum};
+use environment::Environment;
 use glam::{Vec2, Vec3};
 
 /// A surface point found by a ray.
@@ -78,7 +80,8 @@ pub struct Scene {
     /// Non-triangle lights that a ray can hit (spheres, planes, suns with an angle).
     hittable_lights: Vec<u32>,
     pub camera: Camera,
-    pub world: Spectrum,
+    /// The world background, a light with index `env_light()` when it is not black.
+    pub env: Environment,
     accel: Option<Accel>,
     pub bounds_center: Vec3,
     pub bounds_radius: f32,
@@ -199,13 +202,27 @@ impl Scene {
                 report.emissive_triangles += 1;
             }
         }
-        let weights: Vec<f32> = lights
+        let world_tex = match desc.world_texture {
+            Some(t) if t as usize >= textures.len() => {
+                return Err(SceneError::World(format!("uses texture {t} but the scene has {}", textures.len())))
+            }
+            Some(t) => Some((t, &textures[t as usize])),
+            None => None,
+        };
+        let env = Environment::new(Vec3::from_array(desc.world), world_tex);
+        let mut weights: Vec<f32> = lights
             .iter()
             .map(|l| {
                 let a = if let LightShape::Triangle { prim } = l.shape { areas[prim as usize] } else { 0.0 };
                 l.power_estimate(bounds_radius, a)
             })
             .collect();
+        // the world, last: power through the scene's bounding sphere, π·L·4πR²
+        weights.push(if env.is_black() {
+            0.0
+        } else {
+            env.mean_radiance(&textures) * 4.0 * std::f32::consts::PI.powi(2) * bounds_radius * bounds_radius
+        });
         let light_distribution = Distribution1D::new(&weights);
         let hittable_lights = lights
             .iter()
@@ -213,8 +230,7 @@ impl Scene {
             .filter(|(_, l)| !l.is_delta() && !matches!(l.shape, LightShape::Triangle { .. }))
             .map(|(i, _)| i as u32)
             .collect();
-        let world = Vec3::from_array(desc.world);
-        if light_distribution.is_empty() && world.max_element() <= 0.0 {
+        if light_distribution.is_empty() {
             report.warnings.push(
                 "the scene has no light: no emitting material, no light object and a black world; the image is black"
                     .into(),
@@ -235,7 +251,7 @@ impl Scene {
             tri_light,
             hittable_lights,
             camera,
-            world,
+            env,
             accel,
             bounds_center,
             bounds_radius,
@@ -335,6 +351,12 @@ impl Scene {
     /// includes the selection probability.
     pub fn sample_light(&self, p: Vec3, u_select: f32, u: Vec2) -> Option<(u32, LightSample)> {
         let (li, pmf) = self.light_distribution.sample(u_select)?;
+        if li == self.lights.len() {
+            let (wi, radiance, pdf) = self.env.sample(&self.textures, u)?;
+            let pdf = pdf * pmf;
+            let ls = LightSample { p: p + wi * 1e30, n: -wi, wi, dist: f32::INFINITY, radiance, pdf, is_delta: false };
+            return (pdf > 0.0 && pdf.is_finite()).then_some((li as u32, ls));
+        }
         let light = &self.lights[li];
         let mut ls = match light.shape {
             LightShape::Triangle { prim } => {
@@ -420,6 +442,23 @@ impl Scene {
         Some((t, le, pdf * self.light_distribution.pmf(li as usize)))
     }
 
+    /// The light index of the world background (one past the light objects).
+    #[inline]
+    pub fn env_light(&self) -> u32 {
+        self.lights.len() as u32
+    }
+
+    /// Background radiance arriving from direction `d` and the NEE pdf (solid angle,
+    /// selection included; 0 when the world is not sampled) of that direction.
+    #[inline]
+    pub fn world_eval(&self, d: Vec3) -> (Spectrum, f32) {
+        if self.env.is_black() {
+            return (Spectrum::ZERO, 0.0);
+        }
+        let pmf = self.light_distribution.pmf(self.lights.len());
+        (self.env.eval(&self.textures, d), pmf * self.env.pdf(d))
+    }
+
     /// True when light `li` is an emissive triangle.
     #[inline]
     pub fn is_triangle_light(&self, li: u32) -> bool {
@@ -431,6 +470,9 @@ impl Scene {
     /// included; 1·selection for delta lights) of choosing that point. None if `z` does not
     /// face `from`. Used by the shift mapping to re-evaluate a light point from an offset path.
     pub fn light_eval(&self, li: u32, from: Vec3, z: Vec3) -> Option<(Spectrum, f32)> {
+        if li == self.env_light() {
+            return Some(self.world_eval(z));
+        }
         let light = self.lights.get(li as usize)?;
         let pmf = self.light_distribution.pmf(li as usize);
         match &light.shape {

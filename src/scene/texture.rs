@@ -63,6 +63,11 @@ impl Texture {
         })
     }
 
+    /// (width, height) in pixels.
+    pub fn size(&self) -> (usize, usize) {
+        (self.width, self.height)
+    }
+
     /// The pixel at integer coordinates after the extension mode (None = transparent black).
     #[inline]
     fn texel(&self, x: i64, y: i64) -> Option<Spectrum> {

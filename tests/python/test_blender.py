@@ -4,6 +4,7 @@ Cycles, and bad input reaches the user as an error instead of a crash."""
 
 import math
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -401,3 +402,24 @@ def test_image_textures_agree_with_cycles(bpy_mod, tmp_out):
     c, g = assert_agrees_with_cycles(bpy_mod, _textured_scene, tmp_out, "textures", block=5)
     # the checker must actually show: block means vary strongly across the floor
     assert c[-2:].std() > 0.1 * c[-2:].mean()
+
+
+def _hdri_scene(bpy, engine, spp, seed):
+    """The lights scene lit only by an HDRI world (one of the CC0 studio lights bpy ships,
+    1024×512 EXR) through an Environment Texture node, strength 0.8."""
+    scene = _lights_scene(bpy, engine, spp, seed, size=40, bounces=2)
+    bpy.data.objects["Point"].data.energy = 0.0
+    bpy.data.objects["Area"].data.energy = 0.0
+    hdri = Path(bpy.utils.system_resource("DATAFILES")) / "studiolights" / "world" / "forest.exr"
+    nt = scene.world.node_tree
+    env = nt.nodes.new("ShaderNodeTexEnvironment")
+    env.image = bpy.data.images.load(str(hdri))
+    bg = nt.nodes["Background"]
+    nt.links.new(env.outputs["Color"], bg.inputs["Color"])
+    bg.inputs["Strength"].default_value = 0.8
+    return scene
+
+
+def test_hdri_world_agrees_with_cycles(bpy_mod, tmp_out):
+    """Equirectangular mapping (axes as Cycles), linear EXR data, importance sampling + MIS."""
+    assert_agrees_with_cycles(bpy_mod, _hdri_scene, tmp_out, "hdri", block=5)
