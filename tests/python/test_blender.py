@@ -423,3 +423,25 @@ def _hdri_scene(bpy, engine, spp, seed):
 def test_hdri_world_agrees_with_cycles(bpy_mod, tmp_out):
     """Equirectangular mapping (axes as Cycles), linear EXR data, importance sampling + MIS."""
     assert_agrees_with_cycles(bpy_mod, _hdri_scene, tmp_out, "hdri", block=5)
+
+
+def test_animation_renders_every_frame(bpy_mod, tmp_out):
+    """`blender -b file -a` (here bpy.ops.render.render(animation=True)): every frame is
+    rendered with the scene of that frame — an animated light moves the lit spot."""
+    bpy = bpy_mod
+    scene = _lights_scene(bpy, "GDMLT", 8, 1, size=24, bounces=1)
+    bpy.data.objects["Area"].data.energy = 0.0
+    point = bpy.data.objects["Point"]
+    for frame, x in ((1, -2.0), (3, 2.0)):
+        point.location.x = x
+        point.keyframe_insert("location", index=0, frame=frame)
+    scene.frame_start, scene.frame_end = 1, 3
+    img = scene.render.image_settings
+    img.file_format, img.color_depth, img.color_mode = "OPEN_EXR", "32", "RGB"
+    scene.render.filepath = str(tmp_out / "anim_")
+    scene.render.use_file_extension = True
+    bpy.ops.render.render(animation=True)
+    frames = [read_exr(tmp_out / f"anim_{f:04d}.exr") for f in (1, 2, 3)]
+    # the light sweeps left to right: the brighter half of the image moves with it
+    balance = [f[:, : f.shape[1] // 2].mean() - f[:, f.shape[1] // 2:].mean() for f in frames]
+    assert balance[0] > 0.01 and balance[2] < -0.01 and abs(balance[1]) < abs(balance[0]), balance
