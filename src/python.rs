@@ -264,6 +264,16 @@ fn parse_scene(d: &Bound<'_, PyDict>) -> PyResult<SceneDesc> {
         )?,
         world: get_or(d, "world", [0.0; 3], "scene")?,
         world_texture: get_or(d, "world_texture", None, "scene")?,
+        world_rotation: match d.get_item("world_rotation")? {
+            Some(r) if !r.is_none() => {
+                let v = floats(&r, 3, "scene: world_rotation")?;
+                if v.len() != 9 {
+                    return Err(verr("scene: world_rotation must be 3×3"));
+                }
+                Some([0, 1, 2].map(|i| [v[3 * i], v[3 * i + 1], v[3 * i + 2]]))
+            }
+            _ => None,
+        },
     })
 }
 

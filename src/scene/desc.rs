@@ -196,4 +196,7 @@ pub struct SceneDesc {
     pub world: [f32; 3],
     /// Equirectangular environment texture (index into `textures`) for the background.
     pub world_texture: Option<u32>,
+    /// Rotation (row-major 3×3) from world directions to the texture's frame (Blender's
+    /// Z-up equirectangular mapping); None = identity.
+    pub world_rotation: Option<[[f32; 3]; 3]>,
 }

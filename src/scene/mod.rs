@@ -209,7 +209,19 @@ impl Scene {
             Some(t) => Some((t, &textures[t as usize])),
             None => None,
         };
-        let env = Environment::new(Vec3::from_array(desc.world), world_tex);
+        let rotation = match desc.world_rotation {
+            None => glam::Mat3::IDENTITY,
+            Some(r) => {
+                let m = glam::Mat3::from_cols_array_2d(&r).transpose(); // rows given
+                                                                        // a rotation: orthonormal with determinant 1 (else the pdf would be wrong)
+                let ortho = (m * m.transpose() - glam::Mat3::IDENTITY).to_cols_array().iter().all(|x| x.abs() < 1e-3);
+                if !ortho || (m.determinant() - 1.0).abs() > 1e-3 {
+                    return Err(SceneError::World("world rotation must be a rotation matrix".into()));
+                }
+                m
+            }
+        };
+        let env = Environment::new(Vec3::from_array(desc.world), world_tex, rotation);
         let mut weights: Vec<f32> = lights
             .iter()
             .map(|l| {

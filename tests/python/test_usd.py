@@ -1,0 +1,97 @@
+"""USD stages rendered without Blender (usd-core): a stage written by hand with known light
+units renders the analytic irradiance; broken input is a clear error; the CLI renders
+.usda files. (The Blender → USD → GDMLT round trip is in test_blender.py.)"""
+
+import math
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import gdmlt
+from gdmlt import usd
+from conftest import read_exr
+
+pxr = pytest.importorskip("pxr")
+from pxr import Gf, Usd, UsdGeom, UsdLux, UsdShade, Sdf  # noqa: E402
+
+
+def _stage(path, light="rect"):
+    """A 40×40 grey (albedo 0.5) floor at z = 0 seen from above by a narrow camera, lit by
+    one light: a 0.2×0.2 RectLight of intensity 100 (normalize off) 2 units above the
+    centre, or a DistantLight of intensity 3 tilted by 30°."""
+    stage = Usd.Stage.CreateNew(str(path))
+    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.z)
+    UsdGeom.SetStageMetersPerUnit(stage, 1.0)
+    floor = UsdGeom.Mesh.Define(stage, "/World/Floor")
+    floor.CreatePointsAttr([(-20, -20, 0), (20, -20, 0), (20, 20, 0), (-20, 20, 0)])
+    floor.CreateFaceVertexCountsAttr([4])
+    floor.CreateFaceVertexIndicesAttr([0, 1, 2, 3])
+    floor.CreateSubdivisionSchemeAttr("none")
+    mat = UsdShade.Material.Define(stage, "/World/Grey")
+    shader = UsdShade.Shader.Define(stage, "/World/Grey/Surface")
+    shader.CreateIdAttr("UsdPreviewSurface")
+    shader.CreateInput("diffuseColor", Sdf.ValueTypeNames.Color3f).Set(Gf.Vec3f(0.5, 0.5, 0.5))
+    mat.CreateSurfaceOutput().ConnectToSource(shader.ConnectableAPI(), "surface")
+    UsdShade.MaterialBindingAPI.Apply(floor.GetPrim()).Bind(mat)
+    if light == "rect":
+        rect = UsdLux.RectLight.Define(stage, "/World/Light")
+        rect.CreateWidthAttr(0.2)
+        rect.CreateHeightAttr(0.2)
+        rect.CreateIntensityAttr(100.0)
+        rect.CreateNormalizeAttr(False)
+        UsdGeom.Xformable(rect).AddTranslateOp().Set(Gf.Vec3d(0, 0, 2))  # emits along −Z: down
+    else:
+        sun = UsdLux.DistantLight.Define(stage, "/World/Light")
+        sun.CreateIntensityAttr(3.0)
+        sun.CreateAngleAttr(0.0)
+        UsdGeom.Xformable(sun).AddRotateXOp().Set(30.0)
+    cam = UsdGeom.Camera.Define(stage, "/World/Cam")
+    cam.CreateFocalLengthAttr(50.0)
+    cam.CreateHorizontalApertureAttr(2.0)
+    cam.CreateVerticalApertureAttr(2.0)
+    UsdGeom.Xformable(cam).AddTranslateOp().Set(Gf.Vec3d(0, 0, 5))  # looks down −Z
+    stage.GetRootLayer().Save()
+    return path
+
+
+@pytest.mark.parametrize("light, expected", [
+    # small rectangle: E = L·A/h² (to 0.1% at this size) → radiance ρ/π·E
+    ("rect", 0.5 / math.pi * 100.0 * 0.04 / 4.0),
+    # distant light tilted 30°: E = intensity·cos 30°
+    ("sun", 0.5 / math.pi * 3.0 * math.cos(math.radians(30))),
+])
+def test_light_units_of_a_hand_written_stage(tmp_path, light, expected):
+    desc, warnings = usd.load(_stage(tmp_path / "s.usda", light), width=16, height=16)
+    assert warnings == []
+    img = gdmlt.render(gdmlt.Scene(desc), method="pt", spp=256, max_bounces=0, seed=1)["layers"]["Combined"]
+    centre = img[7:9, 7:9].mean(axis=(0, 1))
+    noise = img[7:9, 7:9].std() / 2 + 1e-6
+    assert np.allclose(centre, expected, rtol=0.01, atol=4 * noise), (centre, expected)
+
+
+def test_missing_and_broken_stages_are_clear_errors(tmp_path):
+    with pytest.raises(FileNotFoundError):
+        usd.load(tmp_path / "none.usda")
+    path = _stage(tmp_path / "b.usda")
+    stage = Usd.Stage.Open(str(path))
+    UsdGeom.Mesh(stage.GetPrimAtPath("/World/Floor")).GetFaceVertexCountsAttr().Set([5])
+    stage.GetRootLayer().Save()
+    with pytest.raises(ValueError, match="Floor"):
+        usd.load(path)
+    UsdGeom.Mesh(stage.GetPrimAtPath("/World/Floor")).GetFaceVertexCountsAttr().Set([4])
+    stage.RemovePrim("/World/Cam")
+    stage.GetRootLayer().Save()
+    with pytest.raises(ValueError, match="no camera"):
+        usd.load(path)
+
+
+def test_cli_renders_a_usd_file(tmp_path):
+    path = _stage(tmp_path / "s.usda")
+    out = tmp_path / "o.exr"
+    r = subprocess.run([sys.executable, "-m", "gdmlt.cli", "render", str(path), "-o", str(out), "--method", "pt",
+                        "--spp", "16", "--width", "8"], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    img = read_exr(out)
+    assert img.shape == (8, 8, 3) and np.isfinite(img).all() and img.mean() > 0
