@@ -148,7 +148,8 @@ fn resolve(
     let dy = to_image(rows, |r| &r.dy, scale);
     let direct = to_image(rows, |r| &r.direct, scale);
     let recon = reconstruct_rgb(w, h, &primal, &dx, &dy, alpha, norm);
-    let combined: Vec<f64> = recon.iter().zip(&direct).map(|(a, b)| a + b).collect();
+    // the screened Poisson solve is unconstrained: clip its small negative ringing to 0 (radiance)
+    let combined: Vec<f64> = recon.iter().zip(&direct).map(|(a, b)| (a + b).max(0.0)).collect();
     let primal_full: Vec<f64> = primal.iter().zip(&direct).map(|(a, b)| a + b).collect();
     (f32_image(w, h, &combined), f32_image(w, h, &primal_full), f32_image(w, h, &dx), f32_image(w, h, &dy))
 }

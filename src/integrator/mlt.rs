@@ -374,7 +374,8 @@ fn resolve(
     let dx = sum_layer(DX);
     let dy = sum_layer(DY);
     let recon = reconstruct_rgb(w, h, &primal, &dx, &dy, alpha_rec, norm);
-    let combined: Vec<f64> = recon.iter().zip(direct).map(|(a, b)| a + b).collect();
+    // the screened Poisson solve is unconstrained: clip its small negative ringing to 0 (radiance)
+    let combined: Vec<f64> = recon.iter().zip(direct).map(|(a, b)| (a + b).max(0.0)).collect();
     let primal_full: Vec<f64> = primal.iter().zip(direct).map(|(a, b)| a + b).collect();
     vec![
         ("Combined".into(), img(&combined)),
