@@ -517,6 +517,40 @@ fn write_exr(py: Python<'_>, path: std::path::PathBuf, layers: Vec<(String, Boun
     py.detach(|| crate::output::write_exr(&path, &refs)).map_err(|e| PyRuntimeError::new_err(e.to_string()))
 }
 
+/// The gradient-domain image from (primal without very-direct light, dx, dy, very direct),
+/// each float32 (H, W, 3): screened Poisson reconstruction (`norm` "l1" or "l2", weight
+/// `alpha`) plus the very-direct light, clipped at 0 — what gdpt/gdpssmlt write as Combined.
+/// Used to merge partial renders (gdmlt merge).
+#[pyfunction]
+#[pyo3(signature = (primal, dx, dy, direct, alpha=0.2, norm="l1"))]
+fn reconstruct<'py>(
+    py: Python<'py>,
+    primal: &Bound<'py, PyAny>,
+    dx: &Bound<'py, PyAny>,
+    dy: &Bound<'py, PyAny>,
+    direct: &Bound<'py, PyAny>,
+    alpha: f64,
+    norm: &str,
+) -> PyResult<Bound<'py, PyAny>> {
+    let norm = crate::reconstruct::Norm::parse(norm)
+        .ok_or_else(|| verr(format!("unknown reconstruction '{norm}' (expected l1 or l2)")))?;
+    if !(alpha.is_finite() && alpha > 0.0) {
+        return Err(verr("alpha must be a finite number > 0"));
+    }
+    let imgs = [primal, dx, dy, direct].map(numpy_to_image);
+    let [p, gx, gy, d] = imgs;
+    let (p, gx, gy, d) = (p?, gx?, gy?, d?);
+    if p.channels != 3 || [&gx, &gy, &d].iter().any(|i| (i.width, i.height, i.channels) != (p.width, p.height, 3)) {
+        return Err(verr("primal, dx, dy and direct must all be float32 arrays of the same shape (H, W, 3)"));
+    }
+    let f = |i: &Image| -> Vec<f64> { i.data.iter().map(|&v| v as f64).collect() };
+    let (w, h) = (p.width, p.height);
+    let (combined, _) =
+        py.detach(|| crate::reconstruct::gradient_domain_image(w, h, &f(&p), &f(&gx), &f(&gy), &f(&d), alpha, norm));
+    let out = Image { width: w, height: h, channels: 3, data: combined.iter().map(|&v| v as f32).collect() };
+    image_to_numpy(py, &out)
+}
+
 /// Writes an RGB float32 (H, W, 3) linear image as an 8-bit sRGB PNG.
 #[pyfunction]
 fn write_png(path: std::path::PathBuf, image: &Bound<'_, PyAny>) -> PyResult<()> {
@@ -531,6 +565,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(builtin_scene, m)?)?;
     m.add_function(wrap_pyfunction!(write_exr, m)?)?;
     m.add_function(wrap_pyfunction!(write_png, m)?)?;
+    m.add_function(wrap_pyfunction!(reconstruct, m)?)?;
     m.add("METHODS", vec!["pt", "gdpt", "pssmlt", "gdpssmlt"])?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())

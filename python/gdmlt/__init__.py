@@ -8,7 +8,7 @@
 Blender: ``gdmlt.enable_addon()`` registers the render engine in the running bpy.
 """
 
-from ._core import Scene, render, builtin_scene, write_exr, write_png, METHODS, __version__
+from ._core import Scene, render, builtin_scene, write_exr, write_png, reconstruct, METHODS, __version__
 from .addon import enable_addon, addon_dir
 
-__all__ = ["Scene", "render", "builtin_scene", "write_exr", "write_png", "METHODS", "enable_addon", "addon_dir", "__version__"]
+__all__ = ["Scene", "render", "builtin_scene", "write_exr", "write_png", "reconstruct", "METHODS", "enable_addon", "addon_dir", "__version__"]

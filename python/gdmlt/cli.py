@@ -80,6 +80,22 @@ def build_parser():
     r.add_argument("--no-png", action="store_true", help="write only the EXR")
     r.add_argument("--frame", type=float, help="USD: the time code to render (default: the stage's default time)")
     r.add_argument("--camera", help="USD: path of the camera prim (default: the first camera)")
+    r.add_argument("--partial", metavar="K/N",
+                   help="render partial K of N (its own seed) into OUT.npz, for gdmlt merge")
+    r.add_argument("--dask", nargs="?", const="", metavar="ADDRESS",
+                   help="render --partials partials on a Dask cluster (tcp://host:8786; without an address "
+                        "a local cluster of --workers processes) and merge them")
+    r.add_argument("--partials", type=_positive_int, default=4, help="with --dask: number of partials (default 4)")
+    r.add_argument("--workers", type=_positive_int, default=2, help="with --dask and no address: local workers")
+    mg = sub.add_parser("merge", help="merge partial renders (--partial K/N) into one EXR",
+                        description="Averages partial renders weighted by their samples and, for the "
+                                    "gradient-domain methods, reconstructs once from the merged buffers.")
+    mg.add_argument("partials", nargs="+", help="partial .npz files")
+    mg.add_argument("-o", "--output", required=True, help="output EXR path; a PNG is written next to it")
+    mg.add_argument("--recon", choices=["l1", "l2"], type=str.lower, dest="reconstruction",
+                    help="reconstruction norm (default: the partials')")
+    mg.add_argument("--alpha-rec", type=float, help="reconstruction α (default: the partials')")
+    mg.add_argument("--no-png", action="store_true", help="write only the EXR")
     b = sub.add_parser("bench", help="error against a converged reference at equal time budgets, per method",
                        description="Renders a built-in scene or a .blend file with every method for the same "
                                    "wall-clock budgets and prints relMSE and SMAPE against a converged path-traced "
@@ -109,16 +125,21 @@ def _settings(args):
         "chains": args.chains}.items() if v is not None}
 
 
+def render_settings(args) -> dict:
+    """gdmlt.render's settings: the CLI's options over the defaults."""
+    opts = {"method": "gdpssmlt", "spp": 64, "time_limit": 0.0, "max_bounces": 8, "nee": True, "seed": 0, "threads": 0,
+            "reconstruction": "l1", "alpha_rec": 0.2, "alpha_target": 1.0, "large_step_probability": 0.3,
+            "chains": 0}
+    opts.update(_settings(args))
+    return opts
+
+
 def render_desc(desc, args, out: Path):
     """Renders a scene dict with the CLI's settings; writes the EXR (+ PNG)."""
     import gdmlt
 
     scene = gdmlt.Scene(desc)
-    opts = {"method": "gdpssmlt", "spp": 64, "time_limit": 0.0, "max_bounces": 8, "nee": True, "seed": 0, "threads": 0,
-            "reconstruction": "l1", "alpha_rec": 0.2, "alpha_target": 1.0, "large_step_probability": 0.3,
-            "chains": 0}
-    opts.update(_settings(args))
-    res = gdmlt.render(scene, **opts)
+    res = gdmlt.render(scene, **render_settings(args))
     layers = res["layers"]
     gdmlt.write_exr(str(out), [(n, layers[n]) for n in layers])
     if not args.no_png:
@@ -155,39 +176,60 @@ def main(argv=None):
             print(f"gdmlt: error: {e}", file=sys.stderr)
             return 1
         return 0
+    if args.command == "merge":
+        return merge_command(args)
     out = Path(args.output)
-    if out.suffix.lower() != ".exr":
-        parser.error(f"output must be an .exr file, got '{out}'")
+    distributed = args.partial is not None or args.dask is not None
+    want = ".npz" if args.partial is not None else ".exr"
+    if out.suffix.lower() != want:
+        parser.error(f"output must be a {want} file" + (" with --partial" if want == ".npz" else "") + f", got '{out}'")
+    partial = None
+    if args.partial is not None:
+        try:
+            k, n = (int(x) for x in args.partial.split("/"))
+            if not 0 <= k < n:
+                raise ValueError
+        except ValueError:
+            parser.error(f"--partial: '{args.partial}' must be K/N with 0 ≤ K < N")
+        partial = (k, n)
+    if args.dask is not None and args.partials < 1:
+        parser.error("--partials must be at least 1")
     out.parent.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     try:
-        if args.scene in BUILTIN:
-            import gdmlt
-
-            stats = render_desc(gdmlt.builtin_scene(args.scene, args.width or 256, args.height or 256), args, out)
-        else:
-            path = Path(args.scene)
+        path = Path(args.scene)
+        if args.scene not in BUILTIN:
             if path.suffix.lower() != ".blend" and path.suffix.lower() not in USD_SUFFIXES:
                 parser.error(f"'{args.scene}' is neither a .blend or USD file nor a built-in scene "
                              f"({', '.join(BUILTIN)})")
             if not path.is_file():
                 print(f"gdmlt: error: file not found: {path}", file=sys.stderr)
                 return 1
-            if path.suffix.lower() in USD_SUFFIXES:
-                if not path.is_file():
-                    print(f"gdmlt: error: file not found: {path}", file=sys.stderr)
-                    return 1
-                from .usd import load
+        if path.suffix.lower() == ".blend" and not distributed:
+            from .blend import render_blend
 
-                desc, warnings = load(path, frame=args.frame, width=args.width, height=args.height,
-                                      camera=args.camera)
-                for w in warnings:
-                    print(f"gdmlt: warning: {w}", file=sys.stderr)
-                stats = render_desc(desc, args, out)
-            else:
-                from .blend import render_blend
-                stats = render_blend(path, out, _settings(args), width=args.width, height=args.height,
-                                     png=not args.no_png)
+            stats = render_blend(path, out, _settings(args), width=args.width, height=args.height,
+                                 png=not args.no_png)
+        else:
+            desc = scene_desc(args)
+            if partial is not None:
+                from .distributed import render_partial, save_partial
+
+                p = render_partial(desc, partial[0], partial[1], render_settings(args))
+                save_partial(out, p)
+                print(f"wrote partial {partial[0]}/{partial[1]} to {out} ({p['work']:.0f} samples)")
+                return 0
+            if args.dask is not None:
+                from .distributed import render_dask
+
+                layers, dropped = render_dask(desc, args.partials, render_settings(args),
+                                              address=args.dask or None, workers=args.workers,
+                                              log=lambda m: print(m, file=sys.stderr))
+                write_layers(out, layers, not args.no_png)
+                print(f"wrote {out}: {args.partials - len(dropped)} of {args.partials} partials merged "
+                      f"in {time.perf_counter() - t0:.2f} s")
+                return 0
+            stats = render_desc(desc, args, out)
     except (ValueError, RuntimeError, FileNotFoundError) as e:
         print(f"gdmlt: error: {e}", file=sys.stderr)
         return 1
@@ -200,6 +242,55 @@ def main(argv=None):
           f"{', method ' + stats['method'] if 'method' in stats else ''}), total {total:.2f} s")
     return 0
 
+
+def scene_desc(args):
+    """The scene dict of a built-in name, a USD stage or a .blend file (exported through the addon)."""
+    import gdmlt
+
+    if args.scene in BUILTIN:
+        return gdmlt.builtin_scene(args.scene, args.width or 256, args.height or 256)
+    path = Path(args.scene)
+    if path.suffix.lower() in USD_SUFFIXES:
+        from .usd import load
+
+        desc, warnings = load(path, frame=args.frame, width=args.width, height=args.height, camera=args.camera)
+    else:
+        from .bench import scene_desc as blend_desc
+
+        size = (args.width, args.height) if args.width and args.height else None
+        desc, _ = blend_desc(str(path), size)
+        warnings = []
+    for w in warnings:
+        print(f"gdmlt: warning: {w}", file=sys.stderr)
+    return desc
+
+
+def write_layers(out: Path, layers: dict, png: bool):
+    import gdmlt
+
+    names = ["Combined"] + [n for n in layers if n != "Combined"]
+    gdmlt.write_exr(str(out), [(n, layers[n]) for n in names])
+    if png:
+        gdmlt.write_png(str(out.with_suffix(".png")), layers["Combined"])
+
+
+def merge_command(args):
+    from .distributed import load_partial, merge
+
+    out = Path(args.output)
+    if out.suffix.lower() != ".exr":
+        print(f"gdmlt: error: output must be an .exr file, got '{out}'", file=sys.stderr)
+        return 2
+    try:
+        partials = [load_partial(p) for p in args.partials]
+        layers = merge(partials, alpha_rec=args.alpha_rec, reconstruction=args.reconstruction)
+    except (ValueError, OSError, KeyError) as e:
+        print(f"gdmlt: error: {e}", file=sys.stderr)
+        return 1
+    out.parent.mkdir(parents=True, exist_ok=True)
+    write_layers(out, layers, not args.no_png)
+    print(f"wrote {out}: {len(partials)} partials merged")
+    return 0
 
 if __name__ == "__main__":
     sys.exit(main())

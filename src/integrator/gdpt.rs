@@ -11,7 +11,7 @@ use super::{RenderControl, RenderOutput, RenderSettings, RenderStats};
 use crate::film::Image;
 use crate::math::{is_finite_spectrum, Spectrum};
 use crate::path::{trace_path, Path};
-use crate::reconstruct::reconstruct_rgb;
+use crate::reconstruct::gradient_domain_image;
 use crate::sampler::Sampler;
 use crate::scene::Scene;
 use crate::shift::shift;
@@ -133,7 +133,7 @@ fn f32_image(w: usize, h: usize, data: &[f64]) -> Image {
 }
 
 /// Normalises the accumulators of `spp` samples and reconstructs:
-/// (combined, primal + very direct, dx, dy).
+/// (combined, primal + very direct, dx, dy, very direct).
 fn resolve(
     rows: &[GdRow],
     w: usize,
@@ -141,17 +141,15 @@ fn resolve(
     spp: u32,
     alpha: f64,
     norm: crate::reconstruct::Norm,
-) -> (Image, Image, Image, Image) {
+) -> (Image, Image, Image, Image, Image) {
     let scale = 1.0 / spp.max(1) as f64;
     let primal = to_image(rows, |r| &r.primal, scale);
     let dx = to_image(rows, |r| &r.dx, scale);
     let dy = to_image(rows, |r| &r.dy, scale);
     let direct = to_image(rows, |r| &r.direct, scale);
-    let recon = reconstruct_rgb(w, h, &primal, &dx, &dy, alpha, norm);
-    // the screened Poisson solve is unconstrained: clip its small negative ringing to 0 (radiance)
-    let combined: Vec<f64> = recon.iter().zip(&direct).map(|(a, b)| (a + b).max(0.0)).collect();
-    let primal_full: Vec<f64> = primal.iter().zip(&direct).map(|(a, b)| a + b).collect();
-    (f32_image(w, h, &combined), f32_image(w, h, &primal_full), f32_image(w, h, &dx), f32_image(w, h, &dy))
+    let (combined, primal_full) = gradient_domain_image(w, h, &primal, &dx, &dy, &direct, alpha, norm);
+    let im = |v: &[f64]| f32_image(w, h, v);
+    (im(&combined), im(&primal_full), im(&dx), im(&dy), im(&direct))
 }
 
 pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl) -> RenderOutput {
@@ -173,7 +171,8 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl)
             batch = (batch * 2).min(64);
         }
     }
-    let (combined, primal_full, dx, dy) = resolve(&rows, w, h, done, settings.alpha_rec, settings.reconstruction);
+    let (combined, primal_full, dx, dy, direct) =
+        resolve(&rows, w, h, done, settings.alpha_rec, settings.reconstruction);
     let scale = 1.0 / done.max(1) as f64;
     let n = |v: &[f64]| f32_image(w, h, v);
     let albedo = to_image(&rows, |r| &r.albedo, scale);
@@ -184,6 +183,7 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl)
             ("GD Primal".into(), primal_full),
             ("GD Gradient X".into(), dx),
             ("GD Gradient Y".into(), dy),
+            ("Very Direct".into(), direct),
             ("Denoising Albedo".into(), n(&albedo)),
             ("Denoising Normal".into(), n(&normal)),
         ],

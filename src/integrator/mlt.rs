@@ -18,7 +18,7 @@ use crate::distribution::Distribution1D;
 use crate::film::Image;
 use crate::math::{abs_luminance, is_finite_spectrum, Spectrum};
 use crate::path::{first_hit, trace_path, Path};
-use crate::reconstruct::{reconstruct_rgb, Norm};
+use crate::reconstruct::{gradient_domain_image, Norm};
 use crate::sampler::{mix64, IndependentSampler, PssSampler, Sampler};
 use crate::scene::Scene;
 use crate::shift::shift;
@@ -373,15 +373,13 @@ fn resolve(
     }
     let dx = sum_layer(DX);
     let dy = sum_layer(DY);
-    let recon = reconstruct_rgb(w, h, &primal, &dx, &dy, alpha_rec, norm);
-    // the screened Poisson solve is unconstrained: clip its small negative ringing to 0 (radiance)
-    let combined: Vec<f64> = recon.iter().zip(direct).map(|(a, b)| (a + b).max(0.0)).collect();
-    let primal_full: Vec<f64> = primal.iter().zip(direct).map(|(a, b)| a + b).collect();
+    let (combined, primal_full) = gradient_domain_image(w, h, &primal, &dx, &dy, direct, alpha_rec, norm);
     vec![
         ("Combined".into(), img(&combined)),
         ("GD Primal".into(), img(&primal_full)),
         ("GD Gradient X".into(), img(&dx)),
         ("GD Gradient Y".into(), img(&dy)),
+        ("Very Direct".into(), img(direct)),
         ("MLT Density".into(), img(&density_img)),
     ]
 }

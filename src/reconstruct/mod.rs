@@ -89,6 +89,26 @@ impl Norm {
 }
 
 /// Reconstructs an RGB image from primal, dx, dy (each W·H·3 interleaved, f64).
+/// The gradient-domain image: the reconstruction of (primal, dx, dy) plus the very-direct
+/// light, clipped at 0 (the screened Poisson solve is unconstrained and rings slightly
+/// negative in the dark). Returns (combined, primal + very direct). All RGB, row-major.
+#[allow(clippy::too_many_arguments)]
+pub fn gradient_domain_image(
+    w: usize,
+    h: usize,
+    primal: &[f64],
+    dx: &[f64],
+    dy: &[f64],
+    direct: &[f64],
+    alpha: f64,
+    norm: Norm,
+) -> (Vec<f64>, Vec<f64>) {
+    let recon = reconstruct_rgb(w, h, primal, dx, dy, alpha, norm);
+    let combined = recon.iter().zip(direct).map(|(a, b)| (a + b).max(0.0)).collect();
+    let primal_full = primal.iter().zip(direct).map(|(a, b)| a + b).collect();
+    (combined, primal_full)
+}
+
 pub fn reconstruct_rgb(w: usize, h: usize, primal: &[f64], dx: &[f64], dy: &[f64], alpha: f64, norm: Norm) -> Vec<f64> {
     let split = |v: &[f64], c: usize| -> Vec<f64> { v.iter().skip(c).step_by(3).copied().collect() };
     let chans: Vec<[Vec<f64>; 3]> = (0..3).map(|c| [split(primal, c), split(dx, c), split(dy, c)]).collect();
