@@ -691,4 +691,39 @@ mod tests {
             }
         }
     }
+
+    mod properties {
+        use super::super::half_vector_copy;
+        use glam::Vec3;
+        use proptest::prelude::*;
+
+        fn upper(a: f32, b: f32) -> Vec3 {
+            crate::math::square_to_cosine_hemisphere(glam::Vec2::new(a, b)) + Vec3::new(0.0, 0.0, 0.05)
+        }
+
+        proptest! {
+            /// For any base bounce and offset direction: the copy stays on the base bounce's
+            /// side (reflection above, refraction below), its inverse copy returns the base
+            /// direction, and the two Jacobians multiply to one.
+            #[test]
+            fn half_vector_copy_is_an_involution(a in 0.0f32..1.0, b in 0.0f32..1.0, c in 0.0f32..1.0,
+                                                  d in 0.0f32..1.0, e in 0.0f32..1.0, f in 0.0f32..1.0,
+                                                  eta in prop_oneof![Just(1.0f32), 1.05f32..2.5, 0.4f32..0.95]) {
+                let (wo_x, wo_y, m) = (upper(a, b).normalize(), upper(c, d).normalize(), upper(e, f).normalize());
+                let wi_x = if eta == 1.0 {
+                    crate::bsdf::microfacet::reflect(wo_x, m)
+                } else {
+                    match crate::bsdf::microfacet::refract(wo_x, m, eta) { Some(w) => w, None => return Ok(()) }
+                };
+                prop_assume!(wi_x.z.abs() > 0.05);
+                if let Some((wi_y, j)) = half_vector_copy(wo_x, wi_x, eta, wo_y, eta) {
+                    prop_assert!((wi_y.z > 0.0) == (wi_x.z > 0.0));
+                    prop_assert!(j.is_finite() && j > 0.0);
+                    let (back, jb) = half_vector_copy(wo_y, wi_y, eta, wo_x, eta).expect("inverse exists");
+                    prop_assert!((back - wi_x).length() < 2e-3, "{} vs {}", back, wi_x);
+                    prop_assert!((j * jb - 1.0).abs() < 2e-2, "J·J⁻¹ = {}", j * jb);
+                }
+            }
+        }
+    }
 }
