@@ -11,7 +11,7 @@ export PATH := $(abspath $(VENV))/bin:$(PATH)
 # Keep Blender's user config out of $HOME during demos and tests.
 export BLENDER_USER_RESOURCES := $(abspath out/blender-user)
 
-.PHONY: all setup build demo test test-rust test-python examples addon bench bench-monastery clean
+.PHONY: all setup build demo test test-rust test-python examples addon bench bench-monastery raybench clean
 
 all: demo
 
@@ -58,6 +58,11 @@ bench-monastery: build
 	$(PY) tools/make_monastery.py out/monastery.blend --size 192 108
 	$(VENV)/bin/gdmlt bench --scene out/monastery.blend --budgets 1,2,4,8 --reference-spp 8192 \
 		--denoise --plot out/bench-monastery.png
+
+# Ray throughput of the core's BVH against Embree on 1M triangles (prints a table).
+raybench: build
+	$(PY) -m pip install -q -r requirements-bench.txt
+	$(VENV)/bin/gdmlt raybench
 
 # Regenerates examples/*.blend from the built-in scene definitions (needs bpy).
 examples: build

@@ -295,6 +295,62 @@ impl Scene {
             Err(_) => Err(PyRuntimeError::new_err("internal error while building the scene (a bug: please report it)")),
         }
     }
+    /// Closest hits of a batch of rays (origins and directions float32 N×3) with the core's
+    /// BVH: (t, triangle) as float32 and int64 arrays, t = inf and triangle = −1 for a miss.
+    /// For benchmarks (gdmlt raybench) and tests; `threads` 0 = all cores.
+    #[pyo3(signature = (origins, directions, threads=0, occlusion=false))]
+    fn trace_rays<'py>(
+        &self,
+        py: Python<'py>,
+        origins: &Bound<'py, PyAny>,
+        directions: &Bound<'py, PyAny>,
+        threads: usize,
+        occlusion: bool,
+    ) -> PyResult<(Bound<'py, PyArray1<f32>>, Bound<'py, PyArray1<i64>>)> {
+        let o = floats(origins, 3, "origins")?;
+        let d = floats(directions, 3, "directions")?;
+        if o.len() != d.len() {
+            return Err(verr("origins and directions must have the same number of rays"));
+        }
+        let n = o.len() / 3;
+        let scene = &self.inner;
+        let run = || -> Vec<(f32, i64)> {
+            use rayon::prelude::*;
+            (0..n)
+                .into_par_iter()
+                .with_min_len(1024)
+                .map(|i| {
+                    let oi = glam::Vec3::new(o[3 * i], o[3 * i + 1], o[3 * i + 2]);
+                    let di = glam::Vec3::new(d[3 * i], d[3 * i + 1], d[3 * i + 2]);
+                    if occlusion {
+                        if scene.occluded(oi, di, 0.0, f32::INFINITY) {
+                            (0.0, 0)
+                        } else {
+                            (f32::INFINITY, -1)
+                        }
+                    } else {
+                        scene
+                            .intersect(oi, di, 0.0, f32::INFINITY)
+                            .map_or((f32::INFINITY, -1), |h| (h.t, h.prim as i64))
+                    }
+                })
+                .collect()
+        };
+        let res = py.detach(|| -> PyResult<Vec<(f32, i64)>> {
+            if threads == 0 {
+                Ok(run())
+            } else {
+                let pool = rayon::ThreadPoolBuilder::new()
+                    .num_threads(threads)
+                    .build()
+                    .map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
+                Ok(pool.install(run))
+            }
+        })?;
+        let (t, p): (Vec<f32>, Vec<i64>) = res.into_iter().unzip();
+        Ok((PyArray1::from_vec(py, t), PyArray1::from_vec(py, p)))
+    }
+
     #[getter]
     fn warnings(&self) -> Vec<String> {
         self.inner.report.warnings.clone()

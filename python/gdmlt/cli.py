@@ -87,6 +87,11 @@ def build_parser():
                         "a local cluster of --workers processes) and merge them")
     r.add_argument("--partials", type=_positive_int, default=4, help="with --dask: number of partials (default 4)")
     r.add_argument("--workers", type=_positive_int, default=2, help="with --dask and no address: local workers")
+    rb = sub.add_parser("raybench", help="ray throughput of the core's BVH against Embree (embreex)",
+                        description="Closest-hit and occlusion rays, coherent and incoherent, 1 thread and all, "
+                                    "on a procedural mesh and the Cornell box: Mrays/s of the core and of Embree.")
+    rb.add_argument("--triangles", type=_positive_int, default=1_000_000)
+    rb.add_argument("--rays", type=_positive_int, default=1_000_000)
     mg = sub.add_parser("merge", help="merge partial renders (--partial K/N) into one EXR",
                         description="Averages partial renders weighted by their samples and, for the "
                                     "gradient-domain methods, reconstructs once from the merged buffers.")
@@ -178,6 +183,15 @@ def main(argv=None):
         return 0
     if args.command == "merge":
         return merge_command(args)
+    if args.command == "raybench":
+        from .raybench import run as raybench
+
+        try:
+            raybench(args.triangles, args.rays)
+        except RuntimeError as e:
+            print(f"gdmlt: error: {e}", file=sys.stderr)
+            return 1
+        return 0
     out = Path(args.output)
     distributed = args.partial is not None or args.dask is not None
     want = ".npz" if args.partial is not None else ".exr"

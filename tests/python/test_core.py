@@ -158,3 +158,25 @@ def test_every_method_writes_denoising_passes(method):
         assert np.abs(got - want).mean() < 0.03, (name, np.abs(got - want).mean())
     assert 0.0 <= layers["Denoising Albedo"].min() and layers["Denoising Albedo"].max() <= 1.0 + 1e-6
     assert np.linalg.norm(layers["Denoising Normal"], axis=2).max() <= 1.0 + 1e-4
+
+
+def test_trace_rays_batch_api():
+    """Scene.trace_rays (used by gdmlt raybench): hits where a ray must hit, misses where it
+    cannot, occlusion consistent with closest hits, same answer on 1 and all threads."""
+    scene = gdmlt.Scene(gdmlt.builtin_scene("cornell", 8, 8))
+    rng = np.random.default_rng(0)
+    o = (rng.random((5000, 3)) * 1.6 - 0.8).astype(np.float32)  # inside the box
+    d = rng.normal(size=(5000, 3)).astype(np.float32)
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    t, prim = scene.trace_rays(o, d)
+    t1, prim1 = scene.trace_rays(o, d, threads=1)
+    assert np.array_equal(prim, prim1) and np.array_equal(t, t1)
+    # the box is closed except the light opening and the camera side: most rays hit
+    assert (prim >= 0).mean() > 0.7 and np.all(t[prim >= 0] > 0) and np.all(np.isinf(t[prim < 0]))
+    _, occ = scene.trace_rays(o, d, occlusion=True)
+    assert np.array_equal(occ >= 0, prim >= 0)
+    far = np.full((3, 3), 100.0, np.float32)
+    _, miss = scene.trace_rays(far, np.tile(np.array([[0.0, 0.0, 1.0]], np.float32), (3, 1)))
+    assert np.all(miss == -1)
+    with pytest.raises(ValueError, match="same number"):
+        scene.trace_rays(o, d[:10])
