@@ -126,7 +126,8 @@ def _color_or_texture(node, name, out, key, textures, warnings, what, default):
 def material_params(mat, warnings, textures=None):
     """Principled-like parameters of a Blender material (nodes followed from the Cycles output).
     `textures`: a Textures registry; image textures linked into Base Color / Color and
-    Roughness are added to it."""
+    Roughness are added to it. Mix Shader and Add Shader trees of supported nodes are
+    flattened into one weighted set of lobes (see _combine)."""
     if mat is None:
         return dict(DEFAULT_MATERIAL)
     what = f"material '{mat.name}'"
@@ -142,6 +143,20 @@ def material_params(mat, warnings, textures=None):
         out["base_color"] = (0.0, 0.0, 0.0)  # Cycles renders an unconnected surface black
         return out
     node = surface.links[0].from_node
+    if node.type in ("MIX_SHADER", "ADD_SHADER"):
+        leaves = []
+        _shader_leaves(node, 1.0, leaves, textures, warnings, what)
+        out.update(_combine(leaves, warnings, what))
+        return out
+    out.update(_node_params(node, textures, warnings, what))
+    out.pop("bsdf", None)
+    return out
+
+
+def _node_params(node, textures, warnings, what):
+    """Parameters of one shader node (a leaf of the shader tree)."""
+    out = dict(DEFAULT_MATERIAL)
+    del out["name"]
     t = node.type
     if t == "BSDF_PRINCIPLED":
         _color_or_texture(node, "Base Color", out, "base_color", textures, warnings, what, (0.8, 0.8, 0.8, 1))
@@ -173,8 +188,88 @@ def material_params(mat, warnings, textures=None):
         strength = _input_value(node, "Strength", warnings, what, 1.0)
         out["base_color"] = (0.0, 0.0, 0.0)
         out["emission"] = tuple(c * strength for c in col)
+        out["bsdf"] = False  # no scattering lobe (matters inside Mix/Add Shaders)
     else:
         warnings.append(f"{what}: shader node '{node.name}' ({t}) is not supported; rendered as grey diffuse")
+    return out
+
+
+def _shader_leaves(node, weight, leaves, textures, warnings, what):
+    """Walks a Mix/Add Shader tree: appends (weight, leaf parameters) for every shader node."""
+    if weight <= 0.0:
+        return
+    if node.type == "MIX_SHADER":
+        fac = min(max(_input_value(node, "Fac", warnings, what, 0.5), 0.0), 1.0)
+        pairs = ((node.inputs[1], weight * (1.0 - fac)), (node.inputs[2], weight * fac))
+    elif node.type == "ADD_SHADER":
+        pairs = ((node.inputs[0], weight), (node.inputs[1], weight))
+    else:
+        leaves.append((weight, _node_params(node, textures, warnings, what)))
+        return
+    for sock, w in pairs:
+        if sock.is_linked:  # an unconnected shader socket adds nothing, as in Cycles
+            _shader_leaves(sock.links[0].from_node, w, leaves, textures, warnings, what)
+
+
+def _combine(leaves, warnings, what):
+    """One material from weighted leaves: the diffuse, metal and glass lobes of every leaf
+    (Principled weights (1−m)(1−t), m, (1−m)t) are summed per kind — exact, since lobes of
+    one kind differ only in colour — and emission adds up. Roughness and IOR are shared by
+    the metal and glass lobes in the core: different values are averaged (with a warning).
+    A total BSDF weight above 1 (Add Shader of two BSDFs) is normalized, with a warning."""
+    lobes = {"d": [0.0, np.zeros(3)], "m": [0.0, np.zeros(3)], "g": [0.0, np.zeros(3)]}
+    emission = np.zeros(3)
+    rough, iors, tex, rough_tex = [], [], [], []
+    for w, p in leaves:
+        emission += w * np.array(p["emission"][:3], dtype=np.float64)
+        if not p.get("bsdf", True):
+            continue
+        m, t = p["metallic"], p["transmission"]
+        color = np.array(p["base_color"][:3], dtype=np.float64)
+        for k, wk in (("d", (1 - m) * (1 - t)), ("m", m), ("g", (1 - m) * t)):
+            if w * wk > 0:
+                lobes[k][0] += w * wk
+                lobes[k][1] += w * wk * color
+        if w * (m + (1 - m) * t) > 0:
+            rough.append((w * (m + (1 - m) * t), p["roughness"]))
+        if w * (1 - m) * t > 0:
+            iors.append(p["ior"])
+        if "base_color_texture" in p:
+            tex.append((p["base_color_texture"], (1 - m) * (1 - t) > 0.999))
+        if "roughness_texture" in p:
+            rough_tex.append(p["roughness_texture"])
+    total = sum(v[0] for v in lobes.values())
+    out = {"emission": tuple(emission.tolist()), "metallic": 0.0, "transmission": 0.0, "roughness": 0.5,
+           "ior": iors[0] if iors else 1.5}
+    if total <= 0:
+        out["base_color"] = (0.0, 0.0, 0.0)
+        return out
+    scale = min(total, 1.0)
+    if total > 1.0 + 1e-6:
+        warnings.append(f"{what}: Add Shader of BSDFs with total weight {total:.2f} is normalized to 1")
+    color = {k: tuple((v[1] / v[0] * scale).tolist()) if v[0] > 0 else (0.0, 0.0, 0.0) for k, v in lobes.items()}
+    out["metallic"] = lobes["m"][0] / total
+    dg = lobes["d"][0] + lobes["g"][0]
+    out["transmission"] = lobes["g"][0] / dg if dg > 0 else 0.0
+    out["base_color"], out["metal_color"], out["glass_color"] = color["d"], color["m"], color["g"]
+    if rough:
+        wsum = sum(w for w, _ in rough)
+        out["roughness"] = sum(w * r for w, r in rough) / wsum
+        if max(r for _, r in rough) - min(r for _, r in rough) > 1e-3:
+            warnings.append(f"{what}: the mixed glossy/glass lobes have different roughness; their weighted mean "
+                            f"{out['roughness']:.3f} is used")
+    if len(set(iors)) > 1:
+        warnings.append(f"{what}: the mixed glass lobes have different IOR; {iors[0]} is used")
+    if tex:
+        index, diffuse_only = tex[0]
+        if len(tex) == 1 and diffuse_only:
+            out["base_color_texture"] = index  # scales with the diffuse lobe's weight below
+            out["base_color"] = color["d"]
+        else:
+            warnings.append(f"{what}: image textures inside a Mix/Add Shader are supported on one Diffuse "
+                            f"(or diffuse-only Principled) input only; their socket values are used elsewhere")
+    if rough_tex:
+        out["roughness_texture"] = rough_tex[0]
     return out
 
 

@@ -59,6 +59,10 @@ pub struct MaterialDesc {
     /// the roughness (the texture's luminance), where the material links them.
     pub base_color_texture: Option<u32>,
     pub roughness_texture: Option<u32>,
+    /// Colours of the metal and glass lobes when they differ from the base colour (a Mix
+    /// Shader of Diffuse and Glossy, say); None = the base colour (Principled).
+    pub metal_color: Option<[f32; 3]>,
+    pub glass_color: Option<[f32; 3]>,
 }
 
 impl Default for MaterialDesc {
@@ -73,6 +77,8 @@ impl Default for MaterialDesc {
             ior: 1.5,
             base_color_texture: None,
             roughness_texture: None,
+            metal_color: None,
+            glass_color: None,
         }
     }
 }

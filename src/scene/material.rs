@@ -19,6 +19,8 @@ pub struct Material {
     pub ior: f32,
     pub base_color_texture: Option<u32>,
     pub roughness_texture: Option<u32>,
+    pub metal_color: Option<Spectrum>,
+    pub glass_color: Option<Spectrum>,
 }
 
 impl Material {
@@ -30,7 +32,9 @@ impl Material {
             }
         }
         let scalars = [d.roughness, d.metallic, d.transmission, d.ior];
-        if d.base_color.iter().chain(d.emission.iter()).chain(scalars.iter()).any(|x| !x.is_finite()) {
+        let lobe_colors = d.metal_color.iter().chain(d.glass_color.iter()).flatten();
+        if d.base_color.iter().chain(d.emission.iter()).chain(scalars.iter()).chain(lobe_colors).any(|x| !x.is_finite())
+        {
             return Err(bad("NaN or Inf parameter"));
         }
         if d.emission.iter().any(|&x| x < 0.0) {
@@ -54,6 +58,8 @@ impl Material {
             },
             base_color_texture: d.base_color_texture,
             roughness_texture: d.roughness_texture,
+            metal_color: d.metal_color.map(|c| Vec3::from_array(c).clamp(Vec3::ZERO, Vec3::ONE)),
+            glass_color: d.glass_color.map(|c| Vec3::from_array(c).clamp(Vec3::ZERO, Vec3::ONE)),
         })
     }
 
@@ -74,9 +80,9 @@ impl Material {
         let (m, t) = (self.metallic, self.transmission);
         let w = [(1.0 - m) * (1.0 - t), m, (1.0 - m) * t];
         let diffuse = Lambert { albedo: base_color };
-        let metal = Conductor { f0: base_color, roughness };
+        let metal = Conductor { f0: self.metal_color.unwrap_or(base_color), roughness };
         let eta = if front { self.ior } else { 1.0 / self.ior };
-        let glass = Dielectric { eta, tint: base_color, roughness };
+        let glass = Dielectric { eta, tint: self.glass_color.unwrap_or(base_color), roughness };
         if w[1] <= 0.0 && w[2] <= 0.0 {
             Bsdf::Lambert(diffuse)
         } else if w[0] <= 0.0 && w[2] <= 0.0 {

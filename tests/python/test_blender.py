@@ -479,3 +479,70 @@ def test_blender_usd_export_renders_the_same_outside_blender(bpy_mod, tmp_out, k
     rms = np.sqrt(np.mean((b - u) ** 2))
     assert b.mean() > 1e-3 and rms < 2.0 * np.sqrt(var) + 1e-3 * b.mean(), (rms, np.sqrt(var))
     assert abs(b.mean() - u.mean()) < 4 * np.sqrt(var / b.size) + 0.002 * b.mean()
+
+
+def _mixed_scene(bpy, engine, spp, seed):
+    """The lights scene with shader trees: the card is Mix(Diffuse, Glossy) (a "plastic"), the
+    wall Mix(Principled metal, Diffuse), the floor Add(Diffuse, Emission). GGX distributions
+    set to single scattering, as GDMLT's."""
+    scene = _lights_scene(bpy, engine, spp, seed, size=40, bounces=3)
+
+    def tree(ob_name, build):
+        mat = bpy.data.materials.new(ob_name + "Mix")
+        if mat.node_tree is None:
+            mat.use_nodes = True
+        nt = mat.node_tree
+        nt.nodes.clear()
+        out = nt.nodes.new("ShaderNodeOutputMaterial")
+        nt.links.new(build(nt).outputs[0], out.inputs["Surface"])
+        ob = bpy.data.objects[ob_name]
+        ob.data.materials.clear()
+        ob.data.materials.append(mat)
+
+    def diffuse(nt, color):
+        n = nt.nodes.new("ShaderNodeBsdfDiffuse")
+        n.inputs["Color"].default_value = (*color, 1)
+        return n
+
+    def mix(nt, fac, a, b, kind="ShaderNodeMixShader"):
+        m = nt.nodes.new(kind)
+        if kind == "ShaderNodeMixShader":
+            m.inputs["Fac"].default_value = fac
+            nt.links.new(a.outputs[0], m.inputs[1])
+            nt.links.new(b.outputs[0], m.inputs[2])
+        else:
+            nt.links.new(a.outputs[0], m.inputs[0])
+            nt.links.new(b.outputs[0], m.inputs[1])
+        return m
+
+    def plastic(nt):
+        g = nt.nodes.new("ShaderNodeBsdfGlossy")
+        g.distribution = "GGX"
+        g.inputs["Color"].default_value = (1, 1, 1, 1)
+        g.inputs["Roughness"].default_value = 0.3
+        return mix(nt, 0.4, diffuse(nt, (0.8, 0.4, 0.1)), g)
+
+    def metal_and_paint(nt):
+        p = nt.nodes.new("ShaderNodeBsdfPrincipled")
+        p.distribution = "GGX"
+        p.inputs["Base Color"].default_value = (0.9, 0.7, 0.3, 1)
+        p.inputs["Metallic"].default_value = 1.0
+        p.inputs["Roughness"].default_value = 0.4
+        return mix(nt, 0.5, p, diffuse(nt, (0.2, 0.5, 0.7)))
+
+    def glowing_floor(nt):
+        e = nt.nodes.new("ShaderNodeEmission")
+        e.inputs["Color"].default_value = (0.2, 0.4, 1.0, 1)
+        e.inputs["Strength"].default_value = 0.3
+        return mix(nt, 0, diffuse(nt, (0.6, 0.6, 0.6)), e, kind="ShaderNodeAddShader")
+
+    tree("Card", plastic)
+    tree("Wall", metal_and_paint)
+    tree("Floor", glowing_floor)
+    return scene
+
+
+def test_mix_and_add_shaders_agree_with_cycles(bpy_mod, tmp_out):
+    """Mix Shader of Diffuse and Glossy, of a metallic Principled and Diffuse, and Add Shader
+    of Diffuse and Emission, flattened into one weighted set of lobes."""
+    assert_agrees_with_cycles(bpy_mod, _mixed_scene, tmp_out, "mix", block=5)
