@@ -24,6 +24,67 @@ def apply_settings(scene, settings: dict):
         setattr(scene.gdmlt, PROPERTY_OF[k], v.upper() if k in ("method", "reconstruction") else v)
 
 
+def export_usd(path: Path, out: Path, frame=None) -> dict:
+    """Exports the .blend's active scene with Blender's own USD exporter (evaluated meshes,
+    materials as UsdPreviewSurface, lights, cameras, the world as a dome) and stores the
+    GDMLT render settings and the image size in the stage's customLayerData under "gdmlt",
+    so `gdmlt render out.usd` on a machine without Blender renders it the same way.
+    Returns the stored settings."""
+    bpy = import_bpy()
+    from .addon import enable_addon
+
+    enable_addon()
+    bpy.ops.wm.open_mainfile(filepath=str(path))
+    scene = bpy.context.scene
+    if frame is not None:
+        scene.frame_set(int(frame))
+    _emission_as_principled(bpy)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    result = bpy.ops.wm.usd_export(filepath=str(out.resolve()), selected_objects_only=False,
+                                   export_animation=False, export_materials=True, export_lights=True,
+                                   export_cameras=True, convert_world_material=True)
+    if "FINISHED" not in result:
+        raise RuntimeError(f"Blender's USD export of {path} failed")
+    g = scene.gdmlt
+    r = scene.render
+    pct = r.resolution_percentage / 100.0
+    settings = {"method": g.method.lower(), "spp": int(g.samples), "time_limit": float(g.time_limit),
+                "max_bounces": int(g.max_bounces), "nee": bool(g.use_nee), "seed": int(g.seed),
+                "reconstruction": g.reconstruction.lower(), "alpha_rec": float(g.alpha_reconstruction),
+                "alpha_target": float(g.alpha_target), "large_step_probability": float(g.large_step_probability),
+                "chains": int(g.chains), "width": max(1, int(r.resolution_x * pct)),
+                "height": max(1, int(r.resolution_y * pct))}
+    if scene.camera is not None:
+        settings["camera"] = scene.camera.name
+    from pxr import Sdf
+
+    layer = Sdf.Layer.FindOrOpen(str(out.resolve()))
+    data = dict(layer.customLayerData)
+    data["gdmlt"] = {k: v for k, v in settings.items() if k != "camera"}
+    layer.customLayerData = data
+    layer.Save()
+    return settings
+
+
+def _emission_as_principled(bpy):
+    """Blender's USD exporter writes UsdPreviewSurface only from Principled (and Diffuse)
+    shaders: an Emission-only surface would be exported as grey diffuse. Rewire such
+    materials (in memory; the .blend is not saved) to a black Principled BSDF with that
+    emission colour and strength, which the exporter writes as emissiveColor."""
+    for mat in bpy.data.materials:
+        tree = mat.node_tree
+        out = tree.get_output_node("CYCLES") if tree is not None else None
+        surface = out.inputs.get("Surface") if out is not None else None
+        if surface is None or not surface.is_linked or surface.links[0].from_node.type != "EMISSION":
+            continue
+        em = surface.links[0].from_node
+        p = tree.nodes.new("ShaderNodeBsdfPrincipled")
+        p.inputs["Base Color"].default_value = (0, 0, 0, 1)
+        p.inputs["Emission Color"].default_value = em.inputs["Color"].default_value
+        p.inputs["Emission Strength"].default_value = em.inputs["Strength"].default_value
+        tree.links.new(p.outputs[0], surface)
+
+
 def render_blend(path: Path, out: Path, settings: dict, width=None, height=None, png=True) -> dict:
     """Opens `path`, renders its active scene with GDMLT into `out` (EXR, 32-bit float) and
     `out.png`. Raises RuntimeError with Blender's report if the render fails."""

@@ -87,6 +87,12 @@ def build_parser():
                         "a local cluster of --workers processes) and merge them")
     r.add_argument("--partials", type=_positive_int, default=4, help="with --dask: number of partials (default 4)")
     r.add_argument("--workers", type=_positive_int, default=2, help="with --dask and no address: local workers")
+    ex = sub.add_parser("export", help="export a .blend to USD for render nodes without Blender",
+                        description="Blender's USD exporter, plus the scene's GDMLT settings and image size "
+                                    "stored in the stage, which `gdmlt render OUT.usdc` then uses as defaults.")
+    ex.add_argument("scene", help=".blend file")
+    ex.add_argument("-o", "--output", required=True, help="output .usd, .usda, .usdc or .usdz")
+    ex.add_argument("--frame", type=int, help="the frame to export (default: the file's current frame)")
     rb = sub.add_parser("raybench", help="ray throughput of the core's BVH against Embree (embreex)",
                         description="Closest-hit and occlusion rays, coherent and incoherent, 1 thread and all, "
                                     "on a procedural mesh and the Cornell box: Mrays/s of the core and of Embree.")
@@ -131,10 +137,15 @@ def _settings(args):
 
 
 def render_settings(args) -> dict:
-    """gdmlt.render's settings: the CLI's options over the defaults."""
+    """gdmlt.render's settings: the CLI's options over the settings stored in a USD stage by
+    `gdmlt export` over the defaults."""
     opts = {"method": "gdpssmlt", "spp": 64, "time_limit": 0.0, "max_bounces": 8, "nee": True, "seed": 0, "threads": 0,
             "reconstruction": "l1", "alpha_rec": 0.2, "alpha_target": 1.0, "large_step_probability": 0.3,
             "chains": 0}
+    if Path(args.scene).suffix.lower() in USD_SUFFIXES:
+        from .usd import stored_settings
+
+        opts.update({k: v for k, v in stored_settings(args.scene).items() if k in opts})
     opts.update(_settings(args))
     return opts
 
@@ -183,6 +194,23 @@ def main(argv=None):
         return 0
     if args.command == "merge":
         return merge_command(args)
+    if args.command == "export":
+        out, src = Path(args.output), Path(args.scene)
+        if out.suffix.lower() not in USD_SUFFIXES:
+            parser.error(f"output must be a USD file ({', '.join(USD_SUFFIXES)}), got '{out}'")
+        if src.suffix.lower() != ".blend" or not src.is_file():
+            print(f"gdmlt: error: not a .blend file: {src}", file=sys.stderr)
+            return 1
+        from .blend import export_usd
+
+        try:
+            stored = export_usd(src, out, frame=args.frame)
+        except RuntimeError as e:
+            print(f"gdmlt: error: {e}", file=sys.stderr)
+            return 1
+        print(f"wrote {out} ({stored['width']}×{stored['height']}, method {stored['method']}, "
+              f"{stored['spp']} per pixel)")
+        return 0
     if args.command == "raybench":
         from .raybench import run as raybench
 

@@ -323,6 +323,17 @@ def _read_exr(path):
     return None
 
 
+def stored_settings(path) -> dict:
+    """The GDMLT render settings that `gdmlt export` stored in the stage (customLayerData
+    "gdmlt"), or {}."""
+    pxr = _pxr()
+    layer = pxr.Sdf.Layer.FindOrOpen(str(path))
+    if layer is None:
+        return {}
+    data = layer.customLayerData.get("gdmlt", {})
+    return {str(k): (v if not isinstance(v, str) else str(v)) for k, v in dict(data).items()}
+
+
 def load(path, frame=None, width=None, height=None, camera=None):
     """Reads a USD stage into a scene dict. Returns (dict, warnings). Raises
     FileNotFoundError for a missing file and ValueError for a stage that cannot be rendered
@@ -336,6 +347,9 @@ def load(path, frame=None, width=None, height=None, camera=None):
         raise ValueError(f"'{path}' could not be opened as a USD stage")
     time = pxr.Usd.TimeCode(frame) if frame is not None else pxr.Usd.TimeCode.Default()
     warnings = []
+    stored = stored_settings(path)
+    if width is None and height is None and "width" in stored:
+        width, height = int(stored["width"]), int(stored["height"])
     r = _Reader(stage, time, warnings)
     meshes, lights, world, cams, textures = [], [], (0.0, 0.0, 0.0), [], []
     world_texture = world_rotation = None

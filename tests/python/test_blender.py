@@ -546,3 +546,34 @@ def test_mix_and_add_shaders_agree_with_cycles(bpy_mod, tmp_out):
     """Mix Shader of Diffuse and Glossy, of a metallic Principled and Diffuse, and Add Shader
     of Diffuse and Emission, flattened into one weighted set of lobes."""
     assert_agrees_with_cycles(bpy_mod, _mixed_scene, tmp_out, "mix", block=5)
+
+
+def test_gdmlt_export_carries_the_scene_and_its_settings_to_usd(bpy_mod, tmp_out):
+    """`gdmlt export demo.blend -o x.usdc` (Blender's USD exporter, Emission materials made
+    exportable, GDMLT settings and image size stored in the stage) and then `gdmlt render
+    x.usdc` with no options renders what `gdmlt render demo.blend` renders."""
+    import subprocess
+
+    def cli(*args):
+        r = subprocess.run([sys.executable, "-m", "gdmlt.cli", *args], capture_output=True, text=True, cwd=ROOT)
+        assert r.returncode == 0, r.stdout + r.stderr
+        return r.stdout
+
+    bpy = bpy_mod
+    bpy.ops.wm.open_mainfile(filepath=str(ROOT / "examples" / "cornell.blend"))
+    s = bpy.context.scene
+    s.gdmlt.method, s.gdmlt.samples, s.gdmlt.seed = "PT", 16, 3
+    s.render.resolution_x = s.render.resolution_y = 48
+    blend = tmp_out / "demo.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend), copy=True)
+    cli("export", str(blend), "-o", str(tmp_out / "demo.usdc"))
+    from gdmlt.usd import stored_settings
+    stored = stored_settings(tmp_out / "demo.usdc")
+    assert stored["method"] == "pt" and stored["spp"] == 16 and stored["width"] == 48
+    cli("render", str(tmp_out / "demo.usdc"), "-o", str(tmp_out / "from_usd.exr"))
+    cli("render", str(blend), "-o", str(tmp_out / "from_blend.exr"))
+    a, b = read_exr(tmp_out / "from_usd.exr"), read_exr(tmp_out / "from_blend.exr")
+    assert a.shape == b.shape == (48, 48, 3)
+    ba, bb = block_means(a, 8), block_means(b, 8)
+    assert abs(a.mean() / b.mean() - 1) < 0.02
+    assert np.sqrt(np.mean((ba - bb) ** 2)) < 0.05 * bb.mean()
