@@ -9,9 +9,9 @@ Blender's exporter writes it: the dome's transform applied to Blender's Z-up
 equirectangular mapping) with intensity × 2^exposure × colour and
 `normalize` as UsdLux defines them, UsdGeomCamera (apertures and focal length in tenths of
 a scene unit, clipping, f-stop, focus distance, aperture offsets), time samples (`frame`),
-instance proxies (flattened). Everything else is reported in the returned warnings:
+instance proxies and PointInstancers of meshes (flattened: copies per instance). Everything else is reported in the returned warnings:
 textures in USD materials (their fallback or the constant value is used), colour
-temperature other than 6500 K, non-EXR DomeLight textures, PointInstancers, other prim types.
+temperature other than 6500 K, non-EXR DomeLight textures, non-mesh prototypes, other prim types.
 """
 
 from __future__ import annotations
@@ -114,7 +114,9 @@ class _Reader:
         return self.material_index[path]
 
     # ---- meshes ----------------------------------------------------------------------
-    def mesh(self, prim):
+    def mesh(self, prim, to_world=None):
+        """The mesh in world space (`to_world`: a column-vector 4×4 instead of the prim's own
+        transform, for point-instanced copies)."""
         UsdGeom, UsdShade = self.pxr.UsdGeom, self.pxr.UsdShade
         mesh = UsdGeom.Mesh(prim)
         t = self.time
@@ -147,7 +149,7 @@ class _Reader:
         if len(tris) == 0:
             self.warn(f"mesh '{name}': no face with three or more corners; skipped")
             return None
-        m = _mat(self.xcache.GetLocalToWorldTransform(prim))
+        m = _mat(self.xcache.GetLocalToWorldTransform(prim)) if to_world is None else to_world
         pos = pts @ m[:3, :3].T + m[:3, 3]
         det = np.linalg.det(m[:3, :3])
         nmat = np.linalg.inv(m[:3, :3]).T if abs(det) > 1e-30 else m[:3, :3]
@@ -185,6 +187,36 @@ class _Reader:
             mat = UsdShade.MaterialBindingAPI(subset.GetPrim()).ComputeBoundMaterial()[0]
             face_mat[faces[(faces >= 0) & (faces < len(counts))]] = self.material(mat)
         out["material_ids"] = np.ascontiguousarray(face_mat[face_of_tri])
+        return out
+
+    def point_instancer(self, prim):
+        """Meshes of every instance of a UsdGeomPointInstancer (flattened: each instance's
+        triangles are copied, memory grows with the instance count)."""
+        UsdGeom, Usd = self.pxr.UsdGeom, self.pxr.Usd
+        inst = UsdGeom.PointInstancer(prim)
+        xforms = inst.ComputeInstanceTransformsAtTime(self.time, self.time)
+        indices = inst.GetProtoIndicesAttr().Get(self.time) or []
+        targets = inst.GetPrototypesRel().GetTargets()
+        world = self.xcache.GetLocalToWorldTransform(prim)
+        protos = []
+        for path in targets:
+            root = self.stage.GetPrimAtPath(path)
+            inv = self.xcache.GetLocalToWorldTransform(root).GetInverse()
+            parts = [(p, self.xcache.GetLocalToWorldTransform(p) * inv)
+                     for p in Usd.PrimRange(root, Usd.TraverseInstanceProxies()) if p.IsA(UsdGeom.Mesh)]
+            if not parts and root.IsA(UsdGeom.Gprim):
+                self.warn(f"'{path}': {root.GetTypeName()} prototypes are not supported (only Mesh); skipped")
+            protos.append(parts)
+        out = []
+        for i, (k, x) in enumerate(zip(indices, xforms)):
+            if not 0 <= k < len(protos):
+                self.warn(f"'{prim.GetPath()}': instance {i} uses prototype {k} of {len(protos)}; skipped")
+                continue
+            for part, rel in protos[k]:
+                m = self.mesh(part, to_world=_mat(rel * x * world))
+                if m is not None:
+                    m["name"] = f"{prim.GetPath()}[{i}]{part.GetPath()}"
+                    out.append(m)
         return out
 
     # ---- lights ----------------------------------------------------------------------
@@ -383,8 +415,8 @@ def load(path, frame=None, width=None, height=None, camera=None):
             if light is not None:
                 lights.append(light)
         elif prim.IsA(UsdGeom.PointInstancer):
-            r.warn(f"'{prim.GetPath()}': PointInstancer is not supported yet; skipped")
-            it.PruneChildren()
+            meshes.extend(r.point_instancer(prim))
+            it.PruneChildren()  # the prototypes render only through their instances
         elif prim.IsA(UsdGeom.Gprim):
             r.warn(f"'{prim.GetPath()}': {prim.GetTypeName()} prims are not supported (only Mesh); skipped")
     if camera is not None:

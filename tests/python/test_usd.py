@@ -95,3 +95,33 @@ def test_cli_renders_a_usd_file(tmp_path):
     assert r.returncode == 0, r.stderr
     img = read_exr(out)
     assert img.shape == (8, 8, 3) and np.isfinite(img).all() and img.mean() > 0
+
+
+def test_point_instancer_places_every_instance(tmp_path):
+    """A PointInstancer of a unit quad at three positions (one scaled by 2, one rotated) is
+    flattened into three world-space copies with the instancer's own transform applied."""
+    path = _stage(tmp_path / "i.usda")
+    stage = Usd.Stage.Open(str(path))
+    inst = UsdGeom.PointInstancer.Define(stage, "/World/Inst")
+    UsdGeom.Xformable(inst).AddTranslateOp().Set(Gf.Vec3d(0, 0, 1))
+    proto = UsdGeom.Mesh.Define(stage, "/World/Inst/Protos/Quad")
+    proto.CreatePointsAttr([(-0.5, -0.5, 0), (0.5, -0.5, 0), (0.5, 0.5, 0), (-0.5, 0.5, 0)])
+    proto.CreateFaceVertexCountsAttr([4])
+    proto.CreateFaceVertexIndicesAttr([0, 1, 2, 3])
+    proto.CreateSubdivisionSchemeAttr("none")
+    inst.CreatePrototypesRel().SetTargets([proto.GetPath()])
+    inst.CreateProtoIndicesAttr([0, 0, 0])
+    inst.CreatePositionsAttr([(0, 0, 0), (3, 0, 0), (0, 3, 0)])
+    inst.CreateScalesAttr([(1, 1, 1), (2, 2, 2), (1, 1, 1)])
+    inst.CreateOrientationsAttr([Gf.Quath(1, 0, 0, 0), Gf.Quath(1, 0, 0, 0),
+                                 Gf.Quath(0.7071068, 0.7071068, 0, 0)])  # 90° about x
+    stage.GetRootLayer().Save()
+    desc, warnings = usd.load(path, width=8, height=8)
+    copies = [m for m in desc["meshes"] if "/World/Inst[" in m["name"]]
+    assert len(copies) == 3, [m["name"] for m in desc["meshes"]]
+    centres = sorted(tuple(np.round(m["positions"].mean(axis=0), 4)) for m in copies)
+    assert centres == sorted([(0.0, 0.0, 1.0), (3.0, 0.0, 1.0), (0.0, 3.0, 1.0)])
+    ext = {tuple(np.round(m["positions"].mean(axis=0), 4)): np.ptp(m["positions"], axis=0) for m in copies}
+    assert np.allclose(ext[(3.0, 0.0, 1.0)], (2, 2, 0))  # scaled by 2
+    assert np.allclose(ext[(0.0, 3.0, 1.0)], (1, 0, 1), atol=1e-3)  # stood up by the rotation (half floats)
+    assert not any(m["name"] == "/World/Inst/Protos/Quad" for m in desc["meshes"])  # prototype not rendered alone
