@@ -25,17 +25,13 @@ impl Conductor {
     pub fn is_delta(&self) -> bool {
         self.roughness <= SPECULAR_ROUGHNESS_THRESHOLD
     }
-    #[inline]
-    fn ggx(&self) -> Ggx {
-        Ggx { alpha: (self.roughness * self.roughness).max(1e-4) }
-    }
 
     pub fn eval(&self, wo: Vec3, wi: Vec3) -> Spectrum {
         if self.is_delta() || wo.z <= 0.0 || wi.z <= 0.0 {
             return Spectrum::ZERO;
         }
         let h = (wo + wi).normalize();
-        let g = self.ggx();
+        let g = Ggx::from_roughness(self.roughness);
         // f·cos θi = F·D·G2 / (4 cos θo)
         schlick(self.f0, wo.dot(h)) * (g.d(h) * g.g2(wo, wi) / (4.0 * wo.z))
     }
@@ -45,7 +41,7 @@ impl Conductor {
             return 0.0;
         }
         let h = (wo + wi).normalize();
-        self.ggx().pdf_visible(wo, h) / (4.0 * wo.dot(h).abs().max(1e-12))
+        Ggx::from_roughness(self.roughness).pdf_visible(wo, h) / (4.0 * wo.dot(h).abs().max(1e-12))
     }
 
     /// The mirror lobe (roughness at or below the threshold): (F as a discrete measure,
@@ -71,7 +67,7 @@ impl Conductor {
                 eta: 1.0,
             });
         }
-        let g = self.ggx();
+        let g = Ggx::from_roughness(self.roughness);
         let h = g.sample_visible(wo, u);
         let wi = reflect(wo, h);
         if wi.z <= 0.0 {

@@ -30,10 +30,6 @@ impl Dielectric {
     pub fn is_delta(&self) -> bool {
         self.roughness <= SPECULAR_ROUGHNESS_THRESHOLD
     }
-    #[inline]
-    fn ggx(&self) -> Ggx {
-        Ggx { alpha: (self.roughness * self.roughness).max(1e-4) }
-    }
 
     /// Microfacet normal of the pair (wo, wi) and whether it is a reflection; None where no
     /// microfacet of the upper hemisphere connects them.
@@ -62,7 +58,7 @@ impl Dielectric {
             return Spectrum::ZERO;
         }
         let Some((h, reflection)) = self.half_vector(wo, wi) else { return Spectrum::ZERO };
-        let g = self.ggx();
+        let g = Ggx::from_roughness(self.roughness);
         let f = fresnel_dielectric(wo.dot(h), self.eta);
         let dg = g.d(h) * g.g2(wo, wi);
         if reflection {
@@ -82,7 +78,7 @@ impl Dielectric {
         }
         let Some((h, reflection)) = self.half_vector(wo, wi) else { return 0.0 };
         let f = fresnel_dielectric(wo.dot(h), self.eta);
-        let pdf_h = self.ggx().pdf_visible(wo, h);
+        let pdf_h = Ggx::from_roughness(self.roughness).pdf_visible(wo, h);
         if reflection {
             pdf_h * f / (4.0 * wo.dot(h))
         } else {
@@ -111,7 +107,7 @@ impl Dielectric {
                 eta: self.eta,
             });
         }
-        let h = self.ggx().sample_visible(wo, u);
+        let h = Ggx::from_roughness(self.roughness).sample_visible(wo, u);
         let f = fresnel_dielectric(wo.dot(h), self.eta);
         let (wi, eta) = if u_lobe < f { (reflect(wo, h), 1.0) } else { (refract(wo, h, self.eta)?, self.eta) };
         if (eta == 1.0) != (wi.z > 0.0) {

@@ -70,6 +70,14 @@ impl Ggx {
     }
 }
 
+impl Ggx {
+    /// The distribution of a lobe of Blender roughness r (α = r², kept off 0).
+    #[inline]
+    pub fn from_roughness(r: f32) -> Ggx {
+        Ggx { alpha: (r * r).max(1e-4) }
+    }
+}
+
 /// Mirror reflection of `w` about the normal `n`.
 #[inline]
 pub fn reflect(w: Vec3, n: Vec3) -> Vec3 {

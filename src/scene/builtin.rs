@@ -39,15 +39,7 @@ fn block(name: &str, center: [f32; 3], half: [f32; 3], angle: f32, mat: u32) -> 
         indices.push([f[0], f[1], f[2]]);
         indices.push([f[0], f[2], f[3]]);
     }
-    let n = indices.len();
-    MeshDesc {
-        name: name.into(),
-        positions,
-        indices,
-        corner_normals: vec![],
-        material_ids: vec![mat; n],
-        corner_uvs: vec![],
-    }
+    flat_mesh(name, positions, indices, mat)
 }
 
 fn material(name: &str, base_color: [f32; 3], emission: [f32; 3]) -> MaterialDesc {
@@ -140,15 +132,7 @@ fn uv_sphere(name: &str, center: [f32; 3], radius: f32, nu: u32, nv: u32, mat: u
             }
         }
     }
-    let n = indices.len();
-    MeshDesc {
-        name: name.into(),
-        positions,
-        indices,
-        corner_normals: vec![],
-        material_ids: vec![mat; n],
-        corner_uvs: vec![],
-    }
+    flat_mesh(name, positions, indices, mat)
 }
 
 /// The Cornell box with a glass sphere and a mirror sphere instead of the blocks (the
@@ -212,5 +196,18 @@ pub fn builtin(name: &str, width: u32, height: u32) -> Option<SceneDesc> {
         "gap" => Some(cornell_gap(width, height)),
         "furnace" => Some(furnace_sphere(0.8, 1.0, width, height)),
         _ => None,
+    }
+}
+
+/// A flat-shaded mesh of one material, without UVs.
+fn flat_mesh(name: &str, positions: Vec<[f32; 3]>, indices: Vec<[u32; 3]>, mat: u32) -> MeshDesc {
+    let n = indices.len();
+    MeshDesc {
+        name: name.into(),
+        positions,
+        indices,
+        corner_normals: vec![],
+        material_ids: vec![mat; n],
+        corner_uvs: vec![],
     }
 }

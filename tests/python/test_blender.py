@@ -350,6 +350,20 @@ def test_spot_sun_and_world_agree_with_cycles(bpy_mod, tmp_out, kind):
     assert_agrees_with_cycles(bpy_mod, build, tmp_out, kind, block=5)
 
 
+def _fresh_material(bpy, ob, name):
+    """A new node material with only an output node, made the object's only material:
+    (node tree, output node)."""
+    mat = bpy.data.materials.new(name)
+    if mat.node_tree is None:
+        mat.use_nodes = True
+    nt = mat.node_tree
+    nt.nodes.clear()
+    out = nt.nodes.new("ShaderNodeOutputMaterial")
+    ob.data.materials.clear()
+    ob.data.materials.append(mat)
+    return nt, out
+
+
 def _textured_scene(bpy, engine, spp, seed):
     """The lights scene with image textures: an sRGB checker (8-bit, bilinear, repeated twice)
     into the floor's Diffuse colour and a linear (Non-Color) gradient into the wall's
@@ -374,12 +388,7 @@ def _textured_scene(bpy, engine, spp, seed):
             ("Floor", image("Checker", checker, "sRGB"), "ShaderNodeBsdfDiffuse", "Color", 2.0),
             ("Wall", image("Ramp", ramp, "Non-Color"), "ShaderNodeBsdfPrincipled", "Base Color", 1.0)):
         ob = bpy.data.objects[ob_name]
-        mat = bpy.data.materials.new(ob_name + "Tex")
-        if mat.node_tree is None:
-            mat.use_nodes = True
-        nt = mat.node_tree
-        nt.nodes.clear()
-        out = nt.nodes.new("ShaderNodeOutputMaterial")
+        nt, out = _fresh_material(bpy, ob, ob_name + "Tex")
         bsdf = nt.nodes.new(shader)
         if shader == "ShaderNodeBsdfPrincipled":
             bsdf.inputs["Roughness"].default_value = 1.0
@@ -388,8 +397,6 @@ def _textured_scene(bpy, engine, spp, seed):
         tex.image = img
         nt.links.new(tex.outputs["Color"], bsdf.inputs[socket])
         nt.links.new(bsdf.outputs[0], out.inputs["Surface"])
-        ob.data.materials.clear()
-        ob.data.materials.append(mat)
         uv = ob.data.uv_layers.new(name="UVMap")
         for loop, (u, v) in zip(uv.uv, [(0, 0), (1, 0), (1, 1), (0, 1)]):
             loop.vector = (u * scale, v * scale)
@@ -488,16 +495,8 @@ def _mixed_scene(bpy, engine, spp, seed):
     scene = _lights_scene(bpy, engine, spp, seed, size=40, bounces=3)
 
     def tree(ob_name, build):
-        mat = bpy.data.materials.new(ob_name + "Mix")
-        if mat.node_tree is None:
-            mat.use_nodes = True
-        nt = mat.node_tree
-        nt.nodes.clear()
-        out = nt.nodes.new("ShaderNodeOutputMaterial")
+        nt, out = _fresh_material(bpy, bpy.data.objects[ob_name], ob_name + "Mix")
         nt.links.new(build(nt).outputs[0], out.inputs["Surface"])
-        ob = bpy.data.objects[ob_name]
-        ob.data.materials.clear()
-        ob.data.materials.append(mat)
 
     def diffuse(nt, color):
         n = nt.nodes.new("ShaderNodeBsdfDiffuse")
