@@ -4,6 +4,7 @@
 //! their weights, so an outlier in one channel is treated as an outlier in all.
 
 use super::{solve_cg, solve_l2_dct, Channel, WeightedProblem};
+use rayon::prelude::*;
 
 #[derive(Clone, Debug)]
 pub struct IrlsParams {
@@ -30,33 +31,38 @@ fn normalise(w: &mut [f64]) {
 pub fn solve_l1(chans: &[Channel], alpha: f64, params: &IrlsParams) -> Vec<Vec<f64>> {
     let (w, h) = (chans[0].width, chans[0].height);
     let n = w * h;
-    let mut sol: Vec<Vec<f64>> = chans.iter().map(|c| solve_l2_dct(c, alpha)).collect();
+    // channels are independent given the shared weights: solved in parallel
+    let mut sol: Vec<Vec<f64>> = chans.par_iter().map(|c| solve_l2_dct(c, alpha)).collect();
     let mut reg = params.reg0;
     for _ in 0..params.outer_iterations {
-        let (mut wg, mut wx, mut wy) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
-        for i in 0..n {
-            let (x, y) = (i % w, i / w);
-            let (mut eg, mut ex, mut ey) = (0.0, 0.0, 0.0);
-            for (c, s) in chans.iter().zip(&sol) {
-                eg += (alpha * (s[i] - c.primal[i])).powi(2);
-                if x + 1 < w {
-                    ex += (s[i + 1] - s[i] - c.dx[i]).powi(2);
+        let weights: Vec<[f64; 3]> = (0..n)
+            .into_par_iter()
+            .with_min_len(4096)
+            .map(|i| {
+                let (x, y) = (i % w, i / w);
+                let (mut eg, mut ex, mut ey) = (0.0, 0.0, 0.0);
+                for (c, s) in chans.iter().zip(&sol) {
+                    eg += (alpha * (s[i] - c.primal[i])).powi(2);
+                    if x + 1 < w {
+                        ex += (s[i + 1] - s[i] - c.dx[i]).powi(2);
+                    }
+                    if y + 1 < h {
+                        ey += (s[i + w] - s[i] - c.dy[i]).powi(2);
+                    }
                 }
-                if y + 1 < h {
-                    ey += (s[i + w] - s[i] - c.dy[i]).powi(2);
-                }
-            }
-            wg[i] = 1.0 / (eg.sqrt() + reg);
-            wx[i] = 1.0 / (ex.sqrt() + reg);
-            wy[i] = 1.0 / (ey.sqrt() + reg);
-        }
-        normalise(&mut wg);
-        normalise(&mut wx);
-        normalise(&mut wy);
-        for (c, s) in chans.iter().zip(sol.iter_mut()) {
+                [1.0 / (eg.sqrt() + reg), 1.0 / (ex.sqrt() + reg), 1.0 / (ey.sqrt() + reg)]
+            })
+            .collect();
+        let split = |k: usize| {
+            let mut v: Vec<f64> = weights.iter().map(|w| w[k]).collect();
+            normalise(&mut v);
+            v
+        };
+        let (wg, wx, wy) = (split(0), split(1), split(2));
+        sol.par_iter_mut().zip(chans.par_iter()).for_each(|(s, c)| {
             let p = WeightedProblem { c, alpha, wg: wg.clone(), wx: wx.clone(), wy: wy.clone() };
             *s = solve_cg(&p, s, params.cg_iterations, 1e-10);
-        }
+        });
         reg *= params.decay;
     }
     sol
