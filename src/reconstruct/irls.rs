@@ -16,8 +16,11 @@ pub struct IrlsParams {
 
 impl Default for IrlsParams {
     fn default() -> Self {
-        // the public GDPT code's defaults
-        IrlsParams { outer_iterations: 20, cg_iterations: 50, reg0: 0.05, decay: 0.5 }
+        // The public GDPT code uses 20 × 50. Measured on GDPT and GDPSSMLT renders of the
+        // Cornell box (96², 16 and 64 per pixel, relMSE against PT at 4096 spp, 2026-11-25):
+        // 10 × 10 warm-started iterations land within ±1% of 20 × 50 (sometimes below it)
+        // at 1/7 of the time; 5 × 20 is up to 13% worse, plain L2 up to 60% worse.
+        IrlsParams { outer_iterations: 10, cg_iterations: 10, reg0: 0.05, decay: 0.5 }
     }
 }
 
