@@ -144,6 +144,15 @@ struct Free {
     diffuse: bool,
 }
 
+impl Free {
+    /// f·|cos θ| and solid-angle pdf of the offset's BSDF at y towards world direction `dir`.
+    fn scatter(&self, scene: &Scene, dir: Vec3) -> (Spectrum, f32) {
+        let bsdf = bsdf_at(scene, self.y.material, self.y.front, self.y.uv);
+        let (wo, wi) = (self.y.frame.to_local(self.wo), self.y.frame.to_local(dir));
+        (bsdf.eval(wo, wi), bsdf.pdf(wo, wi))
+    }
+}
+
 /// The offset's half-vector bounce at a free vertex, traced.
 #[derive(Clone, Copy, Debug)]
 struct Step {
@@ -345,16 +354,15 @@ fn reconnect(scene: &Scene, xk: &Vertex, xn: &Vertex, f: &Free) -> Option<State>
     if (-dir).dot(xn.ng) <= 0.0 {
         return None; // the offset would arrive at x_{k+1} from its other side
     }
-    let bsdf = bsdf_at(scene, f.y.material, f.y.front, f.y.uv);
-    let (wo, wi) = (f.y.frame.to_local(f.wo), f.y.frame.to_local(dir));
     let j = reconnection_jacobian(xk.p, f.y.p, xn.p, xn.ng);
     if !(j > 0.0 && j.is_finite() && xk.pdf_out > 0.0) {
         return None;
     }
+    let (fy, pdf) = f.scatter(scene, dir);
     Some(State::Joined {
         wo: xn.frame.to_local(-dir),
-        beta: f.beta * bsdf.eval(wo, wi) * (j / (xk.pdf_out * xk.rr)),
-        r: f.r * bsdf.pdf(wo, wi) * j / xk.pdf_out,
+        beta: f.beta * fy * (j / (xk.pdf_out * xk.rr)),
+        r: f.r * pdf * j / xk.pdf_out,
     })
 }
 
@@ -366,10 +374,8 @@ fn reconnect_event(scene: &Scene, e: &Event, xk: Vec3, f: &Free) -> Option<(Spec
     }
     let dir = if e.at_infinity { e.z } else { (e.z - f.y.p).normalize() };
     let (le, pdf_l) = scene.light_eval(e.light, f.y.p, e.z)?;
-    let bsdf = bsdf_at(scene, f.y.material, f.y.front, f.y.uv);
-    let (wo, wi) = (f.y.frame.to_local(f.wo), f.y.frame.to_local(dir));
-    let fy = bsdf.eval(wo, wi);
-    let pdf_b = if e.delta { 0.0 } else { bsdf.pdf(wo, wi) };
+    let (fy, pdf) = f.scatter(scene, dir);
+    let pdf_b = if e.delta { 0.0 } else { pdf };
     let pdf_l = if e.pdf_l > 0.0 { pdf_l } else { 0.0 }; // same strategies as the base
     let j = if e.at_infinity || e.delta {
         1.0
@@ -450,10 +456,8 @@ pub fn offset_path(scene: &Scene, base: &Path, offset_raster: Vec2) -> Path {
                         own_pdf_in = s.pdf;
                     }
                 } else if let Some(n) = base.vertices.get(offset.k + 1) {
-                    let bsdf = bsdf_at(scene, f.y.material, f.y.front, f.y.uv);
                     let dir = (n.p - f.y.p).normalize();
-                    let (wo, wi) = (f.y.frame.to_local(f.wo), f.y.frame.to_local(dir));
-                    let (fv, pdf) = (bsdf.eval(wo, wi), bsdf.pdf(wo, wi));
+                    let (fv, pdf) = f.scatter(scene, dir);
                     v.wi = dir;
                     v.f_out = fv;
                     v.pdf_out = pdf;

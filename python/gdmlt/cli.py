@@ -156,10 +156,7 @@ def render_desc(desc, args, out: Path):
 
     scene = gdmlt.Scene(desc)
     res = gdmlt.render(scene, **render_settings(args))
-    layers = res["layers"]
-    gdmlt.write_exr(str(out), [(n, layers[n]) for n in layers])
-    if not args.no_png:
-        gdmlt.write_png(str(out.with_suffix(".png")), layers["Combined"])
+    write_layers(out, res["layers"], not args.no_png)
     return res["stats"]
 
 

@@ -3,19 +3,22 @@
 //! matrix-free, with a Jacobi preconditioner. Weights are per residual row (IRLS).
 
 use super::Channel;
+use std::borrow::Cow;
 
 pub struct WeightedProblem<'a> {
     pub c: &'a Channel<'a>,
     pub alpha: f64,
-    pub wg: Vec<f64>,
-    pub wx: Vec<f64>,
-    pub wy: Vec<f64>,
+    /// Row weights (shared by the channels of one IRLS step, hence borrowed there).
+    pub wg: Cow<'a, [f64]>,
+    pub wx: Cow<'a, [f64]>,
+    pub wy: Cow<'a, [f64]>,
 }
 
 impl<'a> WeightedProblem<'a> {
     pub fn unweighted(c: &'a Channel<'a>, alpha: f64) -> Self {
         let n = c.width * c.height;
-        WeightedProblem { c, alpha, wg: vec![1.0; n], wx: vec![1.0; n], wy: vec![1.0; n] }
+        let ones = || Cow::Owned(vec![1.0; n]);
+        WeightedProblem { c, alpha, wg: ones(), wx: ones(), wy: ones() }
     }
 
     fn apply(&self, v: &[f64], out: &mut [f64]) {

@@ -5,6 +5,7 @@
 
 use super::{solve_cg, solve_l2_dct, Channel, WeightedProblem};
 use rayon::prelude::*;
+use std::borrow::Cow;
 
 #[derive(Clone, Debug)]
 pub struct IrlsParams {
@@ -63,7 +64,8 @@ pub fn solve_l1(chans: &[Channel], alpha: f64, params: &IrlsParams) -> Vec<Vec<f
         };
         let (wg, wx, wy) = (split(0), split(1), split(2));
         sol.par_iter_mut().zip(chans.par_iter()).for_each(|(s, c)| {
-            let p = WeightedProblem { c, alpha, wg: wg.clone(), wx: wx.clone(), wy: wy.clone() };
+            let p =
+                WeightedProblem { c, alpha, wg: Cow::Borrowed(&wg), wx: Cow::Borrowed(&wx), wy: Cow::Borrowed(&wy) };
             *s = solve_cg(&p, s, params.cg_iterations, 1e-10);
         });
         reg *= params.decay;
