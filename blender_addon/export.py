@@ -116,10 +116,7 @@ def _color_or_texture(node, name, out, key, textures, warnings, what, default):
     if tex is not None:
         out[key + "_texture"] = tex
         return
-    if node.inputs.get(name) is not None and node.inputs[name].is_linked:
-        _input_value(node, name, warnings, what, default)  # the warning about the link
-    sock = node.inputs.get(name)
-    v = getattr(sock, "default_value", default) if sock is not None else default
+    v = _input_value(node, name, warnings, what, default)  # (warns if linked to something else)
     out[key] = tuple(v)[:3] if key == "base_color" else float(v)
 
 

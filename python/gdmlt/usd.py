@@ -154,7 +154,7 @@ class _Reader:
         det = np.linalg.det(m[:3, :3])
         nmat = np.linalg.inv(m[:3, :3]).T if abs(det) > 1e-30 else m[:3, :3]
 
-        def corner_values(values, interp, n_face_values=None):
+        def corner_values(values, interp):
             values = np.asarray(values, dtype=np.float64)
             if interp in ("vertex", "varying"):
                 return values[tris]

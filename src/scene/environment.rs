@@ -16,6 +16,8 @@ pub struct Environment {
     pub texture: Option<u32>,
     /// World direction → texture frame (a rotation).
     to_local: Mat3,
+    /// Mean luminance of the texture over the sphere (its pixels weighted by sin θ).
+    mean_texture_luminance: f32,
     /// Rows (v, from the bottom) and, per row, columns (u).
     rows: Distribution1D,
     cols: Vec<Distribution1D>,
@@ -45,6 +47,7 @@ impl Environment {
         let (w, h) = tex.size();
         let mut cols = Vec::with_capacity(h);
         let mut row_weights = Vec::with_capacity(h);
+        let mut weighted_sum = 0.0f64;
         for j in 0..h {
             let v = (j as f32 + 0.5) / h as f32;
             let sin_theta = (PI * (1.0 - v)).sin();
@@ -53,12 +56,22 @@ impl Environment {
             // a floor keeps every direction reachable (bilinear lookup spreads light into
             // neighbours of bright pixels)
             let mean = lum.iter().sum::<f32>() / w as f32;
+            weighted_sum += (mean * sin_theta) as f64;
             let floor = 1e-3 * mean.max(1e-8);
             let weights: Vec<f32> = lum.iter().map(|l| (l + floor) * sin_theta).collect();
             row_weights.push(weights.iter().sum::<f32>());
             cols.push(Distribution1D::new(&weights));
         }
-        Environment { scale, texture: Some(index), to_local, rows: Distribution1D::new(&row_weights), cols }
+        // ∫ sin θ dθ over [0, π] = 2 with h rows of width π/h: mean = Σ_rows mean·sin θ · π/(2h)
+        let mean_texture_luminance = (weighted_sum * std::f64::consts::PI / (2.0 * h as f64)) as f32;
+        Environment {
+            scale,
+            texture: Some(index),
+            to_local,
+            mean_texture_luminance,
+            rows: Distribution1D::new(&row_weights),
+            cols,
+        }
     }
 
     pub fn is_black(&self) -> bool {
@@ -108,23 +121,10 @@ impl Environment {
     }
 
     /// Mean radiance over the sphere (for choosing between lights).
-    pub fn mean_radiance(&self, textures: &[Texture]) -> f32 {
+    pub fn mean_radiance(&self) -> f32 {
         match self.texture {
             None => luminance(self.scale),
-            Some(t) => {
-                let tex = &textures[t as usize];
-                let (w, h) = tex.size();
-                let mut acc = 0.0f64;
-                for j in 0..h {
-                    let v = (j as f32 + 0.5) / h as f32;
-                    let s = (PI * (1.0 - v)).sin() as f64;
-                    for i in 0..w {
-                        acc += luminance(tex.eval(Vec2::new((i as f32 + 0.5) / w as f32, v))) as f64 * s;
-                    }
-                }
-                // ∫ sin θ dθ over [0, π] = 2, with h rows of width π/h: the row sum × π/(2h)
-                (acc / w as f64 * (PI as f64 / (2.0 * h as f64))) as f32 * luminance(self.scale)
-            }
+            Some(_) => self.mean_texture_luminance * luminance(self.scale),
         }
     }
 }
@@ -205,7 +205,7 @@ mod tests {
         let (a, b, p) = (by_sampling / n as f64, by_uniform / n as f64, pdf_integral);
         assert!((p - 1.0).abs() < 0.01, "pdf integrates to {p}");
         assert!((a - b).abs() < 0.02 * b, "sampling {a} vs uniform {b}");
-        let mean = env.mean_radiance(&tex) as f64 * 4.0 * std::f64::consts::PI;
+        let mean = env.mean_radiance() as f64 * 4.0 * std::f64::consts::PI;
         assert!((mean - b).abs() < 0.05 * b, "mean radiance × 4π {mean} vs {b}");
     }
 }

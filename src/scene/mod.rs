@@ -233,7 +233,7 @@ impl Scene {
         weights.push(if env.is_black() {
             0.0
         } else {
-            env.mean_radiance(&textures) * 4.0 * std::f32::consts::PI.powi(2) * bounds_radius * bounds_radius
+            env.mean_radiance() * 4.0 * std::f32::consts::PI.powi(2) * bounds_radius * bounds_radius
         });
         let light_distribution = Distribution1D::new(&weights);
         let hittable_lights = lights
