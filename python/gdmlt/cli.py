@@ -98,6 +98,15 @@ def build_parser():
                                     "on a procedural mesh and the Cornell box: Mrays/s of the core and of Embree.")
     rb.add_argument("--triangles", type=_positive_int, default=1_000_000)
     rb.add_argument("--rays", type=_positive_int, default=1_000_000)
+    pb = sub.add_parser("pathbench", help="path-tracing samples/s against Mitsuba 3 and LuxCore",
+                        description="Camera samples per second of `pt` (NEE and naive) against Mitsuba 3 and LuxCore "
+                                    "PATHCPU on the Cornell box and on it with a ~1M-triangle sphere inside; same "
+                                    "scene arrays, resolution, depth and threads. Needs requirements-bench.txt and "
+                                    "Debian's libllvm19 (for Mitsuba's LLVM backend).")
+    pb.add_argument("--size", type=_positive_int, default=128)
+    pb.add_argument("--triangles", type=_positive_int, default=1_000_000)
+    pb.add_argument("--max-bounces", type=int, default=8)
+    pb.add_argument("--seconds", type=float, default=8.0, help="about how long each cell renders")
     mg = sub.add_parser("merge", help="merge partial renders (--partial K/N) into one EXR",
                         description="Averages partial renders weighted by their samples and, for the "
                                     "gradient-domain methods, reconstructs once from the merged buffers.")
@@ -207,6 +216,11 @@ def main(argv=None):
             return 1
         print(f"wrote {out} ({stored['width']}×{stored['height']}, method {stored['method']}, "
               f"{stored['spp']} per pixel)")
+        return 0
+    if args.command == "pathbench":
+        from .pathbench import run as pathbench
+
+        pathbench(args.size, args.triangles, args.max_bounces, args.seconds)
         return 0
     if args.command == "raybench":
         from .raybench import run as raybench

@@ -1,0 +1,282 @@
+"""Peer renderers driven from GDMLT's own scene dictionary, for benchmarks that compare like
+with like: Mitsuba 3 (PyPI `mitsuba`, `llvm_ad_rgb`) and LuxCoreRender (PyPI `pyluxcore`).
+
+Only what both peers can reproduce exactly is translated: triangle meshes with diffuse
+(Lambert) materials, emissive meshes (two-sided, as Blender's), a constant-colour world and a
+perspective camera with Blender's framing (no shift, no depth of field). Anything else raises
+`Unsupported`, so that a benchmark never compares different scenes. Depth: GDMLT's
+`max_bounces` B (Blender's convention: 0 = direct light only) is Mitsuba's `max_depth` B + 2
+and LuxCore's `path.pathdepth.total` B + 1; the bench prints each peer's image mean next to
+GDMLT's to show the translation renders the same scene.
+
+LuxCore's bundled allocator crashes a process that imports numpy-heavy libraries after it, so
+it always runs in a child process (`python -m gdmlt.peers luxcore IN.npz OUT.npz`)."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+LLVM_CANDIDATES = ("/usr/lib/x86_64-linux-gnu/libLLVM.so.19.1", "/usr/lib/x86_64-linux-gnu/libLLVM-19.so")
+
+
+class Unsupported(Exception):
+    """The scene uses something a peer translation does not reproduce exactly."""
+
+
+def simple_scene(desc: dict) -> dict:
+    """Triangle soups per material plus camera and world, or Unsupported naming the feature."""
+    if desc.get("lights"):
+        raise Unsupported("lamp objects (only emissive meshes are translated)")
+    if desc.get("textures") or desc.get("world_texture") is not None:
+        raise Unsupported("image textures")
+    mats = desc["materials"]
+    for m in mats:
+        if m.get("metallic", 0) or m.get("transmission", 0):
+            raise Unsupported(f"material {m['name']!r} is not diffuse")
+        for key in ("base_color_texture", "roughness_texture", "glass_color", "metal_color"):
+            if m.get(key) is not None:
+                raise Unsupported(f"material {m['name']!r} has {key}")
+    cam = desc["camera"]
+    if cam.get("type", "PERSP") != "PERSP" or cam.get("shift_x", 0) or cam.get("shift_y", 0) \
+            or cam.get("aperture_radius", 0) or cam.get("fstop", 0):
+        raise Unsupported("camera other than a plain perspective one")
+    w, h = int(cam["resolution_x"]), int(cam["resolution_y"])
+    fit = cam.get("sensor_fit", "AUTO")
+    horizontal = (fit == "HORIZONTAL") or (fit == "AUTO" and w >= h)
+    sensor = cam["sensor_width"] if fit in ("AUTO", "HORIZONTAL") else cam["sensor_height"]
+    fov_fit = 2 * math.degrees(math.atan(sensor / (2 * cam["lens"])))
+    # vertical and horizontal fields of view
+    aspect = w / h
+    if horizontal:
+        fov_x = fov_fit
+        fov_y = 2 * math.degrees(math.atan(math.tan(math.radians(fov_fit) / 2) / aspect))
+    else:
+        fov_y = fov_fit
+        fov_x = 2 * math.degrees(math.atan(math.tan(math.radians(fov_fit) / 2) * aspect))
+    groups = {}
+    for mesh in desc["meshes"]:
+        p = np.asarray(mesh["positions"], np.float64)
+        t = np.asarray(mesh["indices"], np.int64).reshape(-1, 3)
+        ids = np.asarray(mesh.get("material_ids", np.zeros(len(t))), np.int64).reshape(-1)
+        for mid in np.unique(ids):
+            sel = t[ids == mid]
+            used, inv = np.unique(sel, return_inverse=True)
+            g = groups.setdefault(int(mid), ([], []))
+            g[0].append(p[used])
+            g[1].append(inv.reshape(-1, 3))
+    shapes = []
+    for mid, (ps, ts) in sorted(groups.items()):
+        off, tris = 0, []
+        for pp, tt in zip(ps, ts):
+            tris.append(tt + off)
+            off += len(pp)
+        m = mats[mid]
+        shapes.append(dict(name=f"m{mid}", positions=np.concatenate(ps).astype(np.float32),
+                           indices=np.concatenate(tris).astype(np.int32),
+                           base_color=[float(c) for c in m["base_color"]],
+                           emission=[float(c) for c in m.get("emission", (0, 0, 0))]))
+    return dict(shapes=shapes, matrix=np.asarray(cam["matrix"], np.float64), width=w, height=h,
+                fov_x=fov_x, fov_y=fov_y, clip_start=float(cam.get("clip_start", 0.01)),
+                clip_end=float(cam.get("clip_end", 1000.0)), world=[float(c) for c in desc.get("world", (0, 0, 0))])
+
+
+def two_sided(simple: dict) -> list:
+    """The shapes with every emissive one doubled: both peers' area lights emit from the front
+    only, Blender's from both sides. The copy faces the other way and sits 1e-5 × the scene's
+    size behind, so each side is seen (and sampled) from its own half-space and occludes the
+    other (an exactly coincident copy would make the hit order a coin toss)."""
+    allp = np.concatenate([s["positions"] for s in simple["shapes"]])
+    eps = 1e-5 * float(np.max(allp.max(0) - allp.min(0)))
+    out = []
+    for s in simple["shapes"]:
+        out.append(s)
+        if any(s["emission"]):
+            p, t = s["positions"].astype(np.float64), s["indices"]
+            # vertex normals from the area-weighted face normals (flat emitters: all equal)
+            fn = np.cross(p[t[:, 1]] - p[t[:, 0]], p[t[:, 2]] - p[t[:, 0]])
+            vn = np.zeros_like(p)
+            for k in range(3):
+                np.add.at(vn, t[:, k], fn)
+            vn /= np.maximum(np.linalg.norm(vn, axis=1, keepdims=True), 1e-30)
+            out.append(dict(s, name=s["name"] + "_back", positions=(p - eps * vn).astype(np.float32),
+                            indices=np.ascontiguousarray(t[:, ::-1])))
+    return out
+
+
+# ---------------------------------------------------------------- Mitsuba 3
+
+
+def import_mitsuba(threads: int = 0):
+    """Mitsuba 3 with the LLVM variant (needs Debian's libllvm19: `apt-get install libllvm19`)."""
+    if "DRJIT_LIBLLVM_PATH" not in os.environ:
+        for c in LLVM_CANDIDATES:
+            if Path(c).exists():
+                os.environ["DRJIT_LIBLLVM_PATH"] = c
+                break
+    try:
+        import drjit as dr
+        import mitsuba as mi
+    except ImportError as e:
+        raise Unsupported("mitsuba is not installed (pip install -r requirements-bench.txt)") from e
+    mi.set_variant("llvm_ad_rgb")
+    if threads:
+        dr.set_thread_count(threads)
+    return mi, dr
+
+
+def mitsuba_scene(mi, simple: dict, max_bounces: int, nee: bool, seed_spp: int = 1):
+    # Blender's camera looks down −Z with +Y up; Mitsuba's down +Z with +Y up and +X to the left.
+    to_world = simple["matrix"] @ np.diag([-1.0, 1.0, -1.0, 1.0])
+    scene = {
+        "type": "scene",
+        "integrator": {"type": "path" if nee else "prb_basic", "max_depth": max_bounces + 2},
+        "sensor": {
+            "type": "perspective", "fov": simple["fov_x"], "fov_axis": "x",
+            "near_clip": simple["clip_start"], "far_clip": simple["clip_end"],
+            "to_world": mi.ScalarTransform4f(to_world.tolist()),
+            "film": {"type": "hdrfilm", "width": simple["width"], "height": simple["height"],
+                     "rfilter": {"type": "box"}, "pixel_format": "rgb"},
+            "sampler": {"type": "independent", "sample_count": seed_spp},
+        },
+    }
+    if any(simple["world"]):
+        scene["world"] = {"type": "constant", "radiance": {"type": "rgb", "value": simple["world"]}}
+    for s in two_sided(simple):
+        props = mi.Properties()
+        # two-sided, as Blender's BSDFs (a Mitsuba BSDF is black from the back)
+        props["bsdf"] = mi.load_dict({"type": "twosided", "bsdf": {
+            "type": "diffuse", "reflectance": {"type": "rgb", "value": s["base_color"]}}})
+        if any(s["emission"]):
+            props["emitter"] = mi.load_dict({"type": "area", "radiance": {"type": "rgb", "value": s["emission"]}})
+        mesh = mi.Mesh(s["name"], len(s["positions"]), len(s["indices"]), props=props, has_vertex_normals=False)
+        params = mi.traverse(mesh)
+        params["vertex_positions"] = mi.Float(np.ascontiguousarray(s["positions"], np.float32).ravel())
+        params["faces"] = mi.UInt32(np.ascontiguousarray(s["indices"], np.uint32).ravel())
+        params.update()
+        scene[s["name"]] = mesh
+    return mi.load_dict(scene)
+
+
+def mitsuba_render(mi, scene, spp: int, seed: int = 0) -> np.ndarray:
+    img = mi.render(scene, spp=spp, seed=seed)
+    return np.array(img, dtype=np.float32)[:, :, :3]
+
+
+# ---------------------------------------------------------------- LuxCore (child process)
+
+
+def _luxcore_child(inp: str, outp: str):
+    import pyluxcore
+
+    data = np.load(inp, allow_pickle=False)
+    cfg = json.loads(str(data["config"]))
+    pyluxcore.Init(lambda msg: None)
+    scn = pyluxcore.Scene()
+    props = pyluxcore.Properties()
+    w, h = cfg["width"], cfg["height"]
+    m = data["matrix"]
+    eye = m[:3, 3]
+    fwd = -m[:3, 2]
+    up = m[:3, 1]
+    props.Set(pyluxcore.Property("scene.camera.type", "perspective"))
+    props.Set(pyluxcore.Property("scene.camera.lookat.orig", [float(x) for x in eye]))
+    props.Set(pyluxcore.Property("scene.camera.lookat.target", [float(x) for x in eye + fwd]))
+    props.Set(pyluxcore.Property("scene.camera.up", [float(x) for x in up]))
+    # LuxCore's field of view is along the shorter image side.
+    props.Set(pyluxcore.Property("scene.camera.fieldofview", float(min(cfg["fov_x"], cfg["fov_y"]))))
+    # Its image sits one pixel row low; shift the screen window back (PEERS.md; checked by the
+    # bench against GDMLT's framing).
+    ax, ay = (w / h, 1.0) if w >= h else (1.0, h / w)
+    dy = 2.0 * ay / h
+    props.Set(pyluxcore.Property("scene.camera.screenwindow", [-ax, ax, -ay - dy, ay - dy]))
+    props.Set(pyluxcore.Property("scene.camera.cliphither", cfg["clip_start"]))
+    props.Set(pyluxcore.Property("scene.camera.clipyon", cfg["clip_end"]))
+    if any(cfg["world"]):
+        props.Set(pyluxcore.Property("scene.lights.world.type", "constantinfinite"))
+        props.Set(pyluxcore.Property("scene.lights.world.color", cfg["world"]))
+        props.Set(pyluxcore.Property("scene.lights.world.gain", [1.0, 1.0, 1.0]))
+    for i, s in enumerate(cfg["shapes"]):
+        pos = data[f"p{i}"]
+        tri = data[f"t{i}"]
+        name = s["name"]
+        mat = name.removesuffix("_back")
+        mp = f"scene.materials.{mat}"
+        props.Set(pyluxcore.Property(f"{mp}.type", "matte"))
+        props.Set(pyluxcore.Property(f"{mp}.kd", s["base_color"]))
+        if any(s["emission"]):
+            props.Set(pyluxcore.Property(f"{mp}.emission", s["emission"]))
+            props.Set(pyluxcore.Property(f"{mp}.emission.gain", [1.0, 1.0, 1.0]))
+            props.Set(pyluxcore.Property(f"{mp}.emission.power", 0.0))
+            props.Set(pyluxcore.Property(f"{mp}.emission.efficency", 0.0))
+            if not cfg["nee"]:
+                props.Set(pyluxcore.Property(f"{mp}.emission.directlightsampling.type", "DISABLED"))
+        scn.DefineMesh(name, [tuple(map(float, p)) for p in pos], [tuple(map(int, x)) for x in tri],
+                       None, None, None, None)
+        props.Set(pyluxcore.Property(f"scene.objects.{name}.shape", name))
+        props.Set(pyluxcore.Property(f"scene.objects.{name}.material", mat))
+    scn.Parse(props)
+    c = pyluxcore.Properties()
+    depth = cfg["max_bounces"] + 1
+    for k, v in [("renderengine.type", "PATHCPU"), ("sampler.type", cfg["sampler"]),
+                 ("sampler.sobol.adaptive.strength", 0.0), ("film.filter.type", "NONE"),
+                 ("film.width", w), ("film.height", h), ("path.pathdepth.total", depth),
+                 ("path.pathdepth.diffuse", depth), ("path.pathdepth.glossy", depth),
+                 ("path.pathdepth.specular", depth), ("path.clamping.variance.maxvalue", 0.0),
+                 ("native.threads.count", cfg["threads"] or os.cpu_count()),
+                 ("batch.halttime", 0), ("batch.haltspp", 0)]:
+        c.Set(pyluxcore.Property(k, v))
+    session = pyluxcore.RenderSession(pyluxcore.RenderConfig(c, scn))
+    buf = np.zeros(w * h * 3, np.float32)
+    images, times, samples = [], [], []
+    t0 = time.perf_counter()
+    session.Start()
+    for budget in cfg["budgets"]:
+        while time.perf_counter() - t0 < budget:
+            time.sleep(min(0.02, max(0.0, budget - (time.perf_counter() - t0))))
+        session.UpdateStats()
+        stats = session.GetStats()
+        session.GetFilm().GetOutputFloat(pyluxcore.FilmOutputType.RGB, buf)
+        times.append(time.perf_counter() - t0)
+        samples.append(stats.Get("stats.renderengine.pass").GetFloat() * w * h)
+        images.append(buf.reshape(h, w, 3)[::-1].copy())
+    session.Stop()
+    pyluxcore.SetLogHandler(None)
+    np.savez(outp, images=np.stack(images), times=np.array(times), samples=np.array(samples))
+
+
+def luxcore_render(simple: dict, budgets, max_bounces: int, nee: bool, sampler="SOBOL", threads=0):
+    """Images after each wall-clock budget (seconds from the session's start, one session),
+    with the sample counts reached then. Runs in a child process."""
+    cfg = dict(width=simple["width"], height=simple["height"], fov_x=simple["fov_x"], fov_y=simple["fov_y"],
+               clip_start=simple["clip_start"], clip_end=simple["clip_end"], world=simple["world"],
+               max_bounces=max_bounces, nee=nee, sampler=sampler, threads=threads, budgets=list(budgets),
+               shapes=[{k: s[k] for k in ("name", "base_color", "emission")} for s in two_sided(simple)])
+    arrays = {"config": json.dumps(cfg), "matrix": simple["matrix"]}
+    for i, s in enumerate(two_sided(simple)):
+        arrays[f"p{i}"] = s["positions"]
+        arrays[f"t{i}"] = s["indices"]
+    with tempfile.TemporaryDirectory() as tmp:
+        inp, outp = Path(tmp) / "in.npz", Path(tmp) / "out.npz"
+        np.savez(inp, **arrays)
+        r = subprocess.run([sys.executable, "-m", "gdmlt.peers", "luxcore", str(inp), str(outp)],
+                           capture_output=True, text=True)
+        if r.returncode != 0 or not outp.exists():
+            raise RuntimeError(f"LuxCore child failed ({r.returncode}): {r.stderr.strip()[-600:]}")
+        out = np.load(outp)
+        return out["images"], out["times"], out["samples"]
+
+
+if __name__ == "__main__":
+    if len(sys.argv) == 4 and sys.argv[1] == "luxcore":
+        _luxcore_child(sys.argv[2], sys.argv[3])
+    else:
+        sys.exit("usage: python -m gdmlt.peers luxcore IN.npz OUT.npz")
