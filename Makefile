@@ -24,8 +24,17 @@ $(STAMP): requirements-dev.txt
 
 setup: $(STAMP)
 
+# The core twice: portable (maturin, installed editable into the venv) and, on x86-64, with
+# -C target-cpu=x86-64-v3 as gdmlt/_core_v3 (its own target dir, so neither build evicts
+# the other); `import gdmlt` loads the v3 one only on CPUs that run it.
+V3_SO := python/gdmlt/_core_v3.abi3.so
 build: $(STAMP)
 	$(VENV)/bin/maturin develop --release --quiet
+	@if [ "$$(uname -m)" = x86_64 ]; then \
+		RUSTFLAGS="-C target-cpu=x86-64-v3" cargo build --release --quiet --lib --features v3-module \
+			--target-dir target/x86-64-v3 && \
+		cp target/x86-64-v3/release/libgdmlt.so $(V3_SO).tmp && mv $(V3_SO).tmp $(V3_SO); \
+	fi
 
 demo: build
 	@mkdir -p out
@@ -42,7 +51,7 @@ test-python: build
 # The Blender extension: dist/gdmlt-<version>.zip with the core bundled as an abi3 wheel.
 # Install it in Blender with Edit > Preferences > Get Extensions > Install from Disk, or
 # blender --command extension install-file -r user_default -e dist/gdmlt-<version>.zip
-addon: $(STAMP)
+addon: build
 	$(PY) tools/build_addon.py
 
 # Error over time on the built-in Cornell box (prints a table, draws out/bench-cornell.png).

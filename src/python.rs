@@ -616,15 +616,52 @@ fn write_png(path: std::path::PathBuf, image: &Bound<'_, PyAny>) -> PyResult<()>
     crate::output::write_png(&path, &img).map_err(|e| PyRuntimeError::new_err(e.to_string()))
 }
 
-#[pymodule]
-fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
+/// Whether this CPU runs the x86-64-v3 build (AVX2, FMA, BMI1/2, LZCNT, MOVBE, F16C), so
+/// that `gdmlt/__init__.py` can load it instead of the portable one.
+#[pyfunction]
+fn cpu_supports_x86_64_v3() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        std::arch::is_x86_feature_detected!("avx2")
+            && std::arch::is_x86_feature_detected!("fma")
+            && std::arch::is_x86_feature_detected!("bmi1")
+            && std::arch::is_x86_feature_detected!("bmi2")
+            && std::arch::is_x86_feature_detected!("lzcnt")
+            && std::arch::is_x86_feature_detected!("movbe")
+            && std::arch::is_x86_feature_detected!("f16c")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
+    }
+}
+
+fn init_module(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Scene>()?;
     m.add_function(wrap_pyfunction!(render, m)?)?;
     m.add_function(wrap_pyfunction!(builtin_scene, m)?)?;
     m.add_function(wrap_pyfunction!(write_exr, m)?)?;
     m.add_function(wrap_pyfunction!(write_png, m)?)?;
     m.add_function(wrap_pyfunction!(reconstruct, m)?)?;
+    m.add_function(wrap_pyfunction!(cpu_supports_x86_64_v3, m)?)?;
     m.add("METHODS", vec!["pt", "gdpt", "pssmlt", "gdpssmlt"])?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    m.add("BUILD_TARGET", if cfg!(target_feature = "avx2") { "x86-64-v3" } else { "portable" })?;
+    m.add("SOURCE_HASH", env!("GDMLT_SOURCE_HASH"))?;
     Ok(())
+}
+
+/// The portable module (baseline x86-64 / any target).
+#[cfg(not(feature = "v3-module"))]
+#[pymodule]
+fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    init_module(m)
+}
+
+/// The same core compiled with `-C target-cpu=x86-64-v3` (Makefile `build`), loaded at
+/// import time only on CPUs that have those instructions: a wheel never crashes an older CPU.
+#[cfg(feature = "v3-module")]
+#[pymodule]
+fn _core_v3(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    init_module(m)
 }

@@ -8,7 +8,34 @@
 Blender: ``gdmlt.enable_addon()`` registers the render engine in the running bpy.
 """
 
-from ._core import Scene, render, builtin_scene, write_exr, write_png, reconstruct, METHODS, __version__
+import os as _os
+
+from . import _core
+
+
+def _pick_core():
+    """The x86-64-v3 build of the core when this CPU runs it and it was built from the same
+    sources (the Makefile builds both; GDMLT_CPU=portable forces the portable one), else the
+    portable build."""
+    if _os.environ.get("GDMLT_CPU", "").lower() != "portable" and _core.cpu_supports_x86_64_v3():
+        try:
+            from . import _core_v3
+        except ImportError:
+            return _core
+        if _core_v3.SOURCE_HASH == _core.SOURCE_HASH:
+            return _core_v3
+        import warnings
+
+        warnings.warn("gdmlt: _core_v3 was built from other sources than _core (run `make build`); "
+                      "using the portable core", RuntimeWarning, stacklevel=2)
+    return _core
+
+
+_impl = _pick_core()
+Scene, render, builtin_scene = _impl.Scene, _impl.render, _impl.builtin_scene
+write_exr, write_png, reconstruct = _impl.write_exr, _impl.write_png, _impl.reconstruct
+METHODS, __version__, BUILD_TARGET = _impl.METHODS, _impl.__version__, _impl.BUILD_TARGET
 from .addon import enable_addon, addon_dir
 
-__all__ = ["Scene", "render", "builtin_scene", "write_exr", "write_png", "reconstruct", "METHODS", "enable_addon", "addon_dir", "__version__"]
+__all__ = ["Scene", "render", "builtin_scene", "write_exr", "write_png", "reconstruct", "METHODS", "enable_addon", "addon_dir",
+           "__version__", "BUILD_TARGET"]
