@@ -11,7 +11,7 @@ export PATH := $(abspath $(VENV))/bin:$(PATH)
 # Keep Blender's user config out of $HOME during demos and tests.
 export BLENDER_USER_RESOURCES := $(abspath out/blender-user)
 
-.PHONY: all setup build demo test test-rust test-python examples addon bench bench-monastery raybench clean
+.PHONY: all setup build demo test test-rust test-python examples addon bench bench-monastery bench-peers raybench clean
 
 all: demo
 
@@ -74,6 +74,20 @@ bench-monastery: build
 		--denoise --plot out/bench-monastery.png
 
 # Ray throughput of the core's BVH against Embree on 1M triangles (prints a table).
+# Against the peers, in one run each (README "Measured"): path-tracing samples/s against
+# Mitsuba 3 and LuxCore, then error over time of every method against Cycles, LuxCore (path
+# and Metropolis) and Mitsuba on the Cornell box and the gap-lit scene. About 12 minutes.
+LLVM19 := /usr/lib/x86_64-linux-gnu/libLLVM.so.19.1
+bench-peers: build
+	$(PY) -m pip install -q -r requirements-bench.txt
+	@[ -e $(LLVM19) ] || apt-get install -y -q libllvm19 || \
+		echo "note: Mitsuba's LLVM backend needs libllvm19 (apt-get install libllvm19); its rows will be skipped"
+	$(VENV)/bin/gdmlt pathbench
+	$(VENV)/bin/gdmlt bench --scene cornell --size 128 --budgets 1,2,4,8 --methods pt,gdpt,pssmlt,gdpssmlt \
+		--peers cycles,luxcore,luxcore-mlt,mitsuba --plot out/bench-peers-cornell.png
+	$(VENV)/bin/gdmlt bench --scene gap --size 128 --budgets 1,2,4,8 --methods pt,gdpt,pssmlt,gdpssmlt \
+		--peers cycles,luxcore,luxcore-mlt,mitsuba --plot out/bench-peers-gap.png
+
 raybench: build
 	$(PY) -m pip install -q -r requirements-bench.txt
 	$(VENV)/bin/gdmlt raybench

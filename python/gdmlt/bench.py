@@ -1,6 +1,7 @@
 """`gdmlt bench`: error against a converged reference at equal wall-clock budgets, per
 method and light mode, on a built-in scene or a .blend file. Prints a table (relMSE and
-SMAPE as defined in ALGORITHM.md §5b) and, with --plot, draws error against time (PNG,
+SMAPE as defined in ALGORITHM.md §5b) — also, with --peers, for Cycles, LuxCore (path and
+Metropolis samplers) and Mitsuba 3 at the same budgets against the same reference — and, with --plot, draws error against time (PNG,
 needs matplotlib). With --denoise, every render is also passed through Intel Open Image
 Denoise (pyoidn, with the albedo and normal passes) and reported as its own row — the
 question the paper leaves open (is GD-MLT better than MLT + a denoiser?); the denoiser's own
@@ -52,10 +53,59 @@ def scene_desc(scene: str, size):
     return desc, path.stem
 
 
+PEERS = ("cycles", "luxcore", "luxcore-mlt", "mitsuba")
+
+
+def peer_rows(peer, scene, desc, budgets, nee, max_bounces, threads, size):
+    """Images of a peer renderer at each budget, or a reason it was skipped. Cycles renders
+    the .blend itself (or the built-in scene rebuilt in Blender); LuxCore and Mitsuba render
+    the translation of the scene arrays (gdmlt.peers), when the scene is simple enough."""
+    from . import peers
+
+    try:
+        simple = peers.simple_scene(desc)
+    except peers.Unsupported as e:
+        simple, why = None, str(e)
+    if peer == "cycles":
+        blend = scene if str(scene).lower().endswith(".blend") else None
+        if blend is None and simple is None:
+            return None, f"skipped: {why}"
+        imgs, times, _ = peers.cycles_render(budgets, max_bounces, nee, threads, simple=None if blend else simple,
+                                             camera=desc["camera"], blend=blend, size=size)
+        return imgs, f"cycles wall time per budget (sync included): {', '.join(f'{t:.2f}' for t in times)} s"
+    if simple is None:
+        return None, f"skipped: {why}"
+    if peer.startswith("luxcore"):
+        imgs, times, samples = peers.luxcore_render(simple, budgets, max_bounces, nee,
+                                                    sampler="METROPOLIS" if peer == "luxcore-mlt" else "SOBOL",
+                                                    threads=threads)
+        return imgs, None
+    mi, dr = peers.import_mitsuba(threads)
+    msc = peers.mitsuba_scene(mi, simple, max_bounces, nee)
+    w, h = simple["width"], simple["height"]
+    peers.mitsuba_render(mi, msc, 2)  # compile the kernels
+    spp, dt = 4, 0.0
+    while dt < 0.3 and spp < 1 << 20:  # time a run long enough to set spp from
+        spp *= 4
+        t = time.perf_counter()
+        peers.mitsuba_render(mi, msc, spp)
+        dt = time.perf_counter() - t
+    per_spp = dt / spp
+    imgs, used = [], []
+    for b in budgets:
+        spp = max(1, int(b / per_spp))
+        t = time.perf_counter()
+        imgs.append(peers.mitsuba_render(mi, msc, spp, seed=1))
+        used.append(time.perf_counter() - t)
+        per_spp = used[-1] / spp  # Mitsuba has no time limit: refine the rate as it goes
+    return imgs, f"mitsuba time used per budget: {', '.join(f'{u:.2f}' for u in used)} s (spp set from a timed run)"
+
+
 def run(scene="cornell", size=None, budgets=(1.0, 2.0, 4.0), methods=("pt", "gdpt", "pssmlt", "gdpssmlt"),
         modes=(True, False), reference_spp=8192, max_bounces=8, threads=0, plot=None, extra=None, denoise=False,
-        out=print):
-    """extra: more render settings for every run (alpha_target, reconstruction, ...)."""
+        peers=(), out=print):
+    """extra: more render settings for every run (alpha_target, reconstruction, ...).
+    peers: any of PEERS, rendered at the same budgets and compared with the same reference."""
     import gdmlt
 
     desc, label = scene_desc(scene, size)
@@ -95,6 +145,19 @@ def run(scene="cornell", size=None, budgets=(1.0, 2.0, 4.0), methods=("pt", "gdp
             for name, cs in [(m, cells)] + ([(m + "+oidn", dcells)] if denoise else []):
                 rows.append((name, nee, cs))
                 out(f"{name:14} {str(nee):5} " + " ".join(f"{r:14.4g} {s:7.4f}" for r, s in cs))
+        for peer in peers:
+            try:
+                imgs, note = peer_rows(peer, scene, desc, budgets, nee, max_bounces, threads, size)
+            except Exception as e:  # noqa: BLE001 — a peer that fails is reported, the bench goes on
+                imgs, note = None, f"failed: {e}"
+            if imgs is None:
+                out(f"# {peer} ({'NEE' if nee else 'naive'}): {note}")
+                continue
+            cs = [(rel_mse(i, ref), smape(i, ref)) for i in imgs]
+            rows.append((peer, nee, cs))
+            out(f"{peer:14} {str(nee):5} " + " ".join(f"{r:14.4g} {s:7.4f}" for r, s in cs))
+            if note:
+                out(f"# {note}")
     if denoise_time:
         out(f"# denoiser time per image: {np.median(denoise_time):.2f} s (median, not charged to the budget)")
     if plot:

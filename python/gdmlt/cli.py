@@ -133,6 +133,9 @@ def build_parser():
     b.add_argument("--plot", help="write a PNG of relMSE against time (needs matplotlib)")
     b.add_argument("--denoise", action="store_true",
                    help="also report every render after Intel Open Image Denoise (needs pyoidn)")
+    b.add_argument("--peers", default="",
+                   help="also render with these at the same budgets: cycles, luxcore (PATHCPU + Sobol), "
+                        "luxcore-mlt (PATHCPU + Metropolis), mitsuba (comma-separated; needs requirements-bench.txt)")
     return p
 
 
@@ -178,7 +181,7 @@ def main(argv=None):
             budgets = tuple(float(x) for x in args.budgets.split(","))
         except ValueError:
             parser.error(f"--budgets: '{args.budgets}' is not a comma-separated list of seconds")
-        methods = tuple(m.strip() for m in args.methods.split(","))
+        methods = tuple(m.strip() for m in args.methods.split(",") if m.strip())
         bad = [m for m in methods if m not in METHODS]
         if bad:
             parser.error(f"--methods: unknown {', '.join(bad)} (choose from {', '.join(METHODS)})")
@@ -190,10 +193,16 @@ def main(argv=None):
             parser.error("--size takes N or W H")
         size = None if not args.size else (args.size[0], args.size[-1])
         extra = {} if args.alpha_target is None else {"alpha_target": args.alpha_target}
+        from .bench import PEERS
+
+        peers = tuple(x.strip() for x in args.peers.split(",") if x.strip())
+        bad = [x for x in peers if x not in PEERS]
+        if bad:
+            parser.error(f"--peers: unknown {', '.join(bad)} (choose from {', '.join(PEERS)})")
         try:
             run(args.scene, size, budgets, methods, modes, reference_spp=args.reference_spp,
                 max_bounces=args.max_bounces, threads=args.threads, plot=args.plot, extra=extra,
-                denoise=args.denoise)
+                denoise=args.denoise, peers=peers)
         except (ValueError, RuntimeError, FileNotFoundError) as e:
             print(f"gdmlt: error: {e}", file=sys.stderr)
             return 1

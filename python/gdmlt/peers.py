@@ -260,23 +260,166 @@ def luxcore_render(simple: dict, budgets, max_bounces: int, nee: bool, sampler="
                clip_start=simple["clip_start"], clip_end=simple["clip_end"], world=simple["world"],
                max_bounces=max_bounces, nee=nee, sampler=sampler, threads=threads, budgets=list(budgets),
                shapes=[{k: s[k] for k in ("name", "base_color", "emission")} for s in two_sided(simple)])
-    arrays = {"config": json.dumps(cfg), "matrix": simple["matrix"]}
+    arrays = {"matrix": simple["matrix"]}
     for i, s in enumerate(two_sided(simple)):
         arrays[f"p{i}"] = s["positions"]
         arrays[f"t{i}"] = s["indices"]
+    return _run_child("luxcore", cfg, arrays)
+
+
+# ---------------------------------------------------------------- Cycles (bpy, child process)
+
+
+def cycles_unbiased(scene, samples: int, seed: int, bounces: int, threads: int = 0):
+    """Cycles as an unbiased reference (BLENDER.md): no clamping, no glossy filter, no
+    denoiser, no adaptive sampling, no light threshold, a one-pixel box filter, caustics on,
+    the same bounce limit for every kind."""
+    scene.render.engine = "CYCLES"
+    c = scene.cycles
+    c.device = "CPU"
+    c.samples = samples
+    c.seed = seed
+    c.use_denoising = False
+    c.use_adaptive_sampling = False
+    c.sample_clamp_direct = 0.0
+    c.sample_clamp_indirect = 0.0
+    c.blur_glossy = 0.0
+    c.light_sampling_threshold = 0.0  # the default 0.01 drops faint light contributions (biased)
+    c.pixel_filter_type = "BOX"
+    c.filter_width = 1.0
+    c.max_bounces = c.diffuse_bounces = c.glossy_bounces = c.transmission_bounces = bounces
+    c.transparent_max_bounces = bounces
+    c.caustics_reflective = c.caustics_refractive = True
+    scene.render.threads_mode = "FIXED" if threads else "AUTO"
+    if threads:
+        scene.render.threads = threads
+    scene.view_settings.view_transform = "Standard"
+
+
+def _blend_from_simple(bpy, simple: dict, cam: dict):
+    """A Blender scene of the translated shapes (Diffuse/Emission materials) and camera."""
+    import mathutils
+
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    scene = bpy.context.scene
+    for i, s in enumerate(simple["shapes"]):
+        mat = bpy.data.materials.new(s["name"])
+        mat.use_nodes = True
+        nt = mat.node_tree
+        nt.nodes.clear()
+        out = nt.nodes.new("ShaderNodeOutputMaterial")
+        df = nt.nodes.new("ShaderNodeBsdfDiffuse")
+        df.inputs["Color"].default_value = (*s["base_color"], 1.0)
+        shader = df.outputs["BSDF"]
+        if any(s["emission"]):
+            em = nt.nodes.new("ShaderNodeEmission")
+            em.inputs["Color"].default_value = (*s["emission"], 1.0)
+            em.inputs["Strength"].default_value = 1.0
+            add = nt.nodes.new("ShaderNodeAddShader")
+            nt.links.new(df.outputs["BSDF"], add.inputs[0])
+            nt.links.new(em.outputs["Emission"], add.inputs[1])
+            shader = add.outputs["Shader"]
+        nt.links.new(shader, out.inputs["Surface"])
+        me = bpy.data.meshes.new(s["name"])
+        me.from_pydata(s["positions"].tolist(), [], s["indices"].tolist())
+        me.materials.append(mat)
+        me.update()
+        ob = bpy.data.objects.new(s["name"], me)
+        scene.collection.objects.link(ob)
+    c = bpy.data.cameras.new("Camera")
+    c.lens, c.sensor_width, c.sensor_height = cam["lens"], cam["sensor_width"], cam.get("sensor_height", 24.0)
+    c.sensor_fit = cam.get("sensor_fit", "AUTO")
+    c.clip_start, c.clip_end = cam["clip_start"], cam["clip_end"]
+    ob = bpy.data.objects.new("Camera", c)
+    ob.matrix_world = mathutils.Matrix(simple["matrix"].tolist())
+    scene.collection.objects.link(ob)
+    scene.camera = ob
+    world = bpy.data.worlds.new("World")
+    world.use_nodes = True
+    world.node_tree.nodes["Background"].inputs["Color"].default_value = (*simple["world"], 1.0)
+    scene.world = world
+    r = scene.render
+    r.resolution_x, r.resolution_y, r.resolution_percentage = simple["width"], simple["height"], 100
+    return scene
+
+
+def _cycles_child(inp: str, outp: str):
+    from .blend import import_bpy
+
+    data = np.load(inp, allow_pickle=False)
+    cfg = json.loads(str(data["config"]))
+    bpy = import_bpy()
+    if cfg.get("blend"):
+        bpy.ops.wm.open_mainfile(filepath=cfg["blend"])
+        scene = bpy.context.scene
+        if cfg.get("size"):
+            scene.render.resolution_x, scene.render.resolution_y = cfg["size"]
+            scene.render.resolution_percentage = 100
+    else:
+        simple = dict(shapes=[dict(s, positions=data[f"p{i}"], indices=data[f"t{i}"]) for i, s in enumerate(cfg["shapes"])],
+                      matrix=data["matrix"], width=cfg["width"], height=cfg["height"], world=cfg["world"])
+        scene = _blend_from_simple(bpy, simple, cfg["camera"])
+    cycles_unbiased(scene, 1 << 24, seed=1, bounces=cfg["max_bounces"], threads=cfg["threads"])
+    if not cfg["nee"]:
+        # the paper's naive mode: emissive surfaces and the world only found by hitting them
+        # (lamp objects, if any, are still sampled: Cycles cannot turn that off)
+        for mat in bpy.data.materials:
+            mat.cycles.emission_sampling = "NONE"
+        if scene.world is not None:
+            scene.world.cycles.sampling_method = "NONE"
+    img = scene.render.image_settings
+    img.file_format, img.color_depth, img.color_mode = "OPEN_EXR", "32", "RGB"
+    scene.render.use_file_extension = False
+    images, times = [], []
+    w = scene.render.resolution_x * scene.render.resolution_percentage // 100
+    h = scene.render.resolution_y * scene.render.resolution_percentage // 100
+    for k, budget in enumerate(cfg["budgets"]):
+        scene.cycles.time_limit = budget
+        path = str(Path(outp).with_suffix(f".{k}.exr"))
+        scene.render.filepath = path
+        t = time.perf_counter()
+        bpy.ops.render.render(write_still=True)
+        times.append(time.perf_counter() - t)
+        im = bpy.data.images.load(path)
+        px = np.empty(w * h * 4, np.float32)
+        im.pixels.foreach_get(px)
+        bpy.data.images.remove(im)
+        images.append(px.reshape(h, w, 4)[::-1, :, :3].copy())
+    np.savez(outp, images=np.stack(images), times=np.array(times), samples=np.zeros(len(times)))
+
+
+def cycles_render(budgets, max_bounces: int, nee: bool, threads=0, simple=None, camera=None, blend=None, size=None):
+    """Cycles images after each time limit (one render per budget, Cycles' own time limit),
+    of a .blend file or of a translated simple scene. Runs in a child process (bpy)."""
+    cfg = dict(budgets=list(budgets), max_bounces=max_bounces, nee=nee, threads=threads,
+               blend=str(Path(blend).resolve()) if blend else None, size=list(size) if size else None)
+    arrays = {}
+    if simple is not None:
+        cfg.update(width=simple["width"], height=simple["height"], world=simple["world"],
+                   camera={k: (v if isinstance(v, (str, int, float)) else None) for k, v in camera.items()
+                           if k != "matrix"},
+                   shapes=[{k: s[k] for k in ("name", "base_color", "emission")} for s in simple["shapes"]])
+        arrays["matrix"] = simple["matrix"]
+        for i, s in enumerate(simple["shapes"]):
+            arrays[f"p{i}"] = s["positions"]
+            arrays[f"t{i}"] = s["indices"]
+    return _run_child("cycles", cfg, arrays)
+
+
+def _run_child(kind: str, cfg: dict, arrays: dict):
     with tempfile.TemporaryDirectory() as tmp:
         inp, outp = Path(tmp) / "in.npz", Path(tmp) / "out.npz"
-        np.savez(inp, **arrays)
-        r = subprocess.run([sys.executable, "-m", "gdmlt.peers", "luxcore", str(inp), str(outp)],
+        np.savez(inp, config=json.dumps(cfg), **arrays)
+        r = subprocess.run([sys.executable, "-m", "gdmlt.peers", kind, str(inp), str(outp)],
                            capture_output=True, text=True)
         if r.returncode != 0 or not outp.exists():
-            raise RuntimeError(f"LuxCore child failed ({r.returncode}): {r.stderr.strip()[-600:]}")
+            raise RuntimeError(f"{kind} child failed ({r.returncode}): {r.stderr.strip()[-600:]}")
         out = np.load(outp)
         return out["images"], out["times"], out["samples"]
 
 
 if __name__ == "__main__":
-    if len(sys.argv) == 4 and sys.argv[1] == "luxcore":
-        _luxcore_child(sys.argv[2], sys.argv[3])
+    if len(sys.argv) == 4 and sys.argv[1] in ("luxcore", "cycles"):
+        {"luxcore": _luxcore_child, "cycles": _cycles_child}[sys.argv[1]](sys.argv[2], sys.argv[3])
     else:
-        sys.exit("usage: python -m gdmlt.peers luxcore IN.npz OUT.npz")
+        sys.exit("usage: python -m gdmlt.peers luxcore|cycles IN.npz OUT.npz")
