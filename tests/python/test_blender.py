@@ -210,22 +210,9 @@ def _lights_scene(bpy, engine, spp, seed, size=48, bounces=4):
     scene.view_settings.view_transform = "Standard"
     r.engine = engine
     if engine == "CYCLES":
-        c = scene.cycles
-        c.device = "CPU"
-        c.samples = spp
-        c.seed = seed
-        c.use_denoising = False
-        c.use_adaptive_sampling = False
-        c.sample_clamp_direct = 0.0
-        c.sample_clamp_indirect = 0.0
-        c.blur_glossy = 0.0
-        c.light_sampling_threshold = 0.0  # the default 0.01 drops faint light contributions (biased)
-        c.pixel_filter_type = "BOX"
-        c.filter_width = 1.0
-        c.max_bounces = c.diffuse_bounces = c.glossy_bounces = c.transmission_bounces = bounces
-        c.transparent_max_bounces = bounces
-        c.caustics_reflective = c.caustics_refractive = True
-        r.threads_mode = "AUTO"
+        from gdmlt.peers import cycles_unbiased
+
+        cycles_unbiased(scene, spp, seed, bounces)
     else:
         s = scene.gdmlt
         s.method, s.samples, s.seed, s.max_bounces, s.use_nee = "PT", spp, seed, bounces, True
