@@ -11,7 +11,7 @@ export PATH := $(abspath $(VENV))/bin:$(PATH)
 # Keep Blender's user config out of $HOME during demos and tests.
 export BLENDER_USER_RESOURCES := $(abspath out/blender-user)
 
-.PHONY: all setup build demo test test-rust test-python examples addon bench bench-monastery bench-peers raybench clean
+.PHONY: all setup build demo test test-rust test-python examples addon bench bench-monastery bench-peers scalebench raybench clean
 
 all: demo
 
@@ -87,6 +87,10 @@ bench-peers: build
 		--peers cycles,luxcore,luxcore-mlt,mitsuba --plot out/bench-peers-cornell.png
 	$(VENV)/bin/gdmlt bench --scene gap --size 128 --budgets 1,2,4,8 --methods pt,gdpt,pssmlt,gdpssmlt \
 		--peers cycles,luxcore,luxcore-mlt,mitsuba --plot out/bench-peers-gap.png
+
+# Time per mutation / per path as the scene grows from 10k to 10M triangles and threads 1 → all.
+scalebench: build
+	$(VENV)/bin/gdmlt scalebench
 
 raybench: build
 	$(PY) -m pip install -q -r requirements-bench.txt

@@ -107,6 +107,11 @@ def build_parser():
     pb.add_argument("--triangles", type=_positive_int, default=1_000_000)
     pb.add_argument("--max-bounces", type=int, default=8)
     pb.add_argument("--seconds", type=float, default=8.0, help="about how long each cell renders")
+    sb = sub.add_parser("scalebench", help="time per mutation and per path as scene size and threads grow",
+                        description="µs per GDPSSMLT mutation and per PT path on the Cornell box with a bumpy "
+                                    "sphere of 10k to 10M triangles, 1 thread and all; build time and memory.")
+    sb.add_argument("--sizes", default="10000,100000,1000000,10000000", help="comma-separated triangle counts")
+    sb.add_argument("--size", type=_positive_int, default=64, help="image side in pixels")
     mg = sub.add_parser("merge", help="merge partial renders (--partial K/N) into one EXR",
                         description="Averages partial renders weighted by their samples and, for the "
                                     "gradient-domain methods, reconstructs once from the merged buffers.")
@@ -225,6 +230,15 @@ def main(argv=None):
             return 1
         print(f"wrote {out} ({stored['width']}×{stored['height']}, method {stored['method']}, "
               f"{stored['spp']} per pixel)")
+        return 0
+    if args.command == "scalebench":
+        from .scalebench import run as scalebench
+
+        try:
+            sizes = tuple(int(x) for x in args.sizes.split(","))
+        except ValueError:
+            parser.error(f"--sizes: '{args.sizes}' is not a comma-separated list of triangle counts")
+        scalebench(sizes, args.size)
         return 0
     if args.command == "pathbench":
         from .pathbench import run as pathbench
