@@ -53,11 +53,19 @@ class GDMLTRenderEngine(bpy.types.RenderEngine):
         for name, channels, chan_id, kind in PASSES:
             self.register_pass(scene, renderlayer, name, channels, chan_id, kind)
 
+    def esc_pressed(self) -> bool:
+        """Whether the user cancelled (Esc): the one place the engine polls test_break(),
+        during export and from the core's progress callback every 50 ms."""
+        return self.test_break()
+
     def render(self, depsgraph):
         try:
             self._render(depsgraph)
         except export.ExportCancelled:
-            return
+            # Hand Blender an empty (black) result: returning without one makes Blender 5.0.1
+            # crash when it writes the frame (`-f`, write_still) after an Esc during export.
+            result = self.begin_result(0, 0, self.resolution_x, self.resolution_y)
+            self.end_result(result)
         except Exception as e:  # noqa: BLE001 - every failure must reach the user, not a blank image
             self.report({"ERROR"}, f"GDMLT: {e}")
 
@@ -68,7 +76,7 @@ class GDMLTRenderEngine(bpy.types.RenderEngine):
         s = scene.gdmlt
         t0 = time.perf_counter()
         self.update_stats("GDMLT", "Exporting scene")
-        desc, warnings = export.export_scene(depsgraph, self.test_break)
+        desc, warnings = export.export_scene(depsgraph, self.esc_pressed)
         ntri = sum(len(m["indices"]) for m in desc["meshes"])
         self.update_stats("GDMLT", f"Building BVH ({ntri:,} triangles)")
         core_scene = gdmlt.Scene(desc)
@@ -80,7 +88,7 @@ class GDMLTRenderEngine(bpy.types.RenderEngine):
         def progress(fraction, elapsed):
             self.update_progress(fraction)
             self.update_stats("GDMLT", f"{s.method} | {fraction * 100:.0f}% | {elapsed:.1f} s")
-            return self.test_break()
+            return self.esc_pressed()
 
         w, h = core_scene.size
         layer_name = depsgraph.view_layer.name

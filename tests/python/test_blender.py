@@ -3,6 +3,7 @@ export matches the core's built-in scene, its camera matches Blender's, its ligh
 Cycles, and bad input reaches the user as an error instead of a crash."""
 
 import math
+import time
 import sys
 from pathlib import Path
 
@@ -53,8 +54,8 @@ def test_nan_vertex_reports_an_error_naming_the_object(bpy_mod, tmp_out):
     scene.render.resolution_x = scene.render.resolution_y = 16
     ob = bpy.data.objects["TallBlock"]
     ob.data.vertices[0].co = (math.nan, 0.0, 0.0)
-    with pytest.raises(RuntimeError, match="TallBlock.*NaN"):
-        bpy.ops.render.render(write_still=False)
+    with pytest.raises(RuntimeError, match="TallBlock.*NaN"):  # and Blender survives writing the frame
+        render_to_exr(bpy, scene, tmp_out / "nan.exr")
 
 
 def test_unsupported_node_warns_and_falls_back(bpy_mod, tmp_out, capfd):
@@ -563,3 +564,64 @@ def test_gdmlt_export_carries_the_scene_and_its_settings_to_usd(bpy_mod, tmp_out
     ba, bb = block_means(a, 8), block_means(b, 8)
     assert abs(a.mean() / b.mean() - 1) < 0.02
     assert np.sqrt(np.mean((ba - bb) ** 2)) < 0.05 * bb.mean()
+
+
+def _rss_mb():
+    with open("/proc/self/status") as f:
+        for line in f:
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) / 1024
+    return float("nan")
+
+
+def test_fifty_f12_renders_in_one_blender_do_not_grow_memory(bpy_mod, tmp_out):
+    """Issue 5: an artist renders again and again in one Blender session: every method, through
+    the engine (export, core, passes into the render result), must not leak."""
+    bpy = bpy_mod
+    bpy.ops.wm.open_mainfile(filepath=str(ROOT / "examples" / "cornell.blend"))
+    scene = bpy.context.scene
+    scene.render.resolution_x = scene.render.resolution_y = 24
+    scene.gdmlt.samples, scene.gdmlt.max_bounces = 4, 3
+    methods = ["PT", "GDPT", "PSSMLT", "GDPSSMLT"]
+    for i in range(8):  # warm up allocators and Blender's own caches
+        scene.gdmlt.method = methods[i % 4]
+        bpy.ops.render.render()
+    before = _rss_mb()
+    for i in range(50):
+        scene.gdmlt.method, scene.gdmlt.seed = methods[i % 4], i
+        bpy.ops.render.render()
+    grown = _rss_mb() - before
+    print(f"RSS {before:.0f} MB, grew {grown:.1f} MB over 50 renders")
+    assert grown < 40, f"RSS grew by {grown:.1f} MB over 50 renders"
+
+
+@pytest.mark.parametrize("method", ["PT", "GDPSSMLT"])
+def test_esc_at_any_moment_stops_the_render_cleanly(bpy_mod, tmp_out, monkeypatch, method):
+    """Esc in Blender turns RenderEngine.test_break() true; the engine polls it through
+    esc_pressed() (test_break itself is Blender's C method and cannot be replaced from Python).
+    Esc after k polls — k = 0: during export; later: during rendering — must end the render
+    quickly, without an error, and leave finite pixels that Blender can write (an Esc during
+    export used to crash Blender when it wrote the frame)."""
+    bpy = bpy_mod
+    from gdmlt_blender.engine import GDMLTRenderEngine
+
+    polls = {"n": 0, "after": 0}
+
+    def esc_pressed(self):
+        polls["n"] += 1
+        return polls["n"] > polls["after"]
+
+    monkeypatch.setattr(GDMLTRenderEngine, "esc_pressed", esc_pressed)
+    bpy.ops.wm.open_mainfile(filepath=str(ROOT / "examples" / "cornell.blend"))
+    scene = bpy.context.scene
+    scene.render.resolution_x = scene.render.resolution_y = 32
+    s = scene.gdmlt
+    s.method, s.samples, s.time_limit = method, 100000, 0.0  # a minute of work if never stopped
+    for after in (0, 1, 3, 20):
+        polls.update(n=0, after=after)
+        t = time.perf_counter()
+        img = render_to_exr(bpy, scene, tmp_out / f"break{after}.exr")
+        took = time.perf_counter() - t
+        assert polls["n"] > after, polls  # it polled until Esc, and stopped then
+        assert took < 5 + 0.06 * after, f"{method}: Esc after {after} polls took {took:.1f} s to stop"
+        assert np.isfinite(img).all()
