@@ -13,6 +13,11 @@ import pytest
 import gdmlt
 from conftest import ROOT, block_means, read_exr
 
+sys.path.insert(0, str(ROOT / "tools"))
+from make_test_scenes import keep_lights  # noqa: E402  (the checked-in scenes' own tool)
+
+SCENES = ROOT / "tests" / "scenes"
+
 
 def render_to_exr(bpy, scene, path):
     img = scene.render.image_settings
@@ -150,77 +155,28 @@ def assert_agrees_with_cycles(bpy, build, tmp_out, tag, spp=(256, 512), block=6,
     return c, g
 
 
-def _lights_scene(bpy, engine, spp, seed, size=48, bounces=4):
-    """Diffuse floor, wall and block lit by an area light and a point light with radius."""
-    bpy.ops.wm.read_factory_settings(use_empty=True)
+def open_scene(bpy, name, engine, spp, seed, keep=None):
+    """Opens tests/scenes/NAME.blend (written by tools/make_test_scenes.py) for `engine`:
+    GDMLT with the file's settings, or Cycles as an unbiased reference with the file's bounce
+    limit; `keep` names the lights left on (see make_test_scenes.keep_lights)."""
+    bpy.ops.wm.open_mainfile(filepath=str(SCENES / f"{name}.blend"))
     scene = bpy.context.scene
-
-    def diffuse(name, color):
-        mat = bpy.data.materials.new(name)
-        nt = mat.node_tree if mat.node_tree else None
-        if nt is None:
-            mat.use_nodes = True
-            nt = mat.node_tree
-        nt.nodes.clear()
-        out = nt.nodes.new("ShaderNodeOutputMaterial")
-        d = nt.nodes.new("ShaderNodeBsdfDiffuse")
-        d.inputs["Color"].default_value = (*color, 1)
-        nt.links.new(d.outputs[0], out.inputs["Surface"])
-        return mat
-
-    def quad(name, verts, mat):
-        me = bpy.data.meshes.new(name)
-        me.from_pydata(verts, [], [(0, 1, 2, 3)])
-        me.materials.append(mat)
-        ob = bpy.data.objects.new(name, me)
-        scene.collection.objects.link(ob)
-
-    grey, orange = diffuse("Grey", (0.7, 0.7, 0.7)), diffuse("Orange", (0.8, 0.4, 0.1))
-    quad("Floor", [(-3, -3, 0), (3, -3, 0), (3, 3, 0), (-3, 3, 0)], grey)
-    quad("Wall", [(-3, 2, 0), (3, 2, 0), (3, 2, 3), (-3, 2, 3)], orange)
-    quad("Card", [(-0.5, 0, 0), (0.5, 0.3, 0), (0.5, 0.3, 1.2), (-0.5, 0, 1.2)], grey)
-
-    area = bpy.data.lights.new("Area", "AREA")
-    area.size, area.energy, area.shape, area.size_y = 1.0, 150.0, "RECTANGLE", 0.5
-    ob = bpy.data.objects.new("Area", area)
-    ob.location = (-1.0, -0.5, 2.2)
-    ob.rotation_euler = (math.radians(-20), 0, 0)
-    scene.collection.objects.link(ob)
-    point = bpy.data.lights.new("Point", "POINT")
-    point.energy, point.shadow_soft_size, point.color = 250.0, 0.2, (1.0, 0.9, 0.8)
-    ob = bpy.data.objects.new("Point", point)
-    ob.location = (1.3, -1.0, 1.4)
-    scene.collection.objects.link(ob)
-
-    cam = bpy.data.cameras.new("Cam")
-    cam.lens = 30
-    ob = bpy.data.objects.new("Cam", cam)
-    ob.location = (0, -6.5, 2.2)
-    ob.rotation_euler = (math.radians(75), 0, 0)
-    scene.collection.objects.link(ob)
-    scene.camera = ob
-    world = bpy.data.worlds.new("W")
-    scene.world = world
-    world.color = (0, 0, 0)
-    if world.node_tree is None:
-        world.use_nodes = True
-    world.node_tree.nodes["Background"].inputs["Color"].default_value = (0, 0, 0, 1)
-    r = scene.render
-    r.resolution_x = r.resolution_y = size
-    r.resolution_percentage = 100
-    scene.view_settings.view_transform = "Standard"
-    r.engine = engine
+    if keep is not None:
+        keep_lights(bpy, scene, keep)
     if engine == "CYCLES":
         from gdmlt.peers import cycles_unbiased
 
-        cycles_unbiased(scene, spp, seed, bounces)
+        cycles_unbiased(scene, spp, seed, scene.gdmlt.max_bounces)
     else:
-        s = scene.gdmlt
-        s.method, s.samples, s.seed, s.max_bounces, s.use_nee = "PT", spp, seed, bounces, True
+        scene.render.engine = "GDMLT"
+        scene.gdmlt.samples, scene.gdmlt.seed = spp, seed
     return scene
 
 
 def test_area_and_point_light_agree_with_cycles(bpy_mod, tmp_out):
+    def _lights_scene(bpy, engine, spp, seed):
+        return open_scene(bpy, "lights", engine, spp, seed, keep={"Area", "Point"})
+
     """Same scene in Cycles and GDMLT, tolerance from the noise measured here."""
     assert_agrees_with_cycles(bpy_mod, _lights_scene, tmp_out, "lights")
 
@@ -255,37 +211,12 @@ def test_gdpt_through_blender_writes_its_passes(bpy_mod, tmp_out):
     assert abs(combined[..., :3].mean() / ref["Combined"].mean() - 1) < 0.01
 
 
-def _specular_scene(bpy, engine, spp, seed, size=40, bounces=6):
-    """A mirror (Glossy, roughness 0, white) and a glass sphere (IOR 1.5) on a diffuse floor
-    in front of a wall, lit by an area light."""
-    scene = _lights_scene(bpy, engine, spp, seed, size=size, bounces=bounces)
-    bpy.data.objects.remove(bpy.data.objects["Card"])
-    bpy.data.objects["Point"].data.energy = 0.0
-
-    def node_material(name, node_type, **inputs):
-        mat = bpy.data.materials.new(name)
-        nt = mat.node_tree
-        nt.nodes.clear()
-        out = nt.nodes.new("ShaderNodeOutputMaterial")
-        n = nt.nodes.new(node_type)
-        for k, v in inputs.items():
-            n.inputs[k].default_value = v
-        nt.links.new(n.outputs[0], out.inputs["Surface"])
-        return mat
-
-    mirror = node_material("Mirror", "ShaderNodeBsdfGlossy", Color=(1, 1, 1, 1), Roughness=0.0)
-    glass = node_material("Glass", "ShaderNodeBsdfGlass", Color=(1, 1, 1, 1), Roughness=0.0, IOR=1.5)
-    for name, mat, loc in (("MirrorBall", mirror, (-0.8, 0.3, 0.6)), ("GlassBall", glass, (0.8, -0.2, 0.6))):
-        bpy.ops.mesh.primitive_uv_sphere_add(radius=0.6, location=loc, segments=32, ring_count=16)
-        ob = bpy.context.active_object
-        ob.name = name
-        ob.data.materials.append(mat)
-    return scene
-
-
 def test_mirror_and_glass_agree_with_cycles(bpy_mod, tmp_out):
     """Sharp mirror and glass against Cycles."""
-    assert_agrees_with_cycles(bpy_mod, _specular_scene, tmp_out, "specular", block=5)
+    def build(bpy, engine, spp, seed):
+        return open_scene(bpy, "specular", engine, spp, seed)
+
+    assert_agrees_with_cycles(bpy_mod, build, tmp_out, "specular", block=5)
 
 
 @pytest.mark.parametrize("method", ["PT", "GDPSSMLT"])
@@ -305,96 +236,23 @@ def test_long_render_shows_intermediate_images(bpy_mod, tmp_out, method):
     assert np.isfinite(img).all() and img.mean() > 0.05
 
 
-def _single_light_scene(bpy, engine, spp, seed, kind):
-    """The lights scene with only a spot light, a sun, or a coloured world."""
-    scene = _lights_scene(bpy, engine, spp, seed, size=40, bounces=2)
-    bpy.data.objects["Point"].data.energy = 0.0
-    bpy.data.objects["Area"].data.energy = 0.0
-    ob = None
-    if kind == "spot":
-        light = bpy.data.lights.new("Spot", "SPOT")
-        light.energy, light.spot_size, light.spot_blend, light.shadow_soft_size = 300.0, math.radians(50), 0.3, 0.1
-        ob = bpy.data.objects.new("Spot", light)
-        ob.location, ob.rotation_euler = (0.3, -1.5, 2.5), (math.radians(20), 0, 0)
-    elif kind == "sun":
-        light = bpy.data.lights.new("Sun", "SUN")
-        light.energy, light.angle = 3.0, math.radians(5)
-        ob = bpy.data.objects.new("Sun", light)
-        ob.rotation_euler = (math.radians(40), math.radians(20), 0)
-    else:
-        bg = scene.world.node_tree.nodes["Background"]
-        bg.inputs["Color"].default_value = (0.3, 0.5, 0.8, 1)
-        bg.inputs["Strength"].default_value = 1.5
-    if ob is not None:
-        scene.collection.objects.link(ob)
-    return scene
+@pytest.mark.parametrize("kind", ["Spot", "Sun", "World", "all"])
+def test_spot_sun_world_and_all_lights_together_agree_with_cycles(bpy_mod, tmp_out, kind):
+    keep = {"Area", "Point", "Spot", "Sun", "World"} if kind == "all" else {kind}
 
-
-@pytest.mark.parametrize("kind", ["spot", "sun", "world"])
-def test_spot_sun_and_world_agree_with_cycles(bpy_mod, tmp_out, kind):
     def build(bpy, engine, spp, seed):
-        return _single_light_scene(bpy, engine, spp // 2, seed, kind)
+        return open_scene(bpy, "lights", engine, spp // 2, seed, keep=keep)
 
     assert_agrees_with_cycles(bpy_mod, build, tmp_out, kind, block=5)
-
-
-def _fresh_material(bpy, ob, name):
-    """A new node material with only an output node, made the object's only material:
-    (node tree, output node)."""
-    mat = bpy.data.materials.new(name)
-    if mat.node_tree is None:
-        mat.use_nodes = True
-    nt = mat.node_tree
-    nt.nodes.clear()
-    out = nt.nodes.new("ShaderNodeOutputMaterial")
-    ob.data.materials.clear()
-    ob.data.materials.append(mat)
-    return nt, out
-
-
-def _textured_scene(bpy, engine, spp, seed):
-    """The lights scene with image textures: an sRGB checker (8-bit, bilinear, repeated twice)
-    into the floor's Diffuse colour and a linear (Non-Color) gradient into the wall's
-    Principled Base Color, both through UV maps."""
-    scene = _lights_scene(bpy, engine, spp, seed, size=40, bounces=3)
-
-    def image(name, pixels, colorspace):
-        h, w, _ = pixels.shape
-        img = bpy.data.images.new(name, w, h, alpha=True)
-        img.colorspace_settings.name = colorspace
-        img.pixels.foreach_set(np.ascontiguousarray(pixels, dtype=np.float32).ravel())
-        return img
-
-    yy, xx = np.mgrid[0:8, 0:8]
-    checker = np.where(((xx + yy) % 2 == 0)[..., None], [0.9, 0.8, 0.2, 1.0], [0.1, 0.3, 0.7, 1.0])
-    ramp = np.zeros((4, 16, 4))
-    ramp[..., 0] = np.linspace(0.05, 0.9, 16)
-    ramp[..., 1] = 0.3
-    ramp[..., 2] = np.linspace(0.9, 0.05, 16)
-    ramp[..., 3] = 1
-    for ob_name, img, shader, socket, scale in (
-            ("Floor", image("Checker", checker, "sRGB"), "ShaderNodeBsdfDiffuse", "Color", 2.0),
-            ("Wall", image("Ramp", ramp, "Non-Color"), "ShaderNodeBsdfPrincipled", "Base Color", 1.0)):
-        ob = bpy.data.objects[ob_name]
-        nt, out = _fresh_material(bpy, ob, ob_name + "Tex")
-        bsdf = nt.nodes.new(shader)
-        if shader == "ShaderNodeBsdfPrincipled":
-            bsdf.inputs["Roughness"].default_value = 1.0
-            bsdf.inputs["IOR"].default_value = 1.0  # no specular layer: GDMLT's Principled has none yet
-        tex = nt.nodes.new("ShaderNodeTexImage")
-        tex.image = img
-        nt.links.new(tex.outputs["Color"], bsdf.inputs[socket])
-        nt.links.new(bsdf.outputs[0], out.inputs["Surface"])
-        uv = ob.data.uv_layers.new(name="UVMap")
-        for loop, (u, v) in zip(uv.uv, [(0, 0), (1, 0), (1, 1), (0, 1)]):
-            loop.vector = (u * scale, v * scale)
-    return scene
 
 
 def test_image_textures_agree_with_cycles(bpy_mod, tmp_out):
     """sRGB decoding (after interpolation, as Cycles does for 8-bit images: decoding first
     renders this checker 40% brighter), Non-Color data, bilinear lookup, Repeat and UV maps."""
-    c, g = assert_agrees_with_cycles(bpy_mod, _textured_scene, tmp_out, "textures", block=5)
+    def build(bpy, engine, spp, seed):
+        return open_scene(bpy, "textures", engine, spp, seed)
+
+    c, g = assert_agrees_with_cycles(bpy_mod, build, tmp_out, "textures", block=5)
     # the checker must actually show: block means vary strongly across the floor
     assert c[-2:].std() > 0.1 * c[-2:].mean()
 
@@ -402,9 +260,7 @@ def test_image_textures_agree_with_cycles(bpy_mod, tmp_out):
 def _hdri_scene(bpy, engine, spp, seed):
     """The lights scene lit only by an HDRI world (one of the CC0 studio lights bpy ships,
     1024×512 EXR) through an Environment Texture node, strength 0.8."""
-    scene = _lights_scene(bpy, engine, spp, seed, size=40, bounces=2)
-    bpy.data.objects["Point"].data.energy = 0.0
-    bpy.data.objects["Area"].data.energy = 0.0
+    scene = open_scene(bpy, "lights", engine, spp, seed, keep=set())
     hdri = Path(bpy.utils.system_resource("DATAFILES")) / "studiolights" / "world" / "forest.exr"
     nt = scene.world.node_tree
     env = nt.nodes.new("ShaderNodeTexEnvironment")
@@ -424,8 +280,9 @@ def test_animation_renders_every_frame(bpy_mod, tmp_out):
     """`blender -b file -a` (here bpy.ops.render.render(animation=True)): every frame is
     rendered with the scene of that frame — an animated light moves the lit spot."""
     bpy = bpy_mod
-    scene = _lights_scene(bpy, "GDMLT", 8, 1, size=24, bounces=1)
-    bpy.data.objects["Area"].data.energy = 0.0
+    scene = open_scene(bpy, "lights", "GDMLT", 8, 1, keep={"Point"})
+    scene.render.resolution_x = scene.render.resolution_y = 24
+    scene.gdmlt.max_bounces = 1
     point = bpy.data.objects["Point"]
     for frame, x in ((1, -2.0), (3, 2.0)):
         point.location.x = x
@@ -454,7 +311,8 @@ def test_blender_usd_export_renders_the_same_outside_blender(bpy_mod, tmp_out, k
     imgs = {}
     for seed in (1, 2):
         if kind == "lights":
-            scene = _lights_scene(bpy, "GDMLT", 64, seed, size=32)
+            scene = open_scene(bpy, "lights", "GDMLT", 64, seed, keep={"Area", "Point"})
+            scene.render.resolution_x = scene.render.resolution_y = 32
         else:
             scene = _hdri_scene(bpy, "GDMLT", 64, seed)
             # (Blender 5.0's exporter writes the dome's intensity as 1 whatever the strength)
@@ -476,63 +334,13 @@ def test_blender_usd_export_renders_the_same_outside_blender(bpy_mod, tmp_out, k
     assert abs(b.mean() - u.mean()) < 4 * np.sqrt(var / b.size) + 0.002 * b.mean()
 
 
-def _mixed_scene(bpy, engine, spp, seed):
-    """The lights scene with shader trees: the card is Mix(Diffuse, Glossy) (a "plastic"), the
-    wall Mix(Principled metal, Diffuse), the floor Add(Diffuse, Emission). GGX distributions
-    set to single scattering, as GDMLT's."""
-    scene = _lights_scene(bpy, engine, spp, seed, size=40, bounces=3)
-
-    def tree(ob_name, build):
-        nt, out = _fresh_material(bpy, bpy.data.objects[ob_name], ob_name + "Mix")
-        nt.links.new(build(nt).outputs[0], out.inputs["Surface"])
-
-    def diffuse(nt, color):
-        n = nt.nodes.new("ShaderNodeBsdfDiffuse")
-        n.inputs["Color"].default_value = (*color, 1)
-        return n
-
-    def mix(nt, fac, a, b, kind="ShaderNodeMixShader"):
-        m = nt.nodes.new(kind)
-        if kind == "ShaderNodeMixShader":
-            m.inputs["Fac"].default_value = fac
-            nt.links.new(a.outputs[0], m.inputs[1])
-            nt.links.new(b.outputs[0], m.inputs[2])
-        else:
-            nt.links.new(a.outputs[0], m.inputs[0])
-            nt.links.new(b.outputs[0], m.inputs[1])
-        return m
-
-    def plastic(nt):
-        g = nt.nodes.new("ShaderNodeBsdfGlossy")
-        g.distribution = "GGX"
-        g.inputs["Color"].default_value = (1, 1, 1, 1)
-        g.inputs["Roughness"].default_value = 0.3
-        return mix(nt, 0.4, diffuse(nt, (0.8, 0.4, 0.1)), g)
-
-    def metal_and_paint(nt):
-        p = nt.nodes.new("ShaderNodeBsdfPrincipled")
-        p.distribution = "GGX"
-        p.inputs["Base Color"].default_value = (0.9, 0.7, 0.3, 1)
-        p.inputs["Metallic"].default_value = 1.0
-        p.inputs["Roughness"].default_value = 0.4
-        return mix(nt, 0.5, p, diffuse(nt, (0.2, 0.5, 0.7)))
-
-    def glowing_floor(nt):
-        e = nt.nodes.new("ShaderNodeEmission")
-        e.inputs["Color"].default_value = (0.2, 0.4, 1.0, 1)
-        e.inputs["Strength"].default_value = 0.3
-        return mix(nt, 0, diffuse(nt, (0.6, 0.6, 0.6)), e, kind="ShaderNodeAddShader")
-
-    tree("Card", plastic)
-    tree("Wall", metal_and_paint)
-    tree("Floor", glowing_floor)
-    return scene
-
-
 def test_mix_and_add_shaders_agree_with_cycles(bpy_mod, tmp_out):
     """Mix Shader of Diffuse and Glossy, of a metallic Principled and Diffuse, and Add Shader
     of Diffuse and Emission, flattened into one weighted set of lobes."""
-    assert_agrees_with_cycles(bpy_mod, _mixed_scene, tmp_out, "mix", block=5)
+    def build(bpy, engine, spp, seed):
+        return open_scene(bpy, "mix", engine, spp, seed)
+
+    assert_agrees_with_cycles(bpy_mod, build, tmp_out, "mix", block=5)
 
 
 def test_gdmlt_export_carries_the_scene_and_its_settings_to_usd(bpy_mod, tmp_out):
@@ -625,3 +433,23 @@ def test_esc_at_any_moment_stops_the_render_cleanly(bpy_mod, tmp_out, monkeypatc
         assert polls["n"] > after, polls  # it polled until Esc, and stopped then
         assert took < 5 + 0.06 * after, f"{method}: Esc after {after} polls took {took:.1f} s to stop"
         assert np.isfinite(img).all()
+
+
+@pytest.mark.parametrize("name", ["lights", "textures"])
+def test_command_line_render_of_a_checked_in_scene_is_the_f12_render(bpy_mod, tmp_out, name):
+    """`gdmlt render tests/scenes/NAME.blend -o x.exr` (a separate process, Blender as a module)
+    writes the image that F12 writes from the same file: same export, settings and seed —
+    path tracing is deterministic, so the two files agree to float rounding."""
+    import subprocess
+
+    bpy = bpy_mod
+    bpy.ops.wm.open_mainfile(filepath=str(SCENES / f"{name}.blend"))
+    f12 = render_to_exr(bpy, bpy.context.scene, tmp_out / f"{name}-f12.exr")
+    out = tmp_out / f"{name}-cli.exr"
+    gdmlt_cli = Path(sys.executable).parent / "gdmlt"
+    r = subprocess.run([str(gdmlt_cli), "render", str(SCENES / f"{name}.blend"), "-o", str(out)],
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr[-2000:]
+    cli = read_exr(out)
+    assert cli.shape == f12.shape and f12.mean() > 0.01
+    assert np.allclose(cli, f12, rtol=1e-4, atol=1e-5), np.abs(cli - f12).max()
