@@ -42,6 +42,13 @@ def _to_blender_rows(img, channels):
     return out
 
 
+def remaining_time(fraction: float, elapsed: float) -> str:
+    """' | 12.3 s left', extrapolated from the work done so far once it is 2% done."""
+    if not 0.02 <= fraction < 1.0 or elapsed <= 0:
+        return ""
+    return f" | {elapsed * (1.0 - fraction) / fraction:.1f} s left"
+
+
 class GDMLTRenderEngine(bpy.types.RenderEngine):
     bl_idname = "GDMLT"
     bl_label = "GDMLT"
@@ -87,7 +94,8 @@ class GDMLTRenderEngine(bpy.types.RenderEngine):
 
         def progress(fraction, elapsed):
             self.update_progress(fraction)
-            self.update_stats("GDMLT", f"{s.method} | {fraction * 100:.0f}% | {elapsed:.1f} s")
+            self.update_stats("GDMLT", f"{s.method} | {fraction * 100:.0f}% | {elapsed:.1f} s"
+                              + remaining_time(fraction, elapsed))
             return self.esc_pressed()
 
         w, h = core_scene.size

@@ -236,6 +236,14 @@ def test_long_render_shows_intermediate_images(bpy_mod, tmp_out, method):
     assert np.isfinite(img).all() and img.mean() > 0.05
 
 
+def test_stats_line_extrapolates_the_remaining_time(bpy_mod):
+    from gdmlt_blender.engine import remaining_time
+
+    assert remaining_time(0.25, 3.0) == " | 9.0 s left"
+    assert remaining_time(0.01, 0.5) == ""  # too early to extrapolate
+    assert remaining_time(1.0, 8.0) == ""
+
+
 @pytest.mark.parametrize("kind", ["Spot", "Sun", "World", "all"])
 def test_spot_sun_world_and_all_lights_together_agree_with_cycles(bpy_mod, tmp_out, kind):
     keep = {"Area", "Point", "Spot", "Sun", "World"} if kind == "all" else {kind}
