@@ -17,6 +17,9 @@ use glam::{Vec2, Vec3};
 
 /// Russian roulette starts after this many scattering events.
 pub const RR_START_DEPTH: u32 = 3;
+/// Crossings of transparent surfaces (pass-through lobe) do not count as bounces; a path
+/// ends after this many, as Cycles' "Transparent Max Bounces".
+pub const MAX_TRANSPARENT_BOUNCES: u32 = 16;
 /// Primary samples used per path vertex (see the module comment).
 pub const SAMPLES_PER_VERTEX: usize = 7;
 
@@ -133,7 +136,9 @@ pub fn trace_path<S: Sampler>(
     let cam = scene.camera.generate_ray(raster, lens);
     let (mut o, mut d, mut tmin, mut tmax) = (cam.origin, cam.dir, cam.tmin, cam.tmax);
     let mut beta = Spectrum::ONE;
-    let mut depth = 0u32; // scattering events so far
+    let mut depth = 0u32; // scattering events so far (bounces; pass-through crossings excluded)
+    let mut transparent = 0u32; // pass-through crossings so far
+    let mut nvert = 0u32; // surface vertices so far (the index of the next one)
     let mut prev_p = o;
     let mut prev_pdf = 0.0f32; // pdf of the BSDF sample that produced `d` (0: camera ray)
     let mut prev_delta = true; // camera ray or specular bounce: no MIS with NEE
@@ -143,7 +148,7 @@ pub fn trace_path<S: Sampler>(
     loop {
         let hit = scene.intersect(o, d, tmin, tmax);
         let t_surface = hit.map_or(tmax, |h| h.t);
-        let camera_ray = depth == 0;
+        let camera_ray = nvert == 0;
         let mis = |pdf_light: f32| {
             if !use_nee || prev_delta {
                 1.0
@@ -152,7 +157,7 @@ pub fn trace_path<S: Sampler>(
             }
         };
 
-        let from_vertex = if camera_ray { CAMERA_VERTEX } else { depth - 1 };
+        let from_vertex = if camera_ray { CAMERA_VERTEX } else { nvert - 1 };
         // NEE cannot produce a path whose last bounce was specular: its light pdf is then 0.
         let pdf_l_if_nee = |pdf: f32| if use_nee && !prev_delta { pdf } else { 0.0 };
         let push = |rec: &mut Option<&mut Path>, light: u32, z: Vec3, at_infinity: bool, le: Spectrum, pdf_l: f32| {
@@ -198,7 +203,7 @@ pub fn trace_path<S: Sampler>(
             push(&mut record, li, si.p, false, le, pdf_light);
         }
         let bsdf = scene.bsdf_at(&si);
-        if depth == 0 {
+        if nvert == 0 {
             out.albedo = bsdf.albedo();
             out.normal = si.frame.n;
         }
@@ -246,7 +251,7 @@ pub fn trace_path<S: Sampler>(
                         let at_infinity = !ls.dist.is_finite();
                         p.events.push(Event {
                             nee: true,
-                            vertex: depth,
+                            vertex: nvert,
                             light: li,
                             z: if at_infinity { ls.wi } else { ls.p },
                             at_infinity,
@@ -271,8 +276,14 @@ pub fn trace_path<S: Sampler>(
             break; // shading normal sent the ray through the geometric surface
         }
         beta *= bs.weight;
-        depth += 1;
-        let q = if depth >= RR_START_DEPTH { beta.max_element().min(1.0) } else { 1.0 };
+        let pass_through = bs.is_pass_through(wo);
+        if pass_through {
+            transparent += 1;
+        } else {
+            depth += 1;
+        }
+        nvert += 1;
+        let q = if depth >= RR_START_DEPTH && !pass_through { beta.max_element().min(1.0) } else { 1.0 };
         if let Some(v) = record.as_deref_mut().and_then(|p| p.vertices.last_mut()) {
             v.wi = wi_world;
             v.f_out = bs.weight * bs.pdf;
@@ -287,7 +298,7 @@ pub fn trace_path<S: Sampler>(
             }
             beta /= q;
         }
-        if !is_finite_spectrum(beta) || beta.max_element() <= 0.0 {
+        if !is_finite_spectrum(beta) || beta.max_element() <= 0.0 || transparent > MAX_TRANSPARENT_BOUNCES {
             break;
         }
         prev_p = si.p;

@@ -324,7 +324,11 @@ fn half_vector_step(scene: &Scene, x: &Vertex, f: &Free) -> Option<Step> {
     let (wo_x, wi_x) = (x.frame.to_local(x.wo), x.frame.to_local(x.wi));
     let wo_y = f.y.frame.to_local(f.wo);
     let refraction = wi_x.z < 0.0;
-    let (wi, fy, pdf, j, eta) = if x.delta_out {
+    let (wi, fy, pdf, j, eta) = if x.delta_out && refraction && x.eta_out == 1.0 {
+        // the base passed straight through a transparent surface: so does the offset, J = 1
+        let (fy, pdf, wi) = bsdf.pass_eval(wo_y)?;
+        (wi, fy, pdf, 1.0, 1.0)
+    } else if x.delta_out {
         // both delta: a point evaluation, J = 1
         let (fy, pdf, wi) = bsdf.delta_eval(wo_y, refraction)?;
         (wi, fy, pdf, 1.0, if refraction { bsdf.eta() } else { 1.0 })
@@ -651,15 +655,17 @@ mod tests {
     /// The pair estimator is unbiased pixel by pixel: I(q) = E_q[base part of the shift
     /// towards q−1] + E_{q−1}[offset part of the shift towards q], compared with path tracing
     /// along a row that crosses the glass sphere (reflection and refraction chains, light
-    /// seen through the glass), with and without NEE. Tolerance: 4.5 standard errors of the
+    /// seen through the glass) and along a row through the semi-transparent veil
+    /// (pass-through vertices), with and without NEE. Tolerance: 4.5 standard errors of the
     /// difference, measured from the samples.
     #[test]
     fn pair_estimator_is_unbiased_per_pixel() {
         use crate::path::{trace_path, PathSettings};
         use crate::sampler::{IndependentSampler, Sampler};
-        let scene = Scene::build(&crate::scene::builtin::cornell_spheres(16, 16)).unwrap();
+        use crate::scene::builtin::{cornell_spheres, cornell_veil};
         let (w, row, n) = (16usize, 11.0f32, 60_000u64);
-        for nee in [true, false] {
+        let scenes = [Scene::build(&cornell_spheres(16, 16)).unwrap(), Scene::build(&cornell_veil(16, 16)).unwrap()];
+        for (scene, nee) in [(&scenes[0], true), (&scenes[0], false), (&scenes[1], true), (&scenes[1], false)] {
             let cfg = PathSettings { max_bounces: 6, nee };
             let mut base = Path::default();
             // per pixel: [Σ pt, Σ pt², Σ base, Σ base², Σ offset, Σ offset²]
@@ -668,16 +674,16 @@ mod tests {
                 for i in 0..n {
                     let mut smp = IndependentSampler::new(77, i * 64 + x as u64);
                     let raster = Vec2::new(x as f32, row) + smp.next_2d();
-                    let c = trace_path(&scene, &cfg, raster, &mut smp, Some(&mut base));
+                    let c = trace_path(scene, &cfg, raster, &mut smp, Some(&mut base));
                     let l = crate::math::luminance(c.radiance - c.very_direct) as f64;
                     let back = (x > 0).then(|| raster - Vec2::X);
-                    let b = crate::math::luminance(shift(&scene, &base, back).base) as f64;
+                    let b = crate::math::luminance(shift(scene, &base, back).base) as f64;
                     acc[x][0] += l;
                     acc[x][1] += l * l;
                     acc[x][2] += b;
                     acc[x][3] += b * b;
                     if x + 1 < w {
-                        let o = crate::math::luminance(shift(&scene, &base, Some(raster + Vec2::X)).offset) as f64;
+                        let o = crate::math::luminance(shift(scene, &base, Some(raster + Vec2::X)).offset) as f64;
                         acc[x + 1][4] += o;
                         acc[x + 1][5] += o * o;
                     }

@@ -44,6 +44,15 @@ pub struct BsdfSample {
     pub eta: f32,
 }
 
+impl BsdfSample {
+    /// Whether the sample went straight through (the pass-through lobe: a delta transmission
+    /// with relative IOR exactly 1 — glass keeps its IOR off 1).
+    #[inline]
+    pub fn is_pass_through(&self, wo: Vec3) -> bool {
+        self.lobe == LobeKind::Specular && self.eta == 1.0 && self.wi.z * wo.z < 0.0
+    }
+}
+
 /// A BSDF instance at one surface point. An enum, not a trait object: no allocation and
 /// static dispatch on the hot path.
 #[derive(Clone, Copy, Debug)]
@@ -52,12 +61,16 @@ pub enum Bsdf {
     Conductor(Conductor),
     Dielectric(Dielectric),
     /// Blender's Principled BSDF as a stochastic mixture of a diffuse base, a metal and a
-    /// glass lobe with weights (1−m)(1−t), m, (1−m)t (m = metallic, t = transmission).
+    /// glass lobe with weights (1−m)(1−t), m, (1−m)t (m = metallic, t = transmission), all
+    /// times 1 − τ, and a pass-through lobe of probability τ = `pass` (Transparent BSDF;
+    /// alpha as coverage): a delta lobe that continues the ray unchanged, tinted `pass_tint`.
     Principled {
         diffuse: Lambert,
         metal: Conductor,
         glass: Dielectric,
         w: [f32; 3],
+        pass: f32,
+        pass_tint: Spectrum,
     },
 }
 
@@ -69,7 +82,7 @@ impl Bsdf {
             Bsdf::Lambert(b) => b.eval(wo, wi),
             Bsdf::Conductor(b) => b.eval(wo, wi),
             Bsdf::Dielectric(b) => b.eval(wo, wi),
-            Bsdf::Principled { diffuse, metal, glass, w } => {
+            Bsdf::Principled { diffuse, metal, glass, w, .. } => {
                 let mut f = Spectrum::ZERO;
                 if w[0] > 0.0 {
                     f += diffuse.eval(wo, wi) * w[0];
@@ -92,7 +105,7 @@ impl Bsdf {
             Bsdf::Lambert(b) => b.pdf(wo, wi),
             Bsdf::Conductor(b) => b.pdf(wo, wi),
             Bsdf::Dielectric(b) => b.pdf(wo, wi),
-            Bsdf::Principled { diffuse, metal, glass, w } => {
+            Bsdf::Principled { diffuse, metal, glass, w, .. } => {
                 let mut p = 0.0;
                 if w[0] > 0.0 {
                     p += diffuse.pdf(wo, wi) * w[0];
@@ -115,14 +128,18 @@ impl Bsdf {
             Bsdf::Lambert(b) => b.sample(wo, u),
             Bsdf::Conductor(b) => b.sample(wo, u),
             Bsdf::Dielectric(b) => b.sample(wo, u_lobe, u),
-            Bsdf::Principled { diffuse, metal, glass, w } => {
+            Bsdf::Principled { diffuse, metal, glass, w, pass, pass_tint } => {
                 // choose a lobe ∝ weight, reusing the rest of u_lobe inside the lobe
                 let (k, u_rest) = if u_lobe < w[0] {
                     (0, u_lobe / w[0])
                 } else if u_lobe < w[0] + w[1] {
                     (1, (u_lobe - w[0]) / w[1])
-                } else {
+                } else if *pass <= 0.0 || u_lobe < w[0] + w[1] + w[2] {
                     (2, ((u_lobe - w[0] - w[1]) / w[2].max(1e-12)).min(0.999_999))
+                } else {
+                    // straight through: f = τ·tint as a discrete measure, probability τ
+                    let wi = -wo;
+                    return Some(BsdfSample { wi, weight: *pass_tint, pdf: *pass, lobe: LobeKind::Specular, eta: 1.0 });
                 };
                 let mut bs = match k {
                     0 => diffuse.sample(wo, u)?,
@@ -152,6 +169,7 @@ impl Bsdf {
             Bsdf::Conductor(b) => b.is_delta(),
             Bsdf::Dielectric(b) => b.is_delta(),
             Bsdf::Principled { metal, glass, w, .. } => {
+                // (the pass-through lobe is a delta lobe)
                 w[0] <= 0.0 && (w[1] <= 0.0 || metal.is_delta()) && (w[2] <= 0.0 || glass.is_delta())
             }
         }
@@ -165,8 +183,8 @@ impl Bsdf {
             Bsdf::Lambert(_) => 1.0,
             Bsdf::Conductor(b) => b.roughness,
             Bsdf::Dielectric(b) => b.roughness,
-            Bsdf::Principled { metal, glass, w, .. } => {
-                let mut r: f32 = 1.0;
+            Bsdf::Principled { metal, glass, w, pass, .. } => {
+                let mut r: f32 = if *pass > 0.0 { 0.0 } else { 1.0 };
                 if w[1] > 0.0 {
                     r = r.min(metal.roughness);
                 }
@@ -211,13 +229,22 @@ impl Bsdf {
         }
     }
 
+    /// The pass-through lobe at `wo`, as the shift evaluates it at an offset vertex: (f as a
+    /// discrete measure = τ·tint, probability τ, wi = −wo). None without one.
+    pub fn pass_eval(&self, wo: Vec3) -> Option<(Spectrum, f32, Vec3)> {
+        match self {
+            Bsdf::Principled { pass, pass_tint, .. } if *pass > 0.0 => Some((*pass_tint * *pass, *pass, -wo)),
+            _ => None,
+        }
+    }
+
     /// Diffuse-like albedo, written to the denoising albedo pass.
     pub fn albedo(&self) -> Spectrum {
         match self {
             Bsdf::Lambert(b) => b.albedo,
             Bsdf::Conductor(b) => b.f0,
             Bsdf::Dielectric(b) => b.tint,
-            Bsdf::Principled { diffuse, metal, glass, w } => {
+            Bsdf::Principled { diffuse, metal, glass, w, .. } => {
                 diffuse.albedo * w[0] + metal.f0 * w[1] + glass.tint * w[2]
             }
         }
@@ -235,6 +262,8 @@ mod tests {
             metal: Conductor { f0: Spectrum::ONE, roughness },
             glass: Dielectric { eta: 1.5, tint: Spectrum::ONE, roughness: 0.0 },
             w,
+            pass: if w.iter().sum::<f32>() < 1.0 - 1e-6 { 1.0 - w.iter().sum::<f32>() } else { 0.0 },
+            pass_tint: Spectrum::ONE,
         }
     }
 
@@ -245,6 +274,38 @@ mod tests {
         for wo in [Vec3::Z, Vec3::new(0.6, 0.0, 0.8)] {
             chi2_test(&b, wo, 21);
         }
+    }
+
+    /// The pass-through lobe: chosen with probability τ, straight through, tinted; the
+    /// mixture's albedo is (1 − τ)·(its lobes') + τ·tint (white furnace with a grey tint).
+    #[test]
+    fn pass_through_lobe_probability_and_furnace() {
+        let tint = Spectrum::new(0.5, 0.5, 0.5);
+        let b = Bsdf::Principled {
+            diffuse: Lambert { albedo: Spectrum::ONE },
+            metal: Conductor { f0: Spectrum::ONE, roughness: 0.5 },
+            glass: Dielectric { eta: 1.5, tint: Spectrum::ONE, roughness: 0.0 },
+            w: [0.4, 0.0, 0.0],
+            pass: 0.6,
+            pass_tint: tint,
+        };
+        let wo = Vec3::new(0.3, -0.2, 0.9).normalize();
+        let mut s = crate::sampler::IndependentSampler::new(5, 0);
+        use crate::sampler::Sampler;
+        let (n, mut passed) = (100_000, 0);
+        for _ in 0..n {
+            let bs = b.sample(wo, s.next_1d(), s.next_2d()).unwrap();
+            if bs.is_pass_through(wo) {
+                passed += 1;
+                assert!((bs.wi + wo).length() < 1e-6 && bs.pdf == 0.6 && bs.weight == tint);
+            }
+        }
+        let p = passed as f64 / n as f64;
+        assert!((p - 0.6).abs() < 4.0 * (0.24f64 / n as f64).sqrt(), "pass-through chosen {p}");
+        let (albedo, _) = white_furnace(&b, wo, 200_000, 8);
+        assert!((albedo - (0.4 + 0.6 * 0.5)).abs() < 0.01, "{albedo}");
+        assert_eq!(b.min_roughness(), 0.0); // a delta lobe: not reconnectable
+        chi2_test(&b, wo, 21); // the diffuse part samples its own pdf
     }
 
     /// With white lobes the mixture's albedo is the weighted sum of its lobes' albedos.

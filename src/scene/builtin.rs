@@ -171,6 +171,25 @@ pub fn cornell_gap(width: u32, height: u32) -> SceneDesc {
     d
 }
 
+/// The Cornell box with a veil: a card between the blocks and the camera that lets 60% of
+/// the light through, tinted orange (Transparent BSDF / alpha), and reflects the rest
+/// diffusely; it also casts a coloured half-shadow (the transparency test scene).
+pub fn cornell_veil(width: u32, height: u32) -> SceneDesc {
+    let mut d = cornell_box(width, height);
+    d.materials.push(MaterialDesc {
+        name: "Veil".into(),
+        base_color: [0.8; 3],
+        roughness: 1.0,
+        transparency: 0.6,
+        transparent_color: [1.0, 0.7, 0.4],
+        ..Default::default()
+    });
+    let m = d.materials.len() as u32 - 1;
+    let (y, z0, z1) = (-0.75f32, -1.0f32, 0.3f32);
+    d.meshes.push(quad("Veil", [[-0.7, y, z0], [0.7, y, z0], [0.7, y, z1], [-0.7, y, z1]], m));
+    d
+}
+
 /// A closed UV sphere of radius 1 with uniform albedo and emission, seen from its centre.
 /// Radiance inside is constant: L = Le·Σ_{k=0}^{B+1} ρ^k for B bounces (ρ = albedo).
 pub fn furnace_sphere(albedo: f32, emission: f32, width: u32, height: u32) -> SceneDesc {
@@ -187,13 +206,14 @@ pub fn furnace_sphere(albedo: f32, emission: f32, width: u32, height: u32) -> Sc
 }
 
 /// Names accepted by `builtin`.
-pub const BUILTIN_SCENES: &[&str] = &["cornell", "spheres", "gap", "furnace"];
+pub const BUILTIN_SCENES: &[&str] = &["cornell", "spheres", "gap", "veil", "furnace"];
 
 pub fn builtin(name: &str, width: u32, height: u32) -> Option<SceneDesc> {
     match name {
         "cornell" => Some(cornell_box(width, height)),
         "spheres" => Some(cornell_spheres(width, height)),
         "gap" => Some(cornell_gap(width, height)),
+        "veil" => Some(cornell_veil(width, height)),
         "furnace" => Some(furnace_sphere(0.8, 1.0, width, height)),
         _ => None,
     }

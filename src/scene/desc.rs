@@ -63,6 +63,11 @@ pub struct MaterialDesc {
     /// Shader of Diffuse and Glossy, say); None = the base colour (Principled).
     pub metal_color: Option<[f32; 3]>,
     pub glass_color: Option<[f32; 3]>,
+    /// Probability τ of passing straight through the surface (Blender's Transparent BSDF, or
+    /// Principled alpha = 1 − τ as coverage); the other lobes share 1 − τ.
+    pub transparency: f32,
+    /// Tint of the light that passes through (white for alpha).
+    pub transparent_color: [f32; 3],
 }
 
 impl Default for MaterialDesc {
@@ -79,6 +84,8 @@ impl Default for MaterialDesc {
             roughness_texture: None,
             metal_color: None,
             glass_color: None,
+            transparency: 0.0,
+            transparent_color: [1.0; 3],
         }
     }
 }

@@ -1,6 +1,7 @@
 //! Materials: the parameters of the Principled-like uber-material, turned into a BSDF at a
 //! surface point: Lambertian base, GGX or mirror metal (metallic), smooth glass
-//! or rough GGX glass (transmission), mixed by their Principled weights.
+//! or rough GGX glass (transmission), mixed by their Principled weights, and a pass-through
+//! lobe (Transparent BSDF, alpha as coverage) that takes probability τ from all of them.
 
 use super::desc::MaterialDesc;
 use crate::bsdf::{Bsdf, Conductor, Dielectric, Lambert};
@@ -21,6 +22,9 @@ pub struct Material {
     pub roughness_texture: Option<u32>,
     pub metal_color: Option<Spectrum>,
     pub glass_color: Option<Spectrum>,
+    /// Pass-through probability τ and tint (Transparent BSDF, alpha as coverage).
+    pub transparency: f32,
+    pub transparent_color: Spectrum,
 }
 
 impl Material {
@@ -31,8 +35,8 @@ impl Material {
                 return Err(bad(&format!("uses texture {t} but the scene has {textures}")));
             }
         }
-        let scalars = [d.roughness, d.metallic, d.transmission, d.ior];
-        let lobe_colors = d.metal_color.iter().chain(d.glass_color.iter()).flatten();
+        let scalars = [d.roughness, d.metallic, d.transmission, d.ior, d.transparency];
+        let lobe_colors = d.metal_color.iter().chain(d.glass_color.iter()).flatten().chain(d.transparent_color.iter());
         if d.base_color.iter().chain(d.emission.iter()).chain(scalars.iter()).chain(lobe_colors).any(|x| !x.is_finite())
         {
             return Err(bad("NaN or Inf parameter"));
@@ -60,6 +64,8 @@ impl Material {
             roughness_texture: d.roughness_texture,
             metal_color: d.metal_color.map(|c| Vec3::from_array(c).clamp(Vec3::ZERO, Vec3::ONE)),
             glass_color: d.glass_color.map(|c| Vec3::from_array(c).clamp(Vec3::ZERO, Vec3::ONE)),
+            transparency: d.transparency.clamp(0.0, 1.0),
+            transparent_color: Vec3::from_array(d.transparent_color).clamp(Vec3::ZERO, Vec3::ONE),
         })
     }
 
@@ -77,20 +83,22 @@ impl Material {
     /// The BSDF with base colour and roughness given (where textures replace them).
     #[inline]
     pub fn bsdf_with(&self, front: bool, base_color: Spectrum, roughness: f32) -> Bsdf {
-        let (m, t) = (self.metallic, self.transmission);
-        let w = [(1.0 - m) * (1.0 - t), m, (1.0 - m) * t];
+        let (m, t, tau) = (self.metallic, self.transmission, self.transparency);
+        let w = [(1.0 - m) * (1.0 - t) * (1.0 - tau), m * (1.0 - tau), (1.0 - m) * t * (1.0 - tau)];
         let diffuse = Lambert { albedo: base_color };
         let metal = Conductor { f0: self.metal_color.unwrap_or(base_color), roughness };
         let eta = if front { self.ior } else { 1.0 / self.ior };
         let glass = Dielectric { eta, tint: self.glass_color.unwrap_or(base_color), roughness };
-        if w[1] <= 0.0 && w[2] <= 0.0 {
+        if tau > 0.0 {
+            Bsdf::Principled { diffuse, metal, glass, w, pass: tau, pass_tint: self.transparent_color }
+        } else if w[1] <= 0.0 && w[2] <= 0.0 {
             Bsdf::Lambert(diffuse)
         } else if w[0] <= 0.0 && w[2] <= 0.0 {
             Bsdf::Conductor(metal)
         } else if w[0] <= 0.0 && w[1] <= 0.0 {
             Bsdf::Dielectric(glass)
         } else {
-            Bsdf::Principled { diffuse, metal, glass, w }
+            Bsdf::Principled { diffuse, metal, glass, w, pass: 0.0, pass_tint: Spectrum::ZERO }
         }
     }
 }
