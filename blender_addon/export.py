@@ -140,12 +140,12 @@ def material_params(mat, warnings, textures=None):
         out["base_color"] = (0.0, 0.0, 0.0)  # Cycles renders an unconnected surface black
         return out
     node = surface.links[0].from_node
-    if node.type in ("MIX_SHADER", "ADD_SHADER"):
-        leaves = []
-        _shader_leaves(node, 1.0, leaves, textures, warnings, what)
+    leaves = []
+    _shader_leaves(node, 1.0, leaves, textures, warnings, what)
+    if node.type in ("MIX_SHADER", "ADD_SHADER") or any("pass" in p for _, p in leaves):
         out.update(_combine(leaves, warnings, what))
         return out
-    out.update(_node_params(node, textures, warnings, what))
+    out.update(leaves[0][1] if leaves else _node_params(node, textures, warnings, what))
     out.pop("bsdf", None)
     return out
 
@@ -164,6 +164,10 @@ def _node_params(node, textures, warnings, what):
         col = _input_value(node, "Emission Color", warnings, what, (0, 0, 0, 1))[:3]
         strength = _input_value(node, "Emission Strength", warnings, what, 0.0)
         out["emission"] = tuple(c * strength for c in col)
+        out["alpha"] = min(max(_input_value(node, "Alpha", warnings, what, 1.0), 0.0), 1.0)
+    elif t == "BSDF_TRANSPARENT":
+        out["base_color"] = (0.0, 0.0, 0.0)
+        out["pass"] = tuple(_input_value(node, "Color", warnings, what, (1, 1, 1, 1))[:3])
     elif t == "BSDF_DIFFUSE":
         _color_or_texture(node, "Color", out, "base_color", textures, warnings, what, (0.8, 0.8, 0.8, 1))
         out["roughness"] = 1.0
@@ -201,7 +205,13 @@ def _shader_leaves(node, weight, leaves, textures, warnings, what):
     elif node.type == "ADD_SHADER":
         pairs = ((node.inputs[0], weight), (node.inputs[1], weight))
     else:
-        leaves.append((weight, _node_params(node, textures, warnings, what)))
+        p = _node_params(node, textures, warnings, what)
+        alpha = p.pop("alpha", 1.0)
+        if alpha < 1.0:  # alpha as coverage: Mix(Transparent(white), shader, alpha), as in Cycles
+            clear = dict(p, base_color=(0.0, 0.0, 0.0), emission=(0.0, 0.0, 0.0))
+            clear["pass"] = (1.0, 1.0, 1.0)
+            leaves.append((weight * (1.0 - alpha), clear))
+        leaves.append((weight * alpha, p))
         return
     for sock, w in pairs:
         if sock.is_linked:  # an unconnected shader socket adds nothing, as in Cycles
@@ -215,10 +225,15 @@ def _combine(leaves, warnings, what):
     the metal and glass lobes in the core: different values are averaged (with a warning).
     A total BSDF weight above 1 (Add Shader of two BSDFs) is normalized, with a warning."""
     lobes = {"d": [0.0, np.zeros(3)], "m": [0.0, np.zeros(3)], "g": [0.0, np.zeros(3)]}
+    passing = [0.0, np.zeros(3)]  # Transparent BSDF leaves (and 1 − alpha)
     emission = np.zeros(3)
     rough, iors, tex, rough_tex = [], [], [], []
     for w, p in leaves:
         emission += w * np.array(p["emission"][:3], dtype=np.float64)
+        if "pass" in p:
+            passing[0] += w
+            passing[1] += w * np.array(p["pass"][:3], dtype=np.float64)
+            continue
         if not p.get("bsdf", True):
             continue
         m, t = p["metallic"], p["transmission"]
@@ -236,14 +251,19 @@ def _combine(leaves, warnings, what):
         if "roughness_texture" in p:
             rough_tex.append(p["roughness_texture"])
     total = sum(v[0] for v in lobes.values())
+    total_all = total + passing[0]
     out = {"emission": tuple(emission.tolist()), "metallic": 0.0, "transmission": 0.0, "roughness": 0.5,
            "ior": iors[0] if iors else 1.5}
+    scale = min(total_all, 1.0)
+    if total_all > 1.0 + 1e-6:
+        warnings.append(f"{what}: Add Shader of BSDFs with total weight {total_all:.2f} is normalized to 1")
+    if passing[0] > 0:
+        # the core's pass-through lobe takes probability τ; the other lobes share 1 − τ
+        out["transparency"] = passing[0] / total_all
+        out["transparent_color"] = tuple((passing[1] / passing[0] * scale).tolist())
     if total <= 0:
         out["base_color"] = (0.0, 0.0, 0.0)
         return out
-    scale = min(total, 1.0)
-    if total > 1.0 + 1e-6:
-        warnings.append(f"{what}: Add Shader of BSDFs with total weight {total:.2f} is normalized to 1")
     color = {k: tuple((v[1] / v[0] * scale).tolist()) if v[0] > 0 else (0.0, 0.0, 0.0) for k, v in lobes.items()}
     out["metallic"] = lobes["m"][0] / total
     dg = lobes["d"][0] + lobes["g"][0]

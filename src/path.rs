@@ -93,6 +93,11 @@ pub struct Event {
     /// Throughput-weighted numerator: the balance-heuristic contribution is
     /// numerator / (pdf_b + pdf_l) (ALGORITHM.md §4, "MIS between base and offset").
     pub numerator: Spectrum,
+    /// The last segment crossed transparent surfaces (a shadow ray through them, or
+    /// pass-through vertices after `vertex`); `le` then includes their transmittance. The
+    /// shift does not re-create such segments from a free offset vertex (it fails there,
+    /// on both sides alike).
+    pub through_transparent: bool,
 }
 
 /// A recorded path (reused between samples: no allocation once warm).
@@ -143,12 +148,20 @@ pub fn trace_path<S: Sampler>(
     let mut prev_pdf = 0.0f32; // pdf of the BSDF sample that produced `d` (0: camera ray)
     let mut prev_delta = true; // camera ray or specular bounce: no MIS with NEE
     let mut prev_fcos = Spectrum::ONE; // BSDF·cos of the sampled direction at the previous vertex
+                                       // Pass-through crossings since the last scattering vertex (MIS and events see through
+                                       // them: the segment from that vertex continues) and the product of their tints.
+    let mut passes = 0u32;
+    let mut pass_tint = Spectrum::ONE;
+    let mut last_vertex = CAMERA_VERTEX; // index of the last vertex that scattered
     let use_nee = cfg.nee && scene.has_lights();
 
     loop {
         let hit = scene.intersect(o, d, tmin, tmax);
         let t_surface = hit.map_or(tmax, |h| h.t);
+        // the camera ray itself (very-direct light); lamps stay invisible to the camera
+        // through transparent surfaces too (depth counts scattering, not crossings)
         let camera_ray = nvert == 0;
+        let camera_visibility = depth == 0;
         let mis = |pdf_light: f32| {
             if !use_nee || prev_delta {
                 1.0
@@ -157,7 +170,13 @@ pub fn trace_path<S: Sampler>(
             }
         };
 
-        let from_vertex = if camera_ray { CAMERA_VERTEX } else { nvert - 1 };
+        // Events after pass-throughs from the camera hang on the first crossed vertex, with
+        // the camera's "pdf" 1 (they are not very direct, and the shift fails on them).
+        let (from_vertex, ev_pdf) = match (camera_ray, last_vertex) {
+            (true, _) => (CAMERA_VERTEX, prev_pdf),
+            (false, CAMERA_VERTEX) => (0, 1.0),
+            (false, v) => (v, prev_pdf),
+        };
         // NEE cannot produce a path whose last bounce was specular: its light pdf is then 0.
         let pdf_l_if_nee = |pdf: f32| if use_nee && !prev_delta { pdf } else { 0.0 };
         let push = |rec: &mut Option<&mut Path>, light: u32, z: Vec3, at_infinity: bool, le: Spectrum, pdf_l: f32| {
@@ -169,21 +188,25 @@ pub fn trace_path<S: Sampler>(
                     z,
                     at_infinity,
                     delta: false,
-                    le,
+                    le: le * pass_tint,
                     f: prev_fcos,
-                    pdf_b: prev_pdf,
+                    pdf_b: ev_pdf,
                     pdf_l: pdf_l_if_nee(pdf_l),
-                    numerator: beta * le * prev_pdf,
+                    numerator: beta * le * ev_pdf,
+                    through_transparent: passes > 0,
                 });
             }
         };
 
-        // Analytic lights crossed before the surface (lights are transparent).
+        // Analytic lights crossed before the surface (lights are transparent). After
+        // pass-throughs the light pdf is NEE's from the vertex the segment started at.
         let mut crossed = Spectrum::ZERO;
-        scene.for_each_light_crossed(o, d, t_surface, camera_ray, |li, t, le, pdf_light| {
-            crossed += le * mis(pdf_light);
+        scene.for_each_light_crossed(o, d, t_surface, camera_visibility, |li, t, le, pdf_light| {
             let inf = !t.is_finite();
-            push(&mut record, li, if inf { d } else { o + d * t }, inf, le, pdf_light);
+            let z = if inf { d } else { o + d * t };
+            let pdf_light = if passes > 0 { scene.light_eval(li, prev_p, z).map_or(0.0, |x| x.1) } else { pdf_light };
+            crossed += le * mis(pdf_light);
+            push(&mut record, li, z, inf, le, pdf_light);
         });
         add(&mut out, beta * crossed, camera_ray);
 
@@ -243,10 +266,13 @@ pub fn trace_path<S: Sampler>(
             if let Some((li, ls)) = scene.sample_light(si.p, u_light_select, u_light) {
                 let wi = si.frame.to_local(ls.wi);
                 let f = bsdf.eval(wo, wi);
-                if f.max_element() > 0.0 && ls.wi.dot(si.ng) > 0.0 && scene.visible(&si, &ls) {
+                let through =
+                    if f.max_element() > 0.0 && ls.wi.dot(si.ng) > 0.0 { scene.transmittance(&si, &ls) } else { None };
+                if let Some((tr, crossed_transparent)) = through {
+                    let radiance = ls.radiance * tr;
                     let pdf_b = if ls.is_delta { 0.0 } else { bsdf.pdf(wo, wi) };
                     let w = if ls.is_delta { 1.0 } else { power_heuristic(ls.pdf, pdf_b) };
-                    add(&mut out, beta * f * ls.radiance * (w / ls.pdf), false);
+                    add(&mut out, beta * f * radiance * (w / ls.pdf), false);
                     if let Some(p) = record.as_deref_mut() {
                         let at_infinity = !ls.dist.is_finite();
                         p.events.push(Event {
@@ -256,11 +282,12 @@ pub fn trace_path<S: Sampler>(
                             z: if at_infinity { ls.wi } else { ls.p },
                             at_infinity,
                             delta: ls.is_delta,
-                            le: ls.radiance,
+                            le: radiance,
                             f,
                             pdf_b,
                             pdf_l: ls.pdf,
-                            numerator: beta * f * ls.radiance,
+                            numerator: beta * f * radiance,
+                            through_transparent: crossed_transparent,
                         });
                     }
                 }
@@ -282,7 +309,6 @@ pub fn trace_path<S: Sampler>(
         } else {
             depth += 1;
         }
-        nvert += 1;
         let q = if depth >= RR_START_DEPTH && !pass_through { beta.max_element().min(1.0) } else { 1.0 };
         if let Some(v) = record.as_deref_mut().and_then(|p| p.vertices.last_mut()) {
             v.wi = wi_world;
@@ -301,10 +327,20 @@ pub fn trace_path<S: Sampler>(
         if !is_finite_spectrum(beta) || beta.max_element() <= 0.0 || transparent > MAX_TRANSPARENT_BOUNCES {
             break;
         }
-        prev_p = si.p;
-        prev_pdf = bs.pdf;
-        prev_fcos = bs.weight * bs.pdf;
-        prev_delta = bs.lobe == crate::bsdf::LobeKind::Specular;
+        if pass_through {
+            // the segment from the last scattering vertex goes on through this surface
+            passes += 1;
+            pass_tint *= bs.weight;
+        } else {
+            passes = 0;
+            pass_tint = Spectrum::ONE;
+            last_vertex = nvert;
+            prev_p = si.p;
+            prev_pdf = bs.pdf;
+            prev_fcos = bs.weight * bs.pdf;
+            prev_delta = bs.lobe == crate::bsdf::LobeKind::Specular;
+        }
+        nvert += 1;
         o = si.spawn_origin(wi_world);
         d = wi_world;
         tmin = 0.0;
@@ -366,6 +402,8 @@ mod tests {
             (Scene::build(&cornell_box(16, 16)).unwrap(), true),
             (Scene::build(&cornell_box(16, 16)).unwrap(), false),
             (Scene::build(&crate::scene::builtin::cornell_spheres(16, 16)).unwrap(), true),
+            (Scene::build(&crate::scene::builtin::cornell_veil(16, 16)).unwrap(), true),
+            (Scene::build(&crate::scene::builtin::cornell_veil(16, 16)).unwrap(), false),
         ] {
             let cfg = PathSettings { max_bounces: 4, nee };
             let mut path = Path::default();

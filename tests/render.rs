@@ -87,8 +87,16 @@ fn block_means(img: &Image, b: usize) -> Vec<f64> {
 /// difference NEE − naive must look like noise, judged against the difference of two
 /// naive renders with different seeds (whose variance is at least as large).
 #[test]
-fn nee_and_naive_path_tracing_agree_on_cornell_box() {
-    let desc = cornell_box(32, 32);
+fn nee_and_naive_path_tracing_agree_on_cornell_box_and_through_a_veil() {
+    // the veil: NEE's transparent shadows and MIS that sees through pass-throughs must add up
+    // to what pure BSDF sampling (naive) finds
+    for desc in [cornell_box(32, 32), gdmlt::scene::builtin::cornell_veil(32, 32)] {
+        nee_and_naive_agree(&desc);
+    }
+}
+
+fn nee_and_naive_agree(desc: &SceneDesc) {
+    let desc = desc.clone();
     let nee = block_means(&run(&desc, 256, true, 6, 1, 0), 4);
     let naive_a = block_means(&run(&desc, 512, false, 6, 2, 0), 4);
     let naive_b = block_means(&run(&desc, 512, false, 6, 3, 0), 4);

@@ -197,8 +197,9 @@ def textures(bpy):
 
 def mix(bpy):
     """The lights scene with shader trees: the card is Mix(Diffuse, Glossy) (a "plastic"), the
-    wall Mix(Principled metal, Diffuse), the floor Add(Diffuse, Emission). GGX distributions
-    set to single scattering, as GDMLT's."""
+    wall Mix(Principled metal, Diffuse), the floor Add(Diffuse, Emission); in front, a veil
+    Mix(Transparent (orange), Diffuse) and a curtain of Principled with alpha 0.35 (coverage).
+    GGX distributions set to single scattering, as GDMLT's."""
     scene = lights(bpy, size=40, bounces=3)
 
     def tree(ob_name, build):
@@ -242,9 +243,30 @@ def mix(bpy):
         e.inputs["Strength"].default_value = 0.3
         return mix_node(nt, 0, diffuse(nt, (0.6, 0.6, 0.6)), e, kind="ShaderNodeAddShader")
 
+    def veil(nt):
+        t = nt.nodes.new("ShaderNodeBsdfTransparent")
+        t.inputs["Color"].default_value = (1.0, 0.7, 0.4, 1)
+        return mix_node(nt, 0.4, t, diffuse(nt, (0.6, 0.6, 0.6)))
+
+    def curtain(nt):
+        p = nt.nodes.new("ShaderNodeBsdfPrincipled")
+        p.inputs["Base Color"].default_value = (0.2, 0.6, 0.3, 1)
+        p.inputs["Roughness"].default_value = 1.0
+        p.inputs["IOR"].default_value = 1.0  # no specular layer: GDMLT's Principled has none yet
+        p.inputs["Alpha"].default_value = 0.35
+        return p
+
+    for name, x0, x1, y in (("Veil", -1.5, -0.2, -2.0), ("Curtain", 0.2, 1.5, -2.5)):
+        me = bpy.data.meshes.new(name)
+        me.from_pydata([(x0, y, 0), (x1, y, 0), (x1, y, 1.6), (x0, y, 1.6)], [], [(0, 1, 2, 3)])
+        ob = bpy.data.objects.new(name, me)
+        scene.collection.objects.link(ob)
+        me.materials.append(bpy.data.materials.new(name))
     tree("Card", plastic)
     tree("Wall", metal_and_paint)
     tree("Floor", glowing_floor)
+    tree("Veil", veil)
+    tree("Curtain", curtain)
     return scene
 
 

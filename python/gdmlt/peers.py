@@ -288,7 +288,7 @@ def cycles_unbiased(scene, samples: int, seed: int, bounces: int, threads: int =
     c.pixel_filter_type = "BOX"
     c.filter_width = 1.0
     c.max_bounces = c.diffuse_bounces = c.glossy_bounces = c.transmission_bounces = bounces
-    c.transparent_max_bounces = bounces
+    c.transparent_max_bounces = 16  # as the core (path.rs MAX_TRANSPARENT_BOUNCES): crossings are not bounces
     c.caustics_reflective = c.caustics_refractive = True
     scene.render.threads_mode = "FIXED" if threads else "AUTO"
     if threads:

@@ -173,7 +173,8 @@ pub fn cornell_gap(width: u32, height: u32) -> SceneDesc {
 
 /// The Cornell box with a veil: a card between the blocks and the camera that lets 60% of
 /// the light through, tinted orange (Transparent BSDF / alpha), and reflects the rest
-/// diffusely; it also casts a coloured half-shadow (the transparency test scene).
+/// diffusely, and a canopy of the same material under the light, which most direct light
+/// crosses (coloured half-shadows: the transparency test scene).
 pub fn cornell_veil(width: u32, height: u32) -> SceneDesc {
     let mut d = cornell_box(width, height);
     d.materials.push(MaterialDesc {
@@ -187,6 +188,9 @@ pub fn cornell_veil(width: u32, height: u32) -> SceneDesc {
     let m = d.materials.len() as u32 - 1;
     let (y, z0, z1) = (-0.75f32, -1.0f32, 0.3f32);
     d.meshes.push(quad("Veil", [[-0.7, y, z0], [0.7, y, z0], [0.7, y, z1], [-0.7, y, z1]], m));
+    // and a canopy of the same stuff under the light: most direct light crosses it
+    let z = 0.7f32;
+    d.meshes.push(quad("Canopy", [[-0.6, -0.6, z], [0.6, -0.6, z], [0.6, 0.6, z], [-0.6, 0.6, z]], m));
     d
 }
 

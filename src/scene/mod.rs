@@ -83,6 +83,9 @@ pub struct Scene {
     /// The world background, a light with index `env_light()` when it is not black.
     pub env: Environment,
     accel: Option<Accel>,
+    /// Some material lets light through (pass-through lobe): shadow rays then cross such
+    /// surfaces instead of stopping (decided once; without it shadow rays stay any-hit tests).
+    has_transparency: bool,
     pub bounds_center: Vec3,
     pub bounds_radius: f32,
     pub report: SceneReport,
@@ -249,6 +252,7 @@ impl Scene {
             );
         }
         let accel = if positions.is_empty() { None } else { Some(Accel::build(&positions)) };
+        let has_transparency = materials.iter().any(|m| m.transparency > 0.0);
         Ok(Scene {
             positions,
             normals,
@@ -265,6 +269,7 @@ impl Scene {
             camera,
             env,
             accel,
+            has_transparency,
             bounds_center,
             bounds_radius,
             report,
@@ -296,6 +301,37 @@ impl Scene {
             return true;
         }
         !self.occluded(o, ls.wi, 0.0, tmax)
+    }
+
+    /// Transmittance from a surface point to a light sample (transparent shadows, as Cycles):
+    /// the product of τ·tint of the transparent surfaces crossed (at most
+    /// `MAX_TRANSPARENT_BOUNCES`), and whether any was crossed; None when an opaque surface
+    /// blocks the way.
+    pub fn transmittance(&self, si: &SurfaceInteraction, ls: &LightSample) -> Option<(Spectrum, bool)> {
+        if !self.has_transparency {
+            return self.visible(si, ls).then_some((Spectrum::ONE, false));
+        }
+        let d = ls.wi;
+        let mut o = si.spawn_origin(d);
+        let mut t = Spectrum::ONE;
+        for crossed in 0..=crate::path::MAX_TRANSPARENT_BOUNCES {
+            let tmax =
+                if ls.dist.is_finite() { (ls.p - o).dot(d) * (1.0 - 1e-4) - ray_epsilon(ls.p) } else { f32::INFINITY };
+            if tmax <= 0.0 {
+                return Some((t, crossed > 0));
+            }
+            let Some(hit) = self.intersect(o, d, 0.0, tmax) else {
+                return Some((t, crossed > 0));
+            };
+            let m = &self.materials[self.tri_material[hit.prim as usize] as usize];
+            if m.transparency <= 0.0 {
+                return None;
+            }
+            t *= m.transparent_color * m.transparency;
+            let si = self.interaction(&hit, d);
+            o = si.spawn_origin(d);
+        }
+        None
     }
 
     /// Surface data at a hit, with normals facing the incoming ray direction `d`.
