@@ -105,8 +105,14 @@ class _Reader:
             out["roughness"] = value("roughness", 0.5)
             out["ior"] = value("ior", 1.5)
             out["emission"] = value("emissiveColor", (0.0, 0.0, 0.0))
-            if value("opacity", 1.0) < 1.0:
-                self.warn(f"material '{out['name']}': opacity below 1 is ignored (rendered opaque)")
+            # opacity as coverage (what Blender writes for Principled alpha); with an
+            # opacityThreshold, a cutout: below it fully transparent, else opaque
+            opacity = min(max(value("opacity", 1.0), 0.0), 1.0)
+            threshold = value("opacityThreshold", 0.0)
+            if threshold > 0.0:
+                opacity = 0.0 if opacity < threshold else 1.0
+            if opacity < 1.0:
+                out["transparency"] = 1.0 - opacity
             if value("useSpecularWorkflow", 0.0):
                 self.warn(f"material '{out['name']}': the specular workflow is rendered as the metallic one")
         self.material_index[path] = len(self.materials)
