@@ -30,7 +30,7 @@
 //! base and offset, which is what makes that rule unbiased.
 
 use crate::bsdf::{refraction_half_vector, Bsdf, SPECULAR_ROUGHNESS_THRESHOLD};
-use crate::math::{ray_epsilon, Spectrum};
+use crate::math::Spectrum;
 use crate::path::{Event, Path, Vertex, CAMERA_VERTEX};
 use crate::scene::{Scene, SurfaceInteraction};
 use glam::{Vec2, Vec3};
@@ -109,24 +109,17 @@ fn is_diffuse(scene: &Scene, material: u32, front: bool, uv: Vec2) -> bool {
     bsdf_at(scene, material, front, uv).min_roughness() > SPECULAR_ROUGHNESS_THRESHOLD
 }
 
-/// Visibility from a surface point to a point (or, at infinity, along a direction).
+/// Visibility from a surface point to a point (or, at infinity, along a direction), on the
+/// side the geometric normal faces.
 fn visible(scene: &Scene, si: &SurfaceInteraction, z: Vec3, at_infinity: bool) -> bool {
-    let (dir, tmax) = if at_infinity {
-        (z, f32::INFINITY)
-    } else {
-        let to = z - si.p;
-        let len = to.length();
-        if len <= 0.0 {
-            return false;
-        }
-        (to / len, len)
-    };
+    let dir = if at_infinity { z } else { (z - si.p).normalize_or_zero() };
     if dir.dot(si.ng) <= 0.0 {
         return false;
     }
-    let o = si.spawn_origin(dir);
-    let tmax = if at_infinity { tmax } else { (z - o).length() * (1.0 - 1e-4) - ray_epsilon(z) };
-    tmax <= 0.0 || !scene.occluded(o, dir, 0.0, tmax)
+    match scene.shadow_ray(si, z, at_infinity) {
+        Some((o, d, tmax)) => tmax <= 0.0 || !scene.occluded(o, d, 0.0, tmax),
+        None => false,
+    }
 }
 
 /// An offset vertex of its own (not yet joined to the base path).

@@ -87,10 +87,14 @@ fn block_means(img: &Image, b: usize) -> Vec<f64> {
 /// difference NEE − naive must look like noise, judged against the difference of two
 /// naive renders with different seeds (whose variance is at least as large).
 #[test]
-fn nee_and_naive_path_tracing_agree_on_cornell_box_and_through_a_veil() {
+fn nee_and_naive_path_tracing_agree_on_cornell_box_gap_and_veil() {
     // the veil: NEE's transparent shadows and MIS that sees through pass-throughs must add up
-    // to what pure BSDF sampling (naive) finds
-    for desc in [cornell_box(32, 32), gdmlt::scene::builtin::cornell_veil(32, 32)] {
+    // to what pure BSDF sampling (naive) finds; the gap: the plate under the light sees it at
+    // grazing angles (shadow rays aimed from the unoffset point hit the light's own plane:
+    // NEE lost 99% of the plate's direct light, and this test failed)
+    for desc in
+        [cornell_box(32, 32), gdmlt::scene::builtin::cornell_veil(32, 32), gdmlt::scene::builtin::cornell_gap(32, 32)]
+    {
         nee_and_naive_agree(&desc);
     }
 }
@@ -109,7 +113,7 @@ fn nee_and_naive_agree(desc: &SceneDesc) {
     let mean_d = d.iter().sum::<f64>() / d.len() as f64;
     assert!(mean_d.abs() < 4.0 * re / (d.len() as f64).sqrt(), "mean difference {mean_d} (noise rms {re})");
     // the image is not black
-    assert!(naive_a.iter().sum::<f64>() / naive_a.len() as f64 > 0.05);
+    assert!(naive_a.iter().sum::<f64>() / naive_a.len() as f64 > 0.01);
 }
 
 #[test]
