@@ -22,14 +22,29 @@ class ExportCancelled(Exception):
 
 
 def _input_value(node, name, warnings, what, default=None):
-    """Unlinked input's value; a linked input (texture, etc.) falls back to its default value."""
+    """An input's value: unlinked, its own; linked from an RGB or Value node, that node's
+    constant (converted as Cycles converts sockets: a colour into a value socket is its
+    luminance, Rec.709 weights; a value into a colour socket is grey); linked to anything else
+    (a texture, etc.), its unlinked value, with a warning."""
     sock = node.inputs.get(name)
     if sock is None:
         return default
+    v = getattr(sock, "default_value", default)
     if sock.is_linked:
+        src = sock.links[0].from_node
+        if src.type in ("RGB", "VALUE"):
+            c = src.outputs[0].default_value
+            try:
+                rgb = tuple(c)[:3]
+            except TypeError:
+                rgb = (float(c),) * 3
+            try:
+                n = len(v)
+            except TypeError:
+                return float(0.2126 * rgb[0] + 0.7152 * rgb[1] + 0.0722 * rgb[2])
+            return (*rgb, 1.0)[:n]
         warnings.append(f"{what}: input '{name}' of node '{node.name}' is linked (e.g. a texture); "
                         f"GDMLT uses its unlinked value instead")
-    v = getattr(sock, "default_value", default)
     try:
         return tuple(v)
     except TypeError:

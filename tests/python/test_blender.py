@@ -79,6 +79,37 @@ def test_unsupported_node_warns_and_falls_back(bpy_mod, tmp_out, capfd):
     assert "not supported" in err.out + err.err
 
 
+def test_rgb_and_value_nodes_feed_their_constants(bpy_mod):
+    """RGB and Value nodes linked into shader inputs give their constants, converted between
+    colour and value sockets as Cycles does (luminance one way, grey the other), without a
+    warning."""
+    import gdmlt_blender.export as export
+
+    bpy = bpy_mod
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    mat = bpy.data.materials.new("Const")
+    if mat.node_tree is None:
+        mat.use_nodes = True
+    nt = mat.node_tree
+    p = nt.nodes.get("Principled BSDF") or nt.nodes.new("ShaderNodeBsdfPrincipled")
+    nt.links.new(p.outputs[0], nt.get_output_node("CYCLES").inputs["Surface"])
+    rgb = nt.nodes.new("ShaderNodeRGB")
+    rgb.outputs[0].default_value = (0.2, 0.4, 0.6, 1.0)
+    val = nt.nodes.new("ShaderNodeValue")
+    val.outputs[0].default_value = 0.35
+    grey = nt.nodes.new("ShaderNodeRGB")
+    grey.outputs[0].default_value = (1.0, 0.0, 0.0, 1.0)
+    nt.links.new(rgb.outputs[0], p.inputs["Base Color"])
+    nt.links.new(val.outputs[0], p.inputs["Roughness"])
+    nt.links.new(grey.outputs[0], p.inputs["Metallic"])  # colour into a value socket
+    warnings = []
+    out = export.material_params(mat, warnings)
+    assert warnings == []
+    assert np.allclose(out["base_color"], (0.2, 0.4, 0.6))
+    assert out["roughness"] == pytest.approx(0.35)
+    assert out["metallic"] == pytest.approx(0.2126, abs=1e-4)
+
+
 def _camera_scene(bpy):
     bpy.ops.wm.read_factory_settings(use_empty=True)
     scene = bpy.context.scene
