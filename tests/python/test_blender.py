@@ -465,16 +465,20 @@ def test_esc_at_any_moment_stops_the_render_cleanly(bpy_mod, tmp_out, monkeypatc
     """Esc in Blender turns RenderEngine.test_break() true; the engine polls it through
     esc_pressed() (test_break itself is Blender's C method and cannot be replaced from Python).
     Esc after k polls — k = 0: during export; later: during rendering — must end the render
-    quickly, without an error, and leave finite pixels that Blender can write (an Esc during
+    within a second, without an error, and leave finite pixels that Blender can write (an Esc during
     export used to crash Blender when it wrote the frame)."""
     bpy = bpy_mod
     from gdmlt_blender.engine import GDMLTRenderEngine
 
-    polls = {"n": 0, "after": 0}
+    polls = {"n": 0, "after": 0, "esc_at": None}
 
     def esc_pressed(self):
         polls["n"] += 1
-        return polls["n"] > polls["after"]
+        if polls["n"] > polls["after"]:
+            if polls["esc_at"] is None:
+                polls["esc_at"] = time.perf_counter()
+            return True
+        return False
 
     monkeypatch.setattr(GDMLTRenderEngine, "esc_pressed", esc_pressed)
     bpy.ops.wm.open_mainfile(filepath=str(ROOT / "examples" / "cornell.blend"))
@@ -483,12 +487,12 @@ def test_esc_at_any_moment_stops_the_render_cleanly(bpy_mod, tmp_out, monkeypatc
     s = scene.gdmlt
     s.method, s.samples, s.time_limit = method, 100000, 0.0  # a minute of work if never stopped
     for after in (0, 1, 3, 20):
-        polls.update(n=0, after=after)
-        t = time.perf_counter()
+        polls.update(n=0, after=after, esc_at=None)
         img = render_to_exr(bpy, scene, tmp_out / f"break{after}.exr")
-        took = time.perf_counter() - t
+        took = time.perf_counter() - polls["esc_at"]  # from Esc to the frame written
+        print(f"{method}: Esc after {after} polls: stopped {took:.2f} s after Esc")
         assert polls["n"] > after, polls  # it polled until Esc, and stopped then
-        assert took < 5 + 0.06 * after, f"{method}: Esc after {after} polls took {took:.1f} s to stop"
+        assert took < 1.0, f"{method}: Esc after {after} polls took {took:.2f} s to stop"
         assert np.isfinite(img).all()
 
 
