@@ -172,7 +172,7 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl)
         }
     }
     let (combined, primal_full, dx, dy, direct) =
-        resolve(&rows, w, h, done, settings.alpha_rec, settings.reconstruction);
+        resolve(&rows, w, h, done, settings.alpha_rec, control.final_norm(settings.reconstruction));
     let scale = 1.0 / done.max(1) as f64;
     let n = |v: &[f64]| f32_image(w, h, v);
     let albedo = to_image(&rows, |r| &r.albedo, scale);

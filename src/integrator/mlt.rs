@@ -299,7 +299,8 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl,
     if starts.is_empty() {
         stats.warnings.push("no light reaches the camera in the bootstrap: the image is black".into());
     }
-    let mut layers = resolve(&groups, b, w, h, gradient, &direct, settings.alpha_rec, settings.reconstruction);
+    let norm = control.final_norm(settings.reconstruction);
+    let mut layers = resolve(&groups, b, w, h, gradient, &direct, settings.alpha_rec, norm);
     let img = |v: Vec<f64>| Image { width: w, height: h, channels: 3, data: v.into_iter().map(|x| x as f32).collect() };
     layers.push(("Denoising Albedo".into(), img(albedo)));
     layers.push(("Denoising Normal".into(), img(normal)));
