@@ -65,6 +65,15 @@ pub struct Vertex {
     pub rr: f32,
 }
 
+impl Vertex {
+    /// The path went straight through here (the pass-through lobe of a transparent surface:
+    /// a delta transmission with relative IOR exactly 1, see `BsdfSample::is_pass_through`).
+    #[inline]
+    pub fn passed_through(&self) -> bool {
+        self.delta_out && self.eta_out == 1.0 && self.wi.dot(self.ng) * self.wo.dot(self.ng) < 0.0
+    }
+}
+
 /// Index used for events whose last segment starts at the camera (very-direct light).
 pub const CAMERA_VERTEX: u32 = u32::MAX;
 
@@ -148,9 +157,9 @@ pub fn trace_path<S: Sampler>(
     let mut prev_pdf = 0.0f32; // pdf of the BSDF sample that produced `d` (0: camera ray)
     let mut prev_delta = true; // camera ray or specular bounce: no MIS with NEE
     let mut prev_fcos = Spectrum::ONE; // BSDF·cos of the sampled direction at the previous vertex
-                                       // Pass-through crossings since the last scattering vertex (MIS and events see through
-                                       // them: the segment from that vertex continues) and the product of their tints.
-    let mut passes = 0u32;
+                                       // Whether the segment from the last scattering vertex has gone through transparent
+                                       // surfaces (MIS and events see through them: the segment continues), and their tints.
+    let mut passed = false;
     let mut pass_tint = Spectrum::ONE;
     let mut last_vertex = CAMERA_VERTEX; // index of the last vertex that scattered
     let use_nee = cfg.nee && scene.has_lights();
@@ -193,7 +202,7 @@ pub fn trace_path<S: Sampler>(
                     pdf_b: ev_pdf,
                     pdf_l: pdf_l_if_nee(pdf_l),
                     numerator: beta * le * ev_pdf,
-                    through_transparent: passes > 0,
+                    through_transparent: passed,
                 });
             }
         };
@@ -204,7 +213,7 @@ pub fn trace_path<S: Sampler>(
         scene.for_each_light_crossed(o, d, t_surface, camera_visibility, |li, t, le, pdf_light| {
             let inf = !t.is_finite();
             let z = if inf { d } else { o + d * t };
-            let pdf_light = if passes > 0 { scene.light_eval(li, prev_p, z).map_or(0.0, |x| x.1) } else { pdf_light };
+            let pdf_light = if passed { scene.light_eval(li, prev_p, z).map_or(0.0, |x| x.1) } else { pdf_light };
             crossed += le * mis(pdf_light);
             push(&mut record, li, z, inf, le, pdf_light);
         });
@@ -329,10 +338,10 @@ pub fn trace_path<S: Sampler>(
         }
         if pass_through {
             // the segment from the last scattering vertex goes on through this surface
-            passes += 1;
+            passed = true;
             pass_tint *= bs.weight;
         } else {
-            passes = 0;
+            passed = false;
             pass_tint = Spectrum::ONE;
             last_vertex = nvert;
             prev_p = si.p;

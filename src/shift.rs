@@ -112,14 +112,8 @@ fn is_diffuse(scene: &Scene, material: u32, front: bool, uv: Vec2) -> bool {
 /// Visibility from a surface point to a point (or, at infinity, along a direction), on the
 /// side the geometric normal faces.
 fn visible(scene: &Scene, si: &SurfaceInteraction, z: Vec3, at_infinity: bool) -> bool {
-    let dir = if at_infinity { z } else { (z - si.p).normalize_or_zero() };
-    if dir.dot(si.ng) <= 0.0 {
-        return false;
-    }
-    match scene.shadow_ray(si, z, at_infinity) {
-        Some((o, d, tmax)) => tmax <= 0.0 || !scene.occluded(o, d, 0.0, tmax),
-        None => false,
-    }
+    let dir = if at_infinity { z } else { z - si.p };
+    dir.dot(si.ng) > 0.0 && scene.segment_clear(si, z, at_infinity)
 }
 
 /// An offset vertex of its own (not yet joined to the base path).
@@ -320,7 +314,7 @@ fn half_vector_step(scene: &Scene, x: &Vertex, f: &Free) -> Option<Step> {
     let (wo_x, wi_x) = (x.frame.to_local(x.wo), x.frame.to_local(x.wi));
     let wo_y = f.y.frame.to_local(f.wo);
     let refraction = wi_x.z < 0.0;
-    let (wi, fy, pdf, j, eta) = if x.delta_out && refraction && x.eta_out == 1.0 {
+    let (wi, fy, pdf, j, eta) = if x.passed_through() {
         // the base passed straight through a transparent surface: so does the offset, J = 1
         let (fy, pdf, wi) = bsdf.pass_eval(wo_y)?;
         (wi, fy, pdf, 1.0, 1.0)

@@ -311,13 +311,19 @@ impl Scene {
         Some((o, to / len, len * (1.0 - 1e-4) - ray_epsilon(target)))
     }
 
+    /// Nothing blocks the shadow segment from a surface point to `target` (a point, or at
+    /// infinity a direction); transparent surfaces block it too.
+    pub fn segment_clear(&self, si: &SurfaceInteraction, target: Vec3, at_infinity: bool) -> bool {
+        match self.shadow_ray(si, target, at_infinity) {
+            Some((o, d, tmax)) => tmax <= 0.0 || !self.occluded(o, d, 0.0, tmax),
+            None => false,
+        }
+    }
+
     /// Visibility between a surface point and a light sample.
     pub fn visible(&self, si: &SurfaceInteraction, ls: &LightSample) -> bool {
         let at_infinity = !ls.dist.is_finite();
-        match self.shadow_ray(si, if at_infinity { ls.wi } else { ls.p }, at_infinity) {
-            Some((o, d, tmax)) => tmax <= 0.0 || !self.occluded(o, d, 0.0, tmax),
-            None => true,
-        }
+        self.segment_clear(si, if at_infinity { ls.wi } else { ls.p }, at_infinity)
     }
 
     /// Transmittance from a surface point to a light sample (transparent shadows, as Cycles):
