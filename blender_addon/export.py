@@ -160,7 +160,7 @@ def material_params(mat, warnings, textures=None):
     if node.type in ("MIX_SHADER", "ADD_SHADER") or any("pass" in p for _, p in leaves):
         out.update(_combine(leaves, warnings, what))
         return out
-    out.update(leaves[0][1] if leaves else _node_params(node, textures, warnings, what))
+    out.update(leaves[0][1])  # one shader node, opaque: its own parameters
     out.pop("bsdf", None)
     return out
 
@@ -223,9 +223,7 @@ def _shader_leaves(node, weight, leaves, textures, warnings, what):
         p = _node_params(node, textures, warnings, what)
         alpha = p.pop("alpha", 1.0)
         if alpha < 1.0:  # alpha as coverage: Mix(Transparent(white), shader, alpha), as in Cycles
-            clear = dict(p, base_color=(0.0, 0.0, 0.0), emission=(0.0, 0.0, 0.0))
-            clear["pass"] = (1.0, 1.0, 1.0)
-            leaves.append((weight * (1.0 - alpha), clear))
+            leaves.append((weight * (1.0 - alpha), {"emission": (0.0, 0.0, 0.0), "pass": (1.0, 1.0, 1.0)}))
         leaves.append((weight * alpha, p))
         return
     for sock, w in pairs:

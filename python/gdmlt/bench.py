@@ -70,8 +70,8 @@ def peer_rows(peer, scene, desc, budgets, nee, max_bounces, threads, size):
         blend = scene if str(scene).lower().endswith(".blend") else None
         if blend is None and simple is None:
             return None, f"skipped: {why}"
-        imgs, times, _ = peers.cycles_render(budgets, max_bounces, nee, threads, simple=None if blend else simple,
-                                             camera=desc["camera"], blend=blend, size=size)
+        imgs, times, _ = peers.cycles_render(budgets, max_bounces, nee, threads, desc=None if blend else desc,
+                                             blend=blend, size=size)
         return imgs, f"cycles wall time per budget (sync included): {', '.join(f'{t:.2f}' for t in times)} s"
     if simple is None:
         return None, f"skipped: {why}"
@@ -82,7 +82,6 @@ def peer_rows(peer, scene, desc, budgets, nee, max_bounces, threads, size):
         return imgs, None
     mi, dr = peers.import_mitsuba(threads)
     msc = peers.mitsuba_scene(mi, simple, max_bounces, nee)
-    w, h = simple["width"], simple["height"]
     peers.mitsuba_render(mi, msc, 2)  # compile the kernels
     spp, dt = 4, 0.0
     while dt < 0.3 and spp < 1 << 20:  # time a run long enough to set spp from

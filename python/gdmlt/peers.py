@@ -296,53 +296,6 @@ def cycles_unbiased(scene, samples: int, seed: int, bounces: int, threads: int =
     scene.view_settings.view_transform = "Standard"
 
 
-def _blend_from_simple(bpy, simple: dict, cam: dict):
-    """A Blender scene of the translated shapes (Diffuse/Emission materials) and camera."""
-    import mathutils
-
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    scene = bpy.context.scene
-    for i, s in enumerate(simple["shapes"]):
-        mat = bpy.data.materials.new(s["name"])
-        mat.use_nodes = True
-        nt = mat.node_tree
-        nt.nodes.clear()
-        out = nt.nodes.new("ShaderNodeOutputMaterial")
-        df = nt.nodes.new("ShaderNodeBsdfDiffuse")
-        df.inputs["Color"].default_value = (*s["base_color"], 1.0)
-        shader = df.outputs["BSDF"]
-        if any(s["emission"]):
-            em = nt.nodes.new("ShaderNodeEmission")
-            em.inputs["Color"].default_value = (*s["emission"], 1.0)
-            em.inputs["Strength"].default_value = 1.0
-            add = nt.nodes.new("ShaderNodeAddShader")
-            nt.links.new(df.outputs["BSDF"], add.inputs[0])
-            nt.links.new(em.outputs["Emission"], add.inputs[1])
-            shader = add.outputs["Shader"]
-        nt.links.new(shader, out.inputs["Surface"])
-        me = bpy.data.meshes.new(s["name"])
-        me.from_pydata(s["positions"].tolist(), [], s["indices"].tolist())
-        me.materials.append(mat)
-        me.update()
-        ob = bpy.data.objects.new(s["name"], me)
-        scene.collection.objects.link(ob)
-    c = bpy.data.cameras.new("Camera")
-    c.lens, c.sensor_width, c.sensor_height = cam["lens"], cam["sensor_width"], cam.get("sensor_height", 24.0)
-    c.sensor_fit = cam.get("sensor_fit", "AUTO")
-    c.clip_start, c.clip_end = cam["clip_start"], cam["clip_end"]
-    ob = bpy.data.objects.new("Camera", c)
-    ob.matrix_world = mathutils.Matrix(simple["matrix"].tolist())
-    scene.collection.objects.link(ob)
-    scene.camera = ob
-    world = bpy.data.worlds.new("World")
-    world.use_nodes = True
-    world.node_tree.nodes["Background"].inputs["Color"].default_value = (*simple["world"], 1.0)
-    scene.world = world
-    r = scene.render
-    r.resolution_x, r.resolution_y, r.resolution_percentage = simple["width"], simple["height"], 100
-    return scene
-
-
 def _cycles_child(inp: str, outp: str):
     from .blend import import_bpy
 
@@ -356,9 +309,12 @@ def _cycles_child(inp: str, outp: str):
             scene.render.resolution_x, scene.render.resolution_y = cfg["size"]
             scene.render.resolution_percentage = 100
     else:
-        simple = dict(shapes=[dict(s, positions=data[f"p{i}"], indices=data[f"t{i}"]) for i, s in enumerate(cfg["shapes"])],
-                      matrix=data["matrix"], width=cfg["width"], height=cfg["height"], world=cfg["world"])
-        scene = _blend_from_simple(bpy, simple, cfg["camera"])
+        from .blendscene import build
+
+        desc = dict(cfg["desc"], camera=dict(cfg["desc"]["camera"], matrix=data["matrix"]),
+                    meshes=[dict(m, positions=data[f"p{i}"], indices=data[f"t{i}"], material_ids=data[f"m{i}"])
+                            for i, m in enumerate(cfg["desc"]["meshes"])])
+        scene = build(bpy, desc)
     cycles_unbiased(scene, 1 << 24, seed=1, bounces=cfg["max_bounces"], threads=cfg["threads"])
     if not cfg["nee"]:
         # the paper's naive mode: emissive surfaces and the world only found by hitting them
@@ -388,28 +344,34 @@ def _cycles_child(inp: str, outp: str):
     np.savez(outp, images=np.stack(images), times=np.array(times), samples=np.zeros(len(times)))
 
 
-def cycles_render(budgets, max_bounces: int, nee: bool, threads=0, simple=None, camera=None, blend=None, size=None):
+def cycles_render(budgets, max_bounces: int, nee: bool, threads=0, desc=None, blend=None, size=None):
     """Cycles images after each time limit (one render per budget, Cycles' own time limit),
-    of a .blend file or of a translated simple scene. Runs in a child process (bpy)."""
+    of a .blend file or of a scene dict that `simple_scene` accepts (rebuilt in Blender by
+    gdmlt.blendscene). Runs in a child process (bpy)."""
     cfg = dict(budgets=list(budgets), max_bounces=max_bounces, nee=nee, threads=threads,
                blend=str(Path(blend).resolve()) if blend else None, size=list(size) if size else None)
     arrays = {}
-    if simple is not None:
-        cfg.update(width=simple["width"], height=simple["height"], world=simple["world"],
-                   camera={k: (v if isinstance(v, (str, int, float)) else None) for k, v in camera.items()
-                           if k != "matrix"},
-                   shapes=[{k: s[k] for k in ("name", "base_color", "emission")} for s in simple["shapes"]])
-        arrays["matrix"] = simple["matrix"]
-        for i, s in enumerate(simple["shapes"]):
-            arrays[f"p{i}"] = s["positions"]
-            arrays[f"t{i}"] = s["indices"]
+    if desc is not None:
+        simple_scene(desc)  # refuses what the rebuilt scene would not reproduce
+        cam = desc["camera"]
+        cfg["desc"] = dict(
+            materials=[{k: [float(x) for x in m[k]] if k != "name" else m[k] for k in ("name", "base_color", "emission")}
+                       for m in desc["materials"]],
+            world=[float(x) for x in desc.get("world", (0, 0, 0))],
+            camera={k: v for k, v in cam.items() if k != "matrix"},
+            meshes=[{"name": m["name"]} for m in desc["meshes"]])
+        arrays["matrix"] = np.asarray(cam["matrix"], np.float64)
+        for i, m in enumerate(desc["meshes"]):
+            arrays[f"p{i}"] = np.asarray(m["positions"], np.float32)
+            arrays[f"t{i}"] = np.asarray(m["indices"], np.int64).reshape(-1, 3)
+            arrays[f"m{i}"] = np.asarray(m.get("material_ids", np.zeros(len(arrays[f"t{i}"]))), np.int64).reshape(-1)
     return _run_child("cycles", cfg, arrays)
 
 
 def _run_child(kind: str, cfg: dict, arrays: dict):
     with tempfile.TemporaryDirectory() as tmp:
         inp, outp = Path(tmp) / "in.npz", Path(tmp) / "out.npz"
-        np.savez(inp, config=json.dumps(cfg), **arrays)
+        np.savez(inp, config=json.dumps(cfg, default=lambda o: o.item() if hasattr(o, "item") else str(o)), **arrays)
         r = subprocess.run([sys.executable, "-m", "gdmlt.peers", kind, str(inp), str(outp)],
                            capture_output=True, text=True)
         if r.returncode != 0 or not outp.exists():

@@ -36,7 +36,7 @@ def test_emitters_are_doubled_back_to_back():
 def test_the_scene_rebuilt_in_cycles_renders_what_gdmlt_renders():
     desc = gdmlt.builtin_scene("cornell", 32, 32)
     ref = gdmlt.render(gdmlt.Scene(desc), method="pt", spp=1024, seed=3, max_bounces=4)["layers"]["Combined"]
-    (img,), times, _ = peers.cycles_render([1.5], 4, True, simple=peers.simple_scene(desc), camera=desc["camera"])
+    (img,), times, _ = peers.cycles_render([1.5], 4, True, desc=desc)
     assert img.shape == ref.shape
     # Same framing and light: means within 1%; 4×4-pixel blocks (clipped at 1 so the light's
     # anti-aliased edge does not dominate) within 2% of the mean in rms — measured 0.55%, while
