@@ -232,6 +232,16 @@ mod tests {
         best
     }
 
+    /// `n` random small triangles in a 10-unit cube (`r(k)`: uniform in ±k/2).
+    fn triangle_soup(r: &mut impl FnMut(f32) -> f32, n: usize) -> Vec<[Vec3; 3]> {
+        (0..n)
+            .map(|_| {
+                let c = Vec3::new(r(10.0), r(10.0), r(10.0));
+                [c, c + Vec3::new(r(1.0), r(1.0), r(1.0)), c + Vec3::new(r(1.0), r(1.0), r(1.0))]
+            })
+            .collect()
+    }
+
     /// The AVX2 node test (x86-64-v3 build) returns exactly obvhs' hit masks, for every node
     /// of a BVH and random rays, including axis-parallel ones (infinite inverse directions).
     #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
@@ -239,12 +249,7 @@ mod tests {
     fn avx2_node_test_matches_obvhs() {
         let mut s = IndependentSampler::new(3, 0);
         let mut r = |k: f32| (s.next_1d() - 0.5) * k;
-        let tris: Vec<[Vec3; 3]> = (0..3000)
-            .map(|_| {
-                let c = Vec3::new(r(10.0), r(10.0), r(10.0));
-                [c, c + Vec3::new(r(1.0), r(1.0), r(1.0)), c + Vec3::new(r(1.0), r(1.0), r(1.0))]
-            })
-            .collect();
+        let tris = triangle_soup(&mut r, 3000);
         let accel = Accel::build(&tris);
         let mut checked = 0;
         for i in 0..400 {
@@ -268,12 +273,7 @@ mod tests {
     fn bvh_agrees_with_brute_force() {
         let mut s = IndependentSampler::new(42, 0);
         let mut r = |k: f32| (s.next_1d() - 0.5) * k;
-        let tris: Vec<[Vec3; 3]> = (0..2000)
-            .map(|_| {
-                let c = Vec3::new(r(10.0), r(10.0), r(10.0));
-                [c, c + Vec3::new(r(1.0), r(1.0), r(1.0)), c + Vec3::new(r(1.0), r(1.0), r(1.0))]
-            })
-            .collect();
+        let tris = triangle_soup(&mut r, 2000);
         let mut accel = Accel::build(&tris);
         let mut hits = 0;
         for i in 0..3000 {
