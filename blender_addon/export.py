@@ -175,7 +175,10 @@ def _node_params(node, textures, warnings, what):
         out["metallic"] = _input_value(node, "Metallic", warnings, what, 0.0)
         _color_or_texture(node, "Roughness", out, "roughness", textures, warnings, what, 0.5)
         out["ior"] = _input_value(node, "IOR", warnings, what, 1.5)
+        out["specular_ior"] = _specular_layer_ior(out["ior"], _input_value(node, "Specular IOR Level", warnings,
+                                                                           what, 0.5))
         out["transmission"] = _input_value(node, "Transmission Weight", warnings, what, 0.0)
+        _warn_unsupported_layers(node, warnings, what)
         col = _input_value(node, "Emission Color", warnings, what, (0, 0, 0, 1))[:3]
         strength = _input_value(node, "Emission Strength", warnings, what, 0.0)
         out["emission"] = tuple(c * strength for c in col)
@@ -210,6 +213,32 @@ def _node_params(node, textures, warnings, what):
     return out
 
 
+def _specular_layer_ior(ior, level):
+    """IOR of Principled's dielectric specular layer: Specular IOR Level scales the normal-
+    incidence reflectance F0 = ((η−1)/(η+1))² by 2·level (0.5 keeps the IOR, 0 removes the
+    layer), as Cycles does."""
+    if ior <= 0.0:
+        return 1.0
+    f0 = ((ior - 1.0) / (ior + 1.0)) ** 2 * 2.0 * min(max(level, 0.0), 1.0)
+    r = min(math.sqrt(f0), 0.999)
+    return (1.0 + r) / (1.0 - r)
+
+
+# Principled inputs whose layers the core does not render: (input, value that means "off").
+_UNSUPPORTED_LAYERS = (("Coat Weight", 0.0), ("Sheen Weight", 0.0), ("Subsurface Weight", 0.0),
+                       ("Anisotropic", 0.0), ("Thin Film Thickness", 0.0))
+
+
+def _warn_unsupported_layers(node, warnings, what):
+    for name, off in _UNSUPPORTED_LAYERS:
+        sock = node.inputs.get(name)
+        if sock is not None and (sock.is_linked or abs(float(sock.default_value) - off) > 1e-6):
+            warnings.append(f"{what}: Principled '{name}' is not rendered (the layer is left out)")
+    tint = node.inputs.get("Specular Tint")
+    if tint is not None and (tint.is_linked or any(abs(c - 1.0) > 1e-6 for c in tuple(tint.default_value)[:3])):
+        warnings.append(f"{what}: Principled 'Specular Tint' is not rendered (white is used)")
+
+
 def _shader_leaves(node, weight, leaves, textures, warnings, what):
     """Walks a Mix/Add Shader tree: appends (weight, leaf parameters) for every shader node."""
     if weight <= 0.0:
@@ -241,6 +270,7 @@ def _combine(leaves, warnings, what):
     passing = [0.0, np.zeros(3)]  # Transparent BSDF leaves (and 1 − alpha)
     emission = np.zeros(3)
     rough, iors, tex, rough_tex = [], [], [], []
+    layer = [0.0, []]  # diffuse-lobe weight under a specular layer, and the layers' IORs
     for w, p in leaves:
         emission += w * np.array(p["emission"][:3], dtype=np.float64)
         if "pass" in p:
@@ -255,8 +285,13 @@ def _combine(leaves, warnings, what):
             if w * wk > 0:
                 lobes[k][0] += w * wk
                 lobes[k][1] += w * wk * color
-        if w * (m + (1 - m) * t) > 0:
-            rough.append((w * (m + (1 - m) * t), p["roughness"]))
+        has_layer = p.get("specular_ior", 1.0) > 1.0 and w * (1 - m) * (1 - t) > 0
+        if has_layer:
+            layer[0] += w * (1 - m) * (1 - t)
+            layer[1].append(p["specular_ior"])
+        rough_w = w * (m + (1 - m) * t) + (w * (1 - m) * (1 - t) if has_layer else 0.0)
+        if rough_w > 0:
+            rough.append((rough_w, p["roughness"]))
         if w * (1 - m) * t > 0:
             iors.append(p["ior"])
         if "base_color_texture" in p:
@@ -282,11 +317,17 @@ def _combine(leaves, warnings, what):
     dg = lobes["d"][0] + lobes["g"][0]
     out["transmission"] = lobes["g"][0] / dg if dg > 0 else 0.0
     out["base_color"], out["metal_color"], out["glass_color"] = color["d"], color["m"], color["g"]
+    if layer[0] > 0:
+        out["specular_ior"] = layer[1][0]
+        out["specular"] = layer[0] / lobes["d"][0]
+        if max(layer[1]) - min(layer[1]) > 1e-4:
+            warnings.append(f"{what}: the mixed Principled specular layers have different IOR; {layer[1][0]:.3f} "
+                            f"is used")
     if rough:
         wsum = sum(w for w, _ in rough)
         out["roughness"] = sum(w * r for w, r in rough) / wsum
         if max(r for _, r in rough) - min(r for _, r in rough) > 1e-3:
-            warnings.append(f"{what}: the mixed glossy/glass lobes have different roughness; their weighted mean "
+            warnings.append(f"{what}: the mixed glossy/glass/specular lobes have different roughness; their weighted mean "
                             f"{out['roughness']:.3f} is used")
     if len(set(iors)) > 1:
         warnings.append(f"{what}: the mixed glass lobes have different IOR; {iors[0]} is used")

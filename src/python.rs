@@ -112,6 +112,8 @@ fn parse_material(d: &Bound<'_, PyDict>) -> PyResult<MaterialDesc> {
         roughness_texture: get_or(d, "roughness_texture", None, &ctx)?,
         metal_color: get_or(d, "metal_color", None, &ctx)?,
         glass_color: get_or(d, "glass_color", None, &ctx)?,
+        specular_ior: get_or(d, "specular_ior", def.specular_ior, &ctx)?,
+        specular: get_or(d, "specular", def.specular, &ctx)?,
         transparency: get_or(d, "transparency", def.transparency, &ctx)?,
         transparent_color: rgb(d, "transparent_color", def.transparent_color, &ctx)?,
         name,

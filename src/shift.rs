@@ -650,7 +650,8 @@ mod tests {
     /// The pair estimator is unbiased pixel by pixel: I(q) = E_q[base part of the shift
     /// towards q−1] + E_{q−1}[offset part of the shift towards q], compared with path tracing
     /// along a row that crosses the glass sphere (reflection and refraction chains, light
-    /// seen through the glass), a row of ceiling beside the light (pixels whose neighbours
+    /// seen through the glass), a row of lacquered floor (a smooth specular layer over a
+    /// diffuse base: mixed delta and diffuse lobes at one vertex), a row of ceiling beside the light (pixels whose neighbours
     /// see the black-bodied emitter) and rows through the semi-transparent veil and canopy
     /// (pass-through vertices, transparent shadows), with and without NEE. Tolerance: 4.5 standard errors of the
     /// difference, measured from the samples.
@@ -661,9 +662,11 @@ mod tests {
         use crate::scene::builtin::{cornell_spheres, cornell_veil};
         let (w, n) = (16usize, 60_000u64);
         let scenes = [Scene::build(&cornell_spheres(16, 16)).unwrap(), Scene::build(&cornell_veil(16, 16)).unwrap()];
-        // rows: along the ceiling beside the light (row 3) and across the glass sphere and
-        // the veil (row 11)
-        for (si, nee, row) in [(0, true, 3.0f32), (0, true, 11.0), (0, false, 11.0), (1, true, 3.0), (1, false, 11.0)] {
+        // rows: along the ceiling beside the light (row 3), across the glass sphere and the
+        // veil (row 11) and over the lacquered floor (row 13)
+        for (si, nee, row) in
+            [(0, true, 3.0f32), (0, true, 11.0), (0, false, 11.0), (0, true, 13.0), (1, true, 3.0), (1, false, 11.0)]
+        {
             let scene = &scenes[si];
             let cfg = PathSettings { max_bounces: 6, nee };
             let mut base = Path::default();

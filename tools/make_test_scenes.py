@@ -85,8 +85,10 @@ def lights(bpy, size=48, bounces=4):
 
 
 def specular(bpy, size=40, bounces=6):
-    """A mirror (Glossy, roughness 0, white) and a glass sphere (IOR 1.5) on a diffuse floor
-    in front of a wall, lit by an area light."""
+    """A mirror (Glossy, roughness 0, white) and a glass sphere (IOR 1.5) on a floor of
+    default Principled (IOR 1.5, roughness 0.5: a dielectric specular layer over grey) in front
+    of a wall, with two Principled plastic spheres behind (smooth: IOR 1.5, roughness 0; rough:
+    IOR 1.45, roughness 0.35, Specular IOR Level 0.7), lit by an area light."""
     scene = lights(bpy, size=size, bounces=bounces)
     bpy.data.objects.remove(bpy.data.objects["Card"])
     bpy.data.objects["Point"].data.energy = 0.0
@@ -109,6 +111,25 @@ def specular(bpy, size=40, bounces=6):
         ob = bpy.context.active_object
         ob.name = name
         ob.data.materials.append(mat)
+    floor = bpy.data.objects["Floor"]
+    nt, out = fresh_material(bpy, floor, "FloorPrincipled")
+    p = nt.nodes.new("ShaderNodeBsdfPrincipled")  # Blender's defaults: IOR 1.5, roughness 0.5
+    p.inputs["Base Color"].default_value = (0.6, 0.6, 0.6, 1)
+    nt.links.new(p.outputs[0], out.inputs["Surface"])
+    for name, color, rough, ior, level, loc in (
+            ("SmoothPlastic", (0.7, 0.1, 0.1, 1), 0.0, 1.5, 0.5, (-0.5, 1.3, 0.45)),
+            ("RoughPlastic", (0.1, 0.2, 0.7, 1), 0.35, 1.45, 0.7, (1.4, 1.1, 0.45))):
+        bpy.ops.mesh.primitive_uv_sphere_add(radius=0.45, location=loc, segments=32, ring_count=16)
+        ob = bpy.context.active_object
+        ob.name = name
+        bpy.ops.object.shade_smooth()
+        nt, out = fresh_material(bpy, ob, name)
+        p = nt.nodes.new("ShaderNodeBsdfPrincipled")
+        p.inputs["Base Color"].default_value = color
+        p.inputs["Roughness"].default_value = rough
+        p.inputs["IOR"].default_value = ior
+        p.inputs["Specular IOR Level"].default_value = level
+        nt.links.new(p.outputs[0], out.inputs["Surface"])
     return scene
 
 
@@ -183,8 +204,7 @@ def textures(bpy):
         nt, out = fresh_material(bpy, ob, ob_name + "Tex")
         bsdf = nt.nodes.new(shader)
         if shader == "ShaderNodeBsdfPrincipled":
-            bsdf.inputs["Roughness"].default_value = 1.0
-            bsdf.inputs["IOR"].default_value = 1.0  # no specular layer: GDMLT's Principled has none yet
+            bsdf.inputs["Roughness"].default_value = 1.0  # (and the default IOR 1.5 specular layer)
         tex = nt.nodes.new("ShaderNodeTexImage")
         tex.image = img
         nt.links.new(tex.outputs["Color"], bsdf.inputs[socket])
@@ -252,7 +272,6 @@ def mix(bpy):
         p = nt.nodes.new("ShaderNodeBsdfPrincipled")
         p.inputs["Base Color"].default_value = (0.2, 0.6, 0.3, 1)
         p.inputs["Roughness"].default_value = 1.0
-        p.inputs["IOR"].default_value = 1.0  # no specular layer: GDMLT's Principled has none yet
         p.inputs["Alpha"].default_value = 0.35
         return p
 

@@ -38,7 +38,7 @@ def export_usd(path: Path, out: Path, frame=None) -> dict:
     scene = bpy.context.scene
     if frame is not None:
         scene.frame_set(int(frame))
-    _emission_as_principled(bpy)
+    _as_exportable_principled(bpy)
     out.parent.mkdir(parents=True, exist_ok=True)
     result = bpy.ops.wm.usd_export(filepath=str(out.resolve()), selected_objects_only=False,
                                    export_animation=False, export_materials=True, export_lights=True,
@@ -66,22 +66,32 @@ def export_usd(path: Path, out: Path, frame=None) -> dict:
     return settings
 
 
-def _emission_as_principled(bpy):
-    """Blender's USD exporter writes UsdPreviewSurface only from Principled (and Diffuse)
-    shaders: an Emission-only surface would be exported as grey diffuse. Rewire such
-    materials (in memory; the .blend is not saved) to a black Principled BSDF with that
-    emission colour and strength, which the exporter writes as emissiveColor."""
+def _as_exportable_principled(bpy):
+    """Blender's USD exporter writes UsdPreviewSurface from Principled (and Diffuse) shaders;
+    an Emission-only surface would be exported as grey diffuse, and a Diffuse one gets
+    UsdPreviewSurface's default IOR 1.5, i.e. a specular layer the Diffuse BSDF does not
+    have. Rewire such materials (in memory; the .blend is not saved) to a Principled BSDF of
+    IOR 1 (no specular layer) with the emission colour and strength (on black), or with the
+    Diffuse colour (its link, if an image texture feeds it)."""
     for mat in bpy.data.materials:
         tree = mat.node_tree
         out = tree.get_output_node("CYCLES") if tree is not None else None
         surface = out.inputs.get("Surface") if out is not None else None
-        if surface is None or not surface.is_linked or surface.links[0].from_node.type != "EMISSION":
+        if surface is None or not surface.is_linked or surface.links[0].from_node.type not in ("EMISSION",
+                                                                                               "BSDF_DIFFUSE"):
             continue
-        em = surface.links[0].from_node
+        src = surface.links[0].from_node
         p = tree.nodes.new("ShaderNodeBsdfPrincipled")
-        p.inputs["Base Color"].default_value = (0, 0, 0, 1)
-        p.inputs["Emission Color"].default_value = em.inputs["Color"].default_value
-        p.inputs["Emission Strength"].default_value = em.inputs["Strength"].default_value
+        p.inputs["IOR"].default_value = 1.0
+        p.inputs["Roughness"].default_value = 1.0
+        if src.type == "EMISSION":
+            p.inputs["Base Color"].default_value = (0, 0, 0, 1)
+            p.inputs["Emission Color"].default_value = src.inputs["Color"].default_value
+            p.inputs["Emission Strength"].default_value = src.inputs["Strength"].default_value
+        elif src.inputs["Color"].is_linked:
+            tree.links.new(src.inputs["Color"].links[0].from_socket, p.inputs["Base Color"])
+        else:
+            p.inputs["Base Color"].default_value = src.inputs["Color"].default_value
         tree.links.new(p.outputs[0], surface)
 
 

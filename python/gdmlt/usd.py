@@ -2,8 +2,8 @@
 
 Supported: UsdGeomMesh (points, faces triangulated as fans, left-handed orientation,
 normals of any interpolation, the `st` texture coordinates, GeomSubset material bindings),
-UsdPreviewSurface materials (diffuseColor, metallic, roughness, ior, emissiveColor as
-constants), UsdLux SphereLight (with ShapingAPI cone → spot), RectLight, DiskLight,
+UsdPreviewSurface materials (diffuseColor, metallic, roughness, ior — also of the
+dielectric specular layer over the diffuse base —, emissiveColor as constants), UsdLux SphereLight (with ShapingAPI cone → spot), RectLight, DiskLight,
 DistantLight and DomeLight (constant colour, or an OpenEXR latlong texture oriented as
 Blender's exporter writes it: the dome's transform applied to Blender's Z-up
 equirectangular mapping) with intensity × 2^exposure × colour and
@@ -104,6 +104,9 @@ class _Reader:
             out["metallic"] = value("metallic", 0.0)
             out["roughness"] = value("roughness", 0.5)
             out["ior"] = value("ior", 1.5)
+            # UsdPreviewSurface's specular lobe: a dielectric layer of that IOR over the
+            # diffuse base (as Principled's, which Blender writes as this shader)
+            out["specular_ior"] = out["ior"]
             out["emission"] = value("emissiveColor", (0.0, 0.0, 0.0))
             # opacity as coverage (what Blender writes for Principled alpha); with an
             # opacityThreshold, a cutout: below it fully transparent, else opaque

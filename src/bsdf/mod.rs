@@ -6,6 +6,7 @@
 mod conductor;
 mod dielectric;
 mod lambert;
+mod layered;
 pub mod microfacet;
 #[cfg(test)]
 pub(crate) mod testing;
@@ -13,6 +14,7 @@ pub(crate) mod testing;
 pub use conductor::Conductor;
 pub use dielectric::{refraction_half_vector, Dielectric};
 pub use lambert::Lambert;
+pub use layered::{specular_albedo, Layered};
 
 use crate::math::Spectrum;
 use glam::{Vec2, Vec3};
@@ -60,12 +62,14 @@ pub enum Bsdf {
     Lambert(Lambert),
     Conductor(Conductor),
     Dielectric(Dielectric),
-    /// Blender's Principled BSDF as a stochastic mixture of a diffuse base, a metal and a
-    /// glass lobe with weights (1−m)(1−t), m, (1−m)t (m = metallic, t = transmission), all
-    /// times 1 − τ, and a pass-through lobe of probability τ = `pass` (Transparent BSDF;
+    /// Principled's opaque dielectric: a specular layer over a Lambertian base.
+    Layered(Layered),
+    /// Blender's Principled BSDF as a stochastic mixture of a (layered) diffuse base, a metal
+    /// and a glass lobe with weights (1−m)(1−t), m, (1−m)t (m = metallic, t = transmission),
+    /// all times 1 − τ, and a pass-through lobe of probability τ = `pass` (Transparent BSDF;
     /// alpha as coverage): a delta lobe that continues the ray unchanged, tinted `pass_tint`.
     Principled {
-        diffuse: Lambert,
+        diffuse: Layered,
         metal: Conductor,
         glass: Dielectric,
         w: [f32; 3],
@@ -82,6 +86,7 @@ impl Bsdf {
             Bsdf::Lambert(b) => b.eval(wo, wi),
             Bsdf::Conductor(b) => b.eval(wo, wi),
             Bsdf::Dielectric(b) => b.eval(wo, wi),
+            Bsdf::Layered(b) => b.eval(wo, wi),
             Bsdf::Principled { diffuse, metal, glass, w, .. } => {
                 let mut f = Spectrum::ZERO;
                 if w[0] > 0.0 {
@@ -105,6 +110,7 @@ impl Bsdf {
             Bsdf::Lambert(b) => b.pdf(wo, wi),
             Bsdf::Conductor(b) => b.pdf(wo, wi),
             Bsdf::Dielectric(b) => b.pdf(wo, wi),
+            Bsdf::Layered(b) => b.pdf(wo, wi),
             Bsdf::Principled { diffuse, metal, glass, w, .. } => {
                 let mut p = 0.0;
                 if w[0] > 0.0 {
@@ -128,6 +134,7 @@ impl Bsdf {
             Bsdf::Lambert(b) => b.sample(wo, u),
             Bsdf::Conductor(b) => b.sample(wo, u),
             Bsdf::Dielectric(b) => b.sample(wo, u_lobe, u),
+            Bsdf::Layered(b) => b.sample(wo, u_lobe, u),
             Bsdf::Principled { diffuse, metal, glass, w, pass, pass_tint } => {
                 // choose a lobe ∝ weight, reusing the rest of u_lobe inside the lobe
                 let (k, u_rest) = if u_lobe < w[0] {
@@ -142,7 +149,7 @@ impl Bsdf {
                     return Some(BsdfSample { wi, weight: *pass_tint, pdf: *pass, lobe: LobeKind::Specular, eta: 1.0 });
                 };
                 let mut bs = match k {
-                    0 => diffuse.sample(wo, u)?,
+                    0 => diffuse.sample(wo, u_rest.min(0.999_999), u)?,
                     1 => metal.sample(wo, u)?,
                     _ => glass.sample(wo, u_rest, u)?,
                 };
@@ -165,7 +172,7 @@ impl Bsdf {
     #[inline]
     pub fn is_delta(&self) -> bool {
         match self {
-            Bsdf::Lambert(_) => false,
+            Bsdf::Lambert(_) | Bsdf::Layered(_) => false,
             Bsdf::Conductor(b) => b.is_delta(),
             Bsdf::Dielectric(b) => b.is_delta(),
             Bsdf::Principled { metal, glass, w, .. } => {
@@ -183,8 +190,12 @@ impl Bsdf {
             Bsdf::Lambert(_) => 1.0,
             Bsdf::Conductor(b) => b.roughness,
             Bsdf::Dielectric(b) => b.roughness,
-            Bsdf::Principled { metal, glass, w, pass, .. } => {
+            Bsdf::Layered(b) => b.min_roughness(),
+            Bsdf::Principled { diffuse, metal, glass, w, pass, .. } => {
                 let mut r: f32 = if *pass > 0.0 { 0.0 } else { 1.0 };
+                if w[0] > 0.0 {
+                    r = r.min(diffuse.min_roughness());
+                }
                 if w[1] > 0.0 {
                     r = r.min(metal.roughness);
                 }
@@ -216,15 +227,21 @@ impl Bsdf {
             Bsdf::Conductor(b) if !refraction => b.delta_eval(wo),
             Bsdf::Conductor(_) => None,
             Bsdf::Dielectric(b) => b.delta_eval(wo, refraction),
-            Bsdf::Principled { metal, glass, w, .. } => {
+            Bsdf::Layered(b) if !refraction => b.delta_eval(wo),
+            Bsdf::Layered(_) => None,
+            Bsdf::Principled { diffuse, metal, glass, w, .. } => {
+                // every delta lobe of one kind leads to the same direction: sum them
+                let d = if w[0] > 0.0 && !refraction { diffuse.delta_eval(wo) } else { None };
                 let m = if w[1] > 0.0 && !refraction { metal.delta_eval(wo) } else { None };
                 let g = if w[2] > 0.0 { glass.delta_eval(wo, refraction) } else { None };
-                match (m, g) {
-                    (None, None) => None,
-                    (Some((f, p, wi)), None) => Some((f * w[1], p * w[1], wi)),
-                    (None, Some((f, p, wi))) => Some((f * w[2], p * w[2], wi)),
-                    (Some((fm, pm, wi)), Some((fg, pg, _))) => Some((fm * w[1] + fg * w[2], pm * w[1] + pg * w[2], wi)),
+                let mut sum: Option<(Spectrum, f32, Vec3)> = None;
+                for (lobe, wk) in [(d, w[0]), (m, w[1]), (g, w[2])] {
+                    if let Some((f, p, wi)) = lobe {
+                        let (f0, p0) = sum.map_or((Spectrum::ZERO, 0.0), |(f, p, _)| (f, p));
+                        sum = Some((f0 + f * wk, p0 + p * wk, wi));
+                    }
                 }
+                sum
             }
         }
     }
@@ -244,8 +261,9 @@ impl Bsdf {
             Bsdf::Lambert(b) => b.albedo,
             Bsdf::Conductor(b) => b.f0,
             Bsdf::Dielectric(b) => b.tint,
+            Bsdf::Layered(b) => b.base.albedo,
             Bsdf::Principled { diffuse, metal, glass, w, .. } => {
-                diffuse.albedo * w[0] + metal.f0 * w[1] + glass.tint * w[2]
+                diffuse.base.albedo * w[0] + metal.f0 * w[1] + glass.tint * w[2]
             }
         }
     }
@@ -258,7 +276,7 @@ mod tests {
 
     fn principled(w: [f32; 3], roughness: f32) -> Bsdf {
         Bsdf::Principled {
-            diffuse: Lambert { albedo: Spectrum::ONE },
+            diffuse: Layered::plain(Lambert { albedo: Spectrum::ONE }),
             metal: Conductor { f0: Spectrum::ONE, roughness },
             glass: Dielectric { eta: 1.5, tint: Spectrum::ONE, roughness: 0.0 },
             w,
@@ -282,7 +300,7 @@ mod tests {
     fn pass_through_lobe_probability_and_furnace() {
         let tint = Spectrum::new(0.5, 0.5, 0.5);
         let b = Bsdf::Principled {
-            diffuse: Lambert { albedo: Spectrum::ONE },
+            diffuse: Layered::plain(Lambert { albedo: Spectrum::ONE }),
             metal: Conductor { f0: Spectrum::ONE, roughness: 0.5 },
             glass: Dielectric { eta: 1.5, tint: Spectrum::ONE, roughness: 0.0 },
             w: [0.4, 0.0, 0.0],

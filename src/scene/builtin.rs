@@ -135,11 +135,27 @@ fn uv_sphere(name: &str, center: [f32; 3], radius: f32, nu: u32, nv: u32, mat: u
     flat_mesh(name, positions, indices, mat)
 }
 
-/// The Cornell box with a glass sphere and a mirror sphere instead of the blocks (the
-/// specular test scene of the gradient-domain methods).
+/// The Cornell box with a glass sphere and a mirror sphere instead of the blocks, a lacquered
+/// floor (a smooth dielectric layer of IOR 2.2 over dark grey: Principled's opaque
+/// dielectric, roughness 0) and a back wall of rough white plastic (IOR 1.5, roughness 0.3):
+/// the specular test scene of the gradient-domain methods.
 pub fn cornell_spheres(width: u32, height: u32) -> SceneDesc {
     let mut d = cornell_box(width, height);
     d.meshes.retain(|m| !m.name.ends_with("Block"));
+    for (name, roughness, ior, base_color) in [("Floor", 0.0f32, 2.2, [0.25; 3]), ("BackWall", 0.3, 1.5, WHITE)] {
+        d.materials.push(MaterialDesc {
+            name: format!("{name}Plastic"),
+            base_color,
+            roughness,
+            specular_ior: ior,
+            ..Default::default()
+        });
+        let m = d.materials.len() as u32 - 1;
+        d.meshes
+            .iter_mut()
+            .filter(|mesh| mesh.name == name)
+            .for_each(|mesh| mesh.material_ids = vec![m; mesh.indices.len()]);
+    }
     d.materials.push(MaterialDesc {
         name: "Glass".into(),
         base_color: [1.0; 3],

@@ -55,6 +55,12 @@ pub struct MaterialDesc {
     pub metallic: f32,
     pub transmission: f32,
     pub ior: f32,
+    /// IOR of the dielectric specular layer over the diffuse base (Principled's opaque
+    /// dielectric, UsdPreviewSurface's specular lobe); 1 = none (a plain Diffuse BSDF).
+    pub specular_ior: f32,
+    /// Coverage of that layer over the diffuse base (1 for Principled; less where a Mix
+    /// Shader blends a Principled with a plain Diffuse).
+    pub specular: f32,
     /// Image textures (indices into `SceneDesc::textures`) that replace the base colour, and
     /// the roughness (the texture's luminance), where the material links them.
     pub base_color_texture: Option<u32>,
@@ -80,6 +86,8 @@ impl Default for MaterialDesc {
             metallic: 0.0,
             transmission: 0.0,
             ior: 1.5,
+            specular_ior: 1.0,
+            specular: 1.0,
             base_color_texture: None,
             roughness_texture: None,
             metal_color: None,

@@ -1,10 +1,10 @@
 //! Materials: the parameters of the Principled-like uber-material, turned into a BSDF at a
-//! surface point: Lambertian base, GGX or mirror metal (metallic), smooth glass
+//! surface point: Lambertian base (under a dielectric specular layer), GGX or mirror metal (metallic), smooth glass
 //! or rough GGX glass (transmission), mixed by their Principled weights, and a pass-through
 //! lobe (Transparent BSDF, alpha as coverage) that takes probability τ from all of them.
 
 use super::desc::MaterialDesc;
-use crate::bsdf::{Bsdf, Conductor, Dielectric, Lambert};
+use crate::bsdf::{Bsdf, Conductor, Dielectric, Lambert, Layered};
 use crate::error::SceneError;
 use crate::math::Spectrum;
 use glam::Vec3;
@@ -18,6 +18,9 @@ pub struct Material {
     pub metallic: f32,
     pub transmission: f32,
     pub ior: f32,
+    /// Specular layer over the diffuse base: IOR (1 = none) and coverage.
+    pub specular_ior: f32,
+    pub specular: f32,
     pub base_color_texture: Option<u32>,
     pub roughness_texture: Option<u32>,
     pub metal_color: Option<Spectrum>,
@@ -35,7 +38,7 @@ impl Material {
                 return Err(bad(&format!("uses texture {t} but the scene has {textures}")));
             }
         }
-        let scalars = [d.roughness, d.metallic, d.transmission, d.ior, d.transparency];
+        let scalars = [d.roughness, d.metallic, d.transmission, d.ior, d.transparency, d.specular_ior, d.specular];
         let lobe_colors = d.metal_color.iter().chain(d.glass_color.iter()).flatten().chain(d.transparent_color.iter());
         if d.base_color.iter().chain(d.emission.iter()).chain(scalars.iter()).chain(lobe_colors).any(|x| !x.is_finite())
         {
@@ -60,6 +63,9 @@ impl Material {
             } else {
                 1.5
             },
+            // the layer's table covers η ≤ 3; below 1 (or exactly 1) there is no layer
+            specular_ior: if d.specular_ior > 1.0 + 1e-4 { d.specular_ior.min(3.0) } else { 1.0 },
+            specular: d.specular.clamp(0.0, 1.0),
             base_color_texture: d.base_color_texture,
             roughness_texture: d.roughness_texture,
             metal_color: d.metal_color.map(|c| Vec3::from_array(c).clamp(Vec3::ZERO, Vec3::ONE)),
@@ -85,14 +91,23 @@ impl Material {
     pub fn bsdf_with(&self, front: bool, base_color: Spectrum, roughness: f32) -> Bsdf {
         let (m, t, tau) = (self.metallic, self.transmission, self.transparency);
         let w = [(1.0 - m) * (1.0 - t) * (1.0 - tau), m * (1.0 - tau), (1.0 - m) * t * (1.0 - tau)];
-        let diffuse = Lambert { albedo: base_color };
+        // the specular layer has the same IOR seen from either side (Cycles inverts it on
+        // back faces; opaque surfaces are rarely seen from behind)
+        let diffuse = Layered {
+            base: Lambert { albedo: base_color },
+            eta: self.specular_ior,
+            roughness,
+            coverage: self.specular,
+        };
         let metal = Conductor { f0: self.metal_color.unwrap_or(base_color), roughness };
         let eta = if front { self.ior } else { 1.0 / self.ior };
         let glass = Dielectric { eta, tint: self.glass_color.unwrap_or(base_color), roughness };
         if tau > 0.0 {
             Bsdf::Principled { diffuse, metal, glass, w, pass: tau, pass_tint: self.transparent_color }
+        } else if w[1] <= 0.0 && w[2] <= 0.0 && !diffuse.has_layer() {
+            Bsdf::Lambert(diffuse.base)
         } else if w[1] <= 0.0 && w[2] <= 0.0 {
-            Bsdf::Lambert(diffuse)
+            Bsdf::Layered(diffuse)
         } else if w[0] <= 0.0 && w[2] <= 0.0 {
             Bsdf::Conductor(metal)
         } else if w[0] <= 0.0 && w[1] <= 0.0 {

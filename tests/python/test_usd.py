@@ -17,10 +17,11 @@ pxr = pytest.importorskip("pxr")
 from pxr import Gf, Usd, UsdGeom, UsdLux, UsdShade, Sdf  # noqa: E402
 
 
-def _stage(path, light="rect"):
+def _stage(path, light="rect", ior=1.0):
     """A 40×40 grey (albedo 0.5) floor at z = 0 seen from above by a narrow camera, lit by
     one light: a 0.2×0.2 RectLight of intensity 100 (normalize off) 2 units above the
-    centre, or a DistantLight of intensity 3 tilted by 30°."""
+    centre, or a DistantLight of intensity 3 tilted by 30°. IOR 1: no specular lobe, a
+    Lambertian floor; None: UsdPreviewSurface's default (1.5)."""
     stage = Usd.Stage.CreateNew(str(path))
     UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.z)
     UsdGeom.SetStageMetersPerUnit(stage, 1.0)
@@ -33,6 +34,8 @@ def _stage(path, light="rect"):
     shader = UsdShade.Shader.Define(stage, "/World/Grey/Surface")
     shader.CreateIdAttr("UsdPreviewSurface")
     shader.CreateInput("diffuseColor", Sdf.ValueTypeNames.Color3f).Set(Gf.Vec3f(0.5, 0.5, 0.5))
+    if ior is not None:
+        shader.CreateInput("ior", Sdf.ValueTypeNames.Float).Set(ior)
     mat.CreateSurfaceOutput().ConnectToSource(shader.ConnectableAPI(), "surface")
     UsdShade.MaterialBindingAPI.Apply(floor.GetPrim()).Bind(mat)
     if light == "rect":
@@ -56,14 +59,33 @@ def _stage(path, light="rect"):
     return path
 
 
-@pytest.mark.parametrize("light, expected", [
+def _layered_brdf_at_normal_incidence(albedo, ior, roughness):
+    """f(n, n) of UsdPreviewSurface's dielectric specular lobe over the diffuse base, as the
+    core layers them: F·D·G2/(4 cos θo cos θi) + (1 − E)·ρ/π, with the layer's albedo E at
+    normal incidence integrated here by quadrature over the half-vector angle (wi = 2θh)."""
+    a2 = roughness ** 4
+    th = np.linspace(0.0, math.pi / 4, 200001)[:-1] + math.pi / 4 / 400000
+
+    def fresnel(c):
+        g = np.sqrt(ior * ior - 1 + c * c)
+        return 0.5 * ((g - c) / (g + c)) ** 2 * (1 + ((c * (g + c) - 1) / (c * (g - c) + 1)) ** 2)
+
+    d = a2 / (math.pi * (np.cos(th) ** 2 * (a2 - 1) + 1) ** 2)
+    lam_i = 0.5 * (-1 + np.sqrt(1 + a2 * np.tan(2 * th) ** 2))
+    e = np.sum(fresnel(np.cos(th)) * d / (1 + lam_i) * np.cos(th) * 2 * math.pi * np.sin(th)) * (math.pi / 4 / 200000)
+    return fresnel(1.0) / (math.pi * a2) / 4 + (1 - e) * albedo / math.pi
+
+
+@pytest.mark.parametrize("light, ior, expected", [
     # small rectangle: E = L·A/h² (to 0.1% at this size) → radiance ρ/π·E
-    ("rect", 0.5 / math.pi * 100.0 * 0.04 / 4.0),
+    ("rect", 1.0, 0.5 / math.pi * 100.0 * 0.04 / 4.0),
     # distant light tilted 30°: E = intensity·cos 30°
-    ("sun", 0.5 / math.pi * 3.0 * math.cos(math.radians(30))),
+    ("sun", 1.0, 0.5 / math.pi * 3.0 * math.cos(math.radians(30))),
+    # the default IOR 1.5 and roughness 0.5: the specular lobe adds a highlight under the light
+    ("rect", None, _layered_brdf_at_normal_incidence(0.5, 1.5, 0.5) * 100.0 * 0.04 / 4.0),
 ])
-def test_light_units_of_a_hand_written_stage(tmp_path, light, expected):
-    desc, warnings = usd.load(_stage(tmp_path / "s.usda", light), width=16, height=16)
+def test_light_units_of_a_hand_written_stage(tmp_path, light, ior, expected):
+    desc, warnings = usd.load(_stage(tmp_path / "s.usda", light, ior), width=16, height=16)
     assert warnings == []
     img = gdmlt.render(gdmlt.Scene(desc), method="pt", spp=256, max_bounces=0, seed=1)["layers"]["Combined"]
     centre = img[7:9, 7:9].mean(axis=(0, 1))
