@@ -7,8 +7,6 @@ of instanced triangles). Lights follow Cycles' conventions; the conversion to ra
 happens in the core. Everything unsupported is reported as a warning with a fallback.
 """
 
-import math
-
 import numpy as np
 
 GEOMETRY_TYPES = {"MESH", "CURVE", "SURFACE", "META", "FONT", "CURVES", "POINTCLOUD", "VOLUME"}
@@ -214,14 +212,9 @@ def _node_params(node, textures, warnings, what):
 
 
 def _specular_layer_ior(ior, level):
-    """IOR of Principled's dielectric specular layer: Specular IOR Level scales the normal-
-    incidence reflectance F0 = ((η−1)/(η+1))² by 2·level (0.5 keeps the IOR, 0 removes the
-    layer), as Cycles does."""
-    if ior <= 0.0:
-        return 1.0
-    f0 = ((ior - 1.0) / (ior + 1.0)) ** 2 * 2.0 * min(max(level, 0.0), 1.0)
-    r = min(math.sqrt(f0), 0.999)
-    return (1.0 + r) / (1.0 - r)
+    from gdmlt.shading import specular_layer_ior  # (the core's package: the engine needs it anyway)
+
+    return specular_layer_ior(ior, level)
 
 
 # Principled inputs whose layers the core does not render: (input, value that means "off").
@@ -388,6 +381,8 @@ def _light(ob, matrix, warnings):
     name = ob.name
     scale = 2.0 ** float(getattr(light, "exposure", 0.0))
     color = np.array(light.color[:3], dtype=np.float64)
+    if getattr(light, "use_temperature", False):  # Blender's blackbody colour (luminance 1)
+        color = color * np.array(light.temperature_color[:3], dtype=np.float64)
     power = tuple((color * light.energy * scale).tolist())
     visible = bool(getattr(ob, "visible_camera", False))
     m = matrix

@@ -26,7 +26,8 @@ def apply_settings(scene, settings: dict):
 
 def export_usd(path: Path, out: Path, frame=None) -> dict:
     """Exports the .blend's active scene with Blender's own USD exporter (evaluated meshes,
-    materials as UsdPreviewSurface, lights, cameras, the world as a dome) and stores the
+    materials as UsdPreviewSurface and MaterialX networks, textures, lights, cameras, the
+    world as a dome) and stores the
     GDMLT render settings and the image size in the stage's customLayerData under "gdmlt",
     so `gdmlt render out.usd` on a machine without Blender renders it the same way.
     Returns the stored settings."""
@@ -42,7 +43,11 @@ def export_usd(path: Path, out: Path, frame=None) -> dict:
     out.parent.mkdir(parents=True, exist_ok=True)
     result = bpy.ops.wm.usd_export(filepath=str(out.resolve()), selected_objects_only=False,
                                    export_animation=False, export_materials=True, export_lights=True,
-                                   export_cameras=True, convert_world_material=True)
+                                   export_cameras=True, convert_world_material=True,
+                                   # MaterialX keeps what UsdPreviewSurface cannot say (glass,
+                                   # glossy, a Diffuse without specular layer); textures are
+                                   # written next to the stage
+                                   generate_materialx_network=True, export_textures_mode="NEW")
     if "FINISHED" not in result:
         raise RuntimeError(f"Blender's USD export of {path} failed")
     g = scene.gdmlt

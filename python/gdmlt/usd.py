@@ -1,17 +1,20 @@
 """USD stage → the scene dict that gdmlt.Scene takes, with usd-core (no Blender needed).
 
 Supported: UsdGeomMesh (points, faces triangulated as fans, left-handed orientation,
-normals of any interpolation, the `st` texture coordinates, GeomSubset material bindings),
-UsdPreviewSurface materials (diffuseColor, metallic, roughness, ior — also of the
-dielectric specular layer over the diffuse base —, emissiveColor as constants), UsdLux SphereLight (with ShapingAPI cone → spot), RectLight, DiskLight,
-DistantLight and DomeLight (constant colour, or an OpenEXR latlong texture oriented as
-Blender's exporter writes it: the dome's transform applied to Blender's Z-up
-equirectangular mapping) with intensity × 2^exposure × colour and
-`normalize` as UsdLux defines them, UsdGeomCamera (apertures and focal length in tenths of
-a scene unit, clipping, f-stop, focus distance, aperture offsets), time samples (`frame`),
-instance proxies and PointInstancers of meshes (flattened: copies per instance). Everything else is reported in the returned warnings:
-textures in USD materials (their fallback or the constant value is used), colour
-temperature other than 6500 K, non-EXR DomeLight textures, non-mesh prototypes, other prim types.
+normals of any interpolation, the `st` texture coordinates, GeomSubset material bindings);
+materials from their MaterialX network where the core renders it exactly (OpenPBR — what
+Blender writes for Principled —, or one diffuse / conductor / dielectric BSDF and a uniform
+EDF), else from UsdPreviewSurface (diffuseColor, metallic, roughness, ior — also of the
+dielectric specular layer over the diffuse base —, emissiveColor, opacity); image textures
+(UsdUVTexture, MaterialX image nodes) on base colour and roughness; UsdLux SphereLight (with
+ShapingAPI cone → spot), RectLight, DiskLight, DistantLight and DomeLight (constant colour,
+or an OpenEXR latlong texture oriented as Blender's exporter writes it: the dome's
+transform applied to Blender's Z-up equirectangular mapping) with intensity × 2^exposure ×
+colour × blackbody colour of the temperature and `normalize` as UsdLux defines them,
+UsdGeomCamera (apertures and focal length in tenths of a scene unit, clipping, f-stop,
+focus distance, aperture offsets), time samples (`frame`), instance proxies and
+PointInstancers of meshes (flattened: copies per instance). Everything else is reported in
+the returned warnings with the fallback used (README: "USD feature table").
 """
 
 from __future__ import annotations
@@ -20,6 +23,8 @@ import math
 from pathlib import Path
 
 import numpy as np
+
+from .shading import specular_layer_ior
 
 USD_SUFFIXES = (".usd", ".usda", ".usdc", ".usdz")
 
@@ -44,12 +49,21 @@ def _light_scale(light, time) -> float:
     return float(light.GetIntensityAttr().Get(time) or 0.0) * 2.0 ** float(exposure)
 
 
+def temperature_rgb(kelvin: float) -> np.ndarray:
+    """UsdLux's blackbody colour of `kelvin` (luminance 1; usd-core's
+    BlackbodyTemperatureAsRgb, the same colour as Blender's Light.temperature_color)."""
+    from pxr import UsdLux
+
+    return np.array(UsdLux.BlackbodyTemperatureAsRgb(float(min(max(kelvin, 1000.0), 10000.0))))
+
+
 def _light_color(light, time, warnings, name):
     color = np.array(light.GetColorAttr().Get(time) or (1.0, 1.0, 1.0), dtype=np.float64)
-    if light.GetEnableColorTemperatureAttr().Get(time):
-        temp = light.GetColorTemperatureAttr().Get(time) or 6500.0
-        if abs(temp - 6500.0) > 1.0:
-            warnings.append(f"light '{name}': colour temperature {temp:g} K is ignored (6500 K = white is assumed)")
+    # An unauthored temperature is white: Blender's exporter enables the temperature on every
+    # light and writes one only when the light uses it (its lights are white otherwise).
+    temp = light.GetColorTemperatureAttr()
+    if light.GetEnableColorTemperatureAttr().Get(time) and temp.HasAuthoredValue():
+        color = color * temperature_rgb(temp.Get(time))
     return color
 
 
@@ -64,6 +78,8 @@ class _Reader:
         self.xcache = pxr.UsdGeom.XformCache(time)
         self.materials = [{"name": "(default)", "base_color": (0.8, 0.8, 0.8)}]
         self.material_index = {}
+        self.textures = []  # scene textures: material images and the dome's
+        self.texture_index = {}
 
     def warn(self, msg):
         if msg not in self.warnings:
@@ -71,56 +87,228 @@ class _Reader:
 
     # ---- materials -------------------------------------------------------------------
     def material(self, usd_material) -> int:
+        """Index of a bound material in the scene's table. The MaterialX network (the
+        `mtlx` render context Blender writes with generate_materialx_network) is read when
+        the core can render it exactly; else the UsdPreviewSurface."""
         if not usd_material:
             return 0
         path = str(usd_material.GetPath())
         if path in self.material_index:
             return self.material_index[path]
-        UsdShade = self.pxr.UsdShade
-        out = {"name": usd_material.GetPrim().GetName(), "base_color": (0.8, 0.8, 0.8), "roughness": 0.5,
-               "metallic": 0.0, "ior": 1.5, "emission": (0.0, 0.0, 0.0)}
-        shader = usd_material.ComputeSurfaceSource()[0]
-        if not shader or shader.GetIdAttr().Get() != "UsdPreviewSurface":
-            self.warn(f"material '{out['name']}': no UsdPreviewSurface surface; rendered grey diffuse")
-        else:
-            def value(name, default):
-                inp = shader.GetInput(name)
-                if not inp:
-                    return default
-                if inp.HasConnectedSource():
-                    src = inp.GetConnectedSource()[0]
-                    fb = UsdShade.Shader(src.GetPrim()).GetInput("fallback") if src else None
-                    fallback = fb.Get() if fb else None
-                    self.warn(f"material '{out['name']}': input '{name}' is connected (texture); "
-                              f"{'its fallback' if fallback is not None else 'the default'} is used")
-                    v = fallback if fallback is not None else default
-                    return tuple(v)[:3] if isinstance(default, tuple) else float(v if not hasattr(v, '__len__') else v[0])
-                v = inp.Get(self.time)
-                if v is None:
-                    return default
-                return tuple(float(x) for x in v)[:3] if isinstance(default, tuple) else float(v)
-
-            out["base_color"] = value("diffuseColor", (0.18, 0.18, 0.18))
-            out["metallic"] = value("metallic", 0.0)
-            out["roughness"] = value("roughness", 0.5)
-            out["ior"] = value("ior", 1.5)
-            # UsdPreviewSurface's specular lobe: a dielectric layer of that IOR over the
-            # diffuse base (as Principled's, which Blender writes as this shader)
-            out["specular_ior"] = out["ior"]
-            out["emission"] = value("emissiveColor", (0.0, 0.0, 0.0))
-            # opacity as coverage (what Blender writes for Principled alpha); with an
-            # opacityThreshold, a cutout: below it fully transparent, else opaque
-            opacity = min(max(value("opacity", 1.0), 0.0), 1.0)
-            threshold = value("opacityThreshold", 0.0)
-            if threshold > 0.0:
-                opacity = 0.0 if opacity < threshold else 1.0
-            if opacity < 1.0:
-                out["transparency"] = 1.0 - opacity
-            if value("useSpecularWorkflow", 0.0):
-                self.warn(f"material '{out['name']}': the specular workflow is rendered as the metallic one")
+        name = usd_material.GetPrim().GetName()
+        out = {"name": name, "base_color": (0.8, 0.8, 0.8), "roughness": 0.5, "metallic": 0.0, "ior": 1.5,
+               "emission": (0.0, 0.0, 0.0)}
+        what = f"material '{name}'"
+        mtlx = usd_material.ComputeSurfaceSource("mtlx")[0]
+        done = False
+        if mtlx and (mtlx.GetIdAttr().Get() or "").startswith("ND_"):
+            done = self._materialx(mtlx, out, what)
+        if not done:
+            shader = usd_material.ComputeSurfaceSource()[0]
+            if shader and shader.GetIdAttr().Get() == "UsdPreviewSurface":
+                self._preview_surface(shader, out, what)
+            else:
+                self.warn(f"{what}: no UsdPreviewSurface or supported MaterialX surface; rendered grey diffuse")
         self.material_index[path] = len(self.materials)
         self.materials.append(out)
         return self.material_index[path]
+
+    def _source(self, inp):
+        """(shader, output name) that produces a connected input's value, through node graphs."""
+        if not inp or not inp.HasConnectedSource():
+            return None
+        attrs = inp.GetValueProducingAttributes(shaderOutputsOnly=True)
+        if not attrs:
+            return None
+        return self.pxr.UsdShade.Shader(attrs[0].GetPrim()), attrs[0].GetName().split(":")[-1]
+
+    def _param(self, shader, name, default, what, out=None, texture_key=None):
+        """An input's constant (default when unauthored). Connected: an image texture becomes
+        out[texture_key] where the core takes one; anything else warns and uses the texture
+        node's fallback or the default."""
+        inp = shader.GetInput(name)
+        if not inp:
+            return default
+        if inp.HasConnectedSource():
+            src = self._source(inp)
+            if src is not None and texture_key is not None:
+                index = self._texture(src[0], what)
+                if index is not None:
+                    out[texture_key] = index
+                    return (1.0, 1.0, 1.0) if isinstance(default, tuple) else default
+            fb = src[0].GetInput("fallback") if src is not None else None
+            fallback = fb.Get() if fb else None
+            self.warn(f"{what}: input '{name}' is connected to what the core does not render here; "
+                      f"{'its fallback' if fallback is not None else 'the default'} is used")
+            v = fallback if fallback is not None else default
+        else:
+            v = inp.Get(self.time)
+            if v is None:
+                return default
+        if isinstance(default, str):
+            return str(v)
+        if isinstance(default, tuple):
+            return tuple(float(x) for x in tuple(v)[:3]) if hasattr(v, "__len__") else (float(v),) * 3
+        return float(v[0] if hasattr(v, "__len__") else v)
+
+    def _preview_surface(self, shader, out, what):
+        p = lambda name, default, key=None: self._param(shader, name, default, what, out, key)  # noqa: E731
+        out["base_color"] = p("diffuseColor", (0.18, 0.18, 0.18), "base_color_texture")
+        out["metallic"] = p("metallic", 0.0)
+        out["roughness"] = p("roughness", 0.5, "roughness_texture")
+        out["ior"] = p("ior", 1.5)
+        # the specular lobe: a dielectric layer of that IOR over the diffuse base (Principled's,
+        # which Blender writes as this shader, with its Specular IOR Level as `specular`)
+        out["specular_ior"] = specular_layer_ior(out["ior"], p("specular", 0.5))
+        out["emission"] = p("emissiveColor", (0.0, 0.0, 0.0))
+        # opacity as coverage (what Blender writes for Principled alpha); with an
+        # opacityThreshold, a cutout: below it fully transparent, else opaque
+        opacity = min(max(p("opacity", 1.0), 0.0), 1.0)
+        threshold = p("opacityThreshold", 0.0)
+        if threshold > 0.0:
+            opacity = 0.0 if opacity < threshold else 1.0
+        if opacity < 1.0:
+            out["transparency"] = 1.0 - opacity
+        if p("useSpecularWorkflow", 0.0):
+            self.warn(f"{what}: the specular workflow is rendered as the metallic one")
+        if p("clearcoat", 0.0) > 0.0:
+            self.warn(f"{what}: clearcoat is not rendered")
+
+    # MaterialX / OpenPBR inputs the core leaves out, with their "off" value
+    _OPEN_PBR_UNSUPPORTED = (("coat_weight", 0.0), ("fuzz_weight", 0.0), ("subsurface_weight", 0.0),
+                             ("thin_film_weight", 0.0), ("specular_roughness_anisotropy", 0.0))
+
+    def _materialx(self, surface, out, what) -> bool:
+        """OpenPBR (Blender's Principled) or a MaterialX `surface` of one diffuse, conductor or
+        dielectric BSDF plus a uniform EDF (Diffuse, Glossy, Glass, Emission). False: not
+        renderable exactly (the UsdPreviewSurface is used instead, with a warning)."""
+        kind = surface.GetIdAttr().Get()
+        p = lambda sh, name, default, key=None: self._param(sh, name, default, what, out, key)  # noqa: E731
+        if kind == "ND_open_pbr_surface_surfaceshader":
+            weight = p(surface, "base_weight", 1.0)
+            color = p(surface, "base_color", (0.8, 0.8, 0.8), "base_color_texture")
+            out["base_color"] = tuple(c * weight for c in color)
+            out["metallic"] = p(surface, "base_metalness", 0.0)
+            out["roughness"] = p(surface, "specular_roughness", 0.3, "roughness_texture")
+            out["ior"] = p(surface, "specular_ior", 1.5)
+            # OpenPBR's specular_weight is twice Principled's Specular IOR Level
+            out["specular_ior"] = specular_layer_ior(out["ior"], 0.5 * p(surface, "specular_weight", 1.0))
+            out["transmission"] = p(surface, "transmission_weight", 0.0)
+            lum = p(surface, "emission_luminance", 0.0)  # Blender writes its Emission Strength here
+            out["emission"] = tuple(c * lum for c in p(surface, "emission_color", (1.0, 1.0, 1.0)))
+            opacity = min(max(p(surface, "geometry_opacity", 1.0), 0.0), 1.0)
+            if opacity < 1.0:
+                out["transparency"] = 1.0 - opacity
+            for name, off in self._OPEN_PBR_UNSUPPORTED:
+                if abs(p(surface, name, off) - off) > 1e-6:
+                    self.warn(f"{what}: OpenPBR '{name}' is not rendered (the layer is left out)")
+            if any(abs(c - 1.0) > 1e-6 for c in p(surface, "specular_color", (1.0, 1.0, 1.0))):
+                self.warn(f"{what}: OpenPBR 'specular_color' is not rendered (white is used)")
+            return True
+        if kind != "ND_surface":
+            self.warn(f"{what}: MaterialX surface {kind} is not supported; the UsdPreviewSurface is used")
+            return False
+        bsdf = self._source(surface.GetInput("bsdf"))
+        edf = self._source(surface.GetInput("edf"))
+        if edf is not None:
+            if edf[0].GetIdAttr().Get() != "ND_uniform_edf":
+                self.warn(f"{what}: MaterialX EDF {edf[0].GetIdAttr().Get()} is not supported; the "
+                          f"UsdPreviewSurface is used")
+                return False
+            out["emission"] = p(edf[0], "color", (1.0, 1.0, 1.0))
+        out["specular_ior"] = 1.0
+        if bsdf is None:
+            out["base_color"] = (0.0, 0.0, 0.0)
+        else:
+            sh, bkind = bsdf[0], bsdf[0].GetIdAttr().Get()
+            weight = p(sh, "weight", 1.0)
+            rough = lambda: float(np.mean(p(sh, "roughness", (0.0, 0.0, 0.0))[:2]))  # noqa: E731 (float2)
+            if bkind == "ND_oren_nayar_diffuse_bsdf":
+                out["base_color"] = tuple(c * weight for c in p(sh, "color", (0.8, 0.8, 0.8), "base_color_texture"))
+                out["roughness"] = 1.0
+            elif bkind == "ND_conductor_bsdf":
+                ior = self._source(sh.GetInput("ior"))
+                if ior is None or ior[0].GetIdAttr().Get() != "ND_artistic_ior":
+                    self.warn(f"{what}: MaterialX conductor without artistic IOR; the UsdPreviewSurface is used")
+                    return False
+                out["base_color"] = tuple(c * weight for c in p(ior[0], "reflectivity", (0.8, 0.8, 0.8)))
+                out["metallic"], out["roughness"] = 1.0, rough()
+            elif bkind == "ND_dielectric_bsdf" and p(sh, "scatter_mode", "R") in ("RT", "T"):
+                out["base_color"] = tuple(c * weight for c in p(sh, "tint", (1.0, 1.0, 1.0)))
+                out["transmission"], out["ior"], out["roughness"] = 1.0, p(sh, "ior", 1.5), rough()
+            else:
+                self.warn(f"{what}: MaterialX BSDF {bkind} is not supported; the UsdPreviewSurface is used")
+                return False
+        opacity = surface.GetInput("opacity")
+        value = opacity.Get(self.time) if opacity and not opacity.HasConnectedSource() else None
+        if value is not None and value < 1.0:
+            out["transparency"] = 1.0 - min(max(float(value), 0.0), 1.0)
+        return True
+
+    # ---- textures --------------------------------------------------------------------
+    _WRAP = {"repeat": "REPEAT", "periodic": "REPEAT", "clamp": "EXTEND", "black": "CLIP", "constant": "CLIP",
+             "useMetadata": "REPEAT", "mirror": "REPEAT"}
+
+    def _texture(self, shader, what):
+        """Texture index of a UsdUVTexture or a MaterialX image node (through a colour
+        conversion), read from its file; None (with a warning) when it cannot be."""
+        kind = shader.GetIdAttr().Get() or ""
+        if kind.startswith("ND_convert_"):
+            src = self._source(shader.GetInput("in"))
+            return self._texture(src[0], what) if src is not None else None
+        p = lambda name, default: self._param(shader, name, default, what)  # noqa: E731
+        if kind == "UsdUVTexture":
+            wraps = {shader.GetInput(w).Get() if shader.GetInput(w) else "useMetadata" for w in ("wrapS", "wrapT")}
+            space = shader.GetInput("sourceColorSpace").Get() if shader.GetInput("sourceColorSpace") else "auto"
+            closest = False
+            st = self._source(shader.GetInput("st"))
+            if st is not None:
+                reader = st[0]
+                var = reader.GetInput("varname").Get() if reader.GetInput("varname") else None
+                if reader.GetIdAttr().Get() != "UsdPrimvarReader_float2" or str(var) != "st":
+                    self.warn(f"{what}: texture '{shader.GetPath().name}' reads other coordinates than primvar "
+                              f"'st' (transforms, other UV sets); 'st' is used")
+            if tuple(p("scale", (1.0, 1.0, 1.0))) != (1.0, 1.0, 1.0) or tuple(p("bias", (0.0, 0.0, 0.0))) != (0.0, 0.0, 0.0):
+                self.warn(f"{what}: texture '{shader.GetPath().name}' scale and bias are ignored")
+        elif kind.startswith("ND_image_") or kind.startswith("ND_tiledimage_"):
+            wraps = {shader.GetInput(w).Get() if shader.GetInput(w) else "periodic"
+                     for w in ("uaddressmode", "vaddressmode")}
+            attr = shader.GetInput("file").GetAttr() if shader.GetInput("file") else None
+            cs = (attr.GetColorSpace() if attr and attr.HasColorSpace() else "") or ""
+            # MaterialX files are in the document's (linear) space unless tagged: Blender tags
+            # sRGB images "srgb_texture" and writes Non-Color ones as vector images
+            space = "sRGB" if "srgb" in cs.lower() else "raw"
+            closest = p("filtertype", "linear") == "closest"
+            if kind.startswith("ND_tiledimage_"):
+                self.warn(f"{what}: tiling of texture '{shader.GetPath().name}' is ignored")
+        else:
+            return None
+        inp = shader.GetInput("file")
+        asset = inp.Get(self.time) if inp else None
+        if not asset or not asset.path:
+            self.warn(f"{what}: texture '{shader.GetPath().name}' has no file")
+            return None
+        file = Path(asset.resolvedPath) if asset.resolvedPath else \
+            Path(self.stage.GetRootLayer().realPath).parent / asset.path
+        if "mirror" in wraps or len(wraps) > 1:
+            self.warn(f"{what}: texture '{file.name}' wrap modes {sorted(map(str, wraps))}: one mode for both "
+                      f"axes, and mirror as repeat")
+        key = (str(file), space, closest, min(wraps, key=str))
+        if key in self.texture_index:
+            return self.texture_index[key]
+        image = _read_image(file)
+        if image is None:
+            self.warn(f"{what}: texture '{asset.path}' could not be read; the input's value is used")
+            return None
+        pixels, eight_bit = image
+        h, w, _ = pixels.shape
+        self.textures.append({"name": file.name, "width": w, "height": h, "channels": 3,
+                              "pixels": np.ascontiguousarray(pixels[::-1].reshape(-1, 3)),  # row 0 at the bottom
+                              "interpolation": "Closest" if closest else "Linear",
+                              "extension": self._WRAP.get(str(min(wraps, key=str)), "REPEAT"),
+                              "srgb": space == "sRGB" or (space == "auto" and eight_bit)})
+        self.texture_index[key] = len(self.textures) - 1
+        return self.texture_index[key]
 
     # ---- meshes ----------------------------------------------------------------------
     def mesh(self, prim, to_world=None):
@@ -287,7 +475,7 @@ class _Reader:
         self.warn(f"light '{name}': {prim.GetTypeName()} is not supported; skipped")
         return None
 
-    def dome(self, prim, textures):
+    def dome(self, prim):
         """(colour × intensity, texture index or None, world → texture rotation or None)."""
         UsdLux = self.pxr.UsdLux
         light = UsdLux.DomeLight(prim)
@@ -305,6 +493,7 @@ class _Reader:
                       f"its colour × intensity is used")
             return scale, None, None
         h, w, _ = pixels.shape
+        textures = self.textures
         textures.append({"name": file.name, "width": w, "height": h, "channels": 3,
                          "pixels": np.ascontiguousarray(pixels[::-1].reshape(-1, 3)),  # row 0 at the bottom
                          "interpolation": "Linear", "extension": "REPEAT"})
@@ -342,6 +531,29 @@ class _Reader:
             d["fstop"] = cam.fStop
             d["focus_distance"] = cam.focusDistance
         return d
+
+
+def _read_image(path):
+    """(float32 H×W×3 with row 0 at the top, whether it was 8-bit) of an OpenEXR file or of
+    any image Pillow reads (PNG, JPEG, TIFF, …); None when it cannot be read."""
+    path = Path(path)
+    if not path.is_file():
+        return None
+    if path.suffix.lower() == ".exr":
+        px = _read_exr(path)
+        return None if px is None else (px, False)
+    try:
+        from PIL import Image
+    except ImportError:
+        return None
+    try:
+        with Image.open(path) as im:
+            if im.mode in ("I;16", "I;16B", "I"):
+                px = np.asarray(im, dtype=np.float32) / 65535.0
+                return np.repeat(px[..., None], 3, axis=-1), False
+            return np.asarray(im.convert("RGB"), dtype=np.float32) / 255.0, True
+    except Exception:  # a broken file is reported by the caller as unreadable
+        return None
 
 
 def _read_exr(path):
@@ -392,7 +604,7 @@ def load(path, frame=None, width=None, height=None, camera=None):
     if width is None and height is None and "width" in stored:
         width, height = int(stored["width"]), int(stored["height"])
     r = _Reader(stage, time, warnings)
-    meshes, lights, world, cams, textures = [], [], (0.0, 0.0, 0.0), [], []
+    meshes, lights, world, cams = [], [], (0.0, 0.0, 0.0), []
     world_texture = world_rotation = None
     UsdGeom, UsdLux = pxr.UsdGeom, pxr.UsdLux
     it = iter(pxr.Usd.PrimRange.Stage(stage, pxr.Usd.TraverseInstanceProxies()))
@@ -417,7 +629,7 @@ def load(path, frame=None, width=None, height=None, camera=None):
             if world != (0.0, 0.0, 0.0) or world_texture is not None:
                 r.warn(f"light '{prim.GetName()}': only one DomeLight is rendered")
                 continue
-            world, world_texture, world_rotation = r.dome(prim, textures)
+            world, world_texture, world_rotation = r.dome(prim)
         elif prim.HasAPI(UsdLux.LightAPI) or prim.IsA(UsdLux.BoundableLightBase) or \
                 prim.IsA(UsdLux.NonboundableLightBase):
             light = r.light(prim)
@@ -435,6 +647,6 @@ def load(path, frame=None, width=None, height=None, camera=None):
     if not cams:
         raise ValueError(f"'{path}' has no camera")
     desc = {"meshes": meshes, "materials": r.materials, "lights": lights, "world": world,
-            "textures": textures, "world_texture": world_texture, "world_rotation": world_rotation,
+            "textures": r.textures, "world_texture": world_texture, "world_rotation": world_rotation,
             "camera": r.camera(cams[0], width, height)}
     return desc, warnings

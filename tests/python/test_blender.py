@@ -287,6 +287,32 @@ def test_spot_sun_world_and_all_lights_together_agree_with_cycles(bpy_mod, tmp_o
     assert_agrees_with_cycles(bpy_mod, build, tmp_out, kind, block=5)
 
 
+def test_light_colour_temperature_agrees_with_cycles_and_survives_usd(bpy_mod, tmp_out):
+    """A point light of 3000 K (colour × Blender's blackbody colour) against Cycles; exported to
+    USD (colorTemperature, read with usd-core's blackbody) it keeps its colour."""
+    from gdmlt import usd
+    from gdmlt_blender import export
+
+    def build(bpy, engine, spp, seed):
+        scene = open_scene(bpy, "lights", engine, spp // 2, seed, keep={"Point"})
+        light = bpy.data.objects["Point"].data
+        light.use_temperature, light.temperature = True, 3000.0
+        return scene
+
+    c, g = assert_agrees_with_cycles(bpy_mod, build, tmp_out, "temperature", block=5)
+    assert c[..., 0].mean() > 2.0 * c[..., 2].mean()  # warm light: fails if the temperature is dropped
+    bpy = bpy_mod
+    scene = build(bpy, "GDMLT", 16, 1)
+    addon_desc, _ = export.export_scene(bpy.context.evaluated_depsgraph_get())
+    addon = {l["name"]: np.array(l["power"]) for l in addon_desc["lights"] if "power" in l}
+    path = tmp_out / "temperature" / "scene.usda"
+    bpy.ops.wm.usd_export(filepath=str(path))
+    desc, _ = usd.load(path, width=8, height=8)
+    point = [np.array(l["power"]) for l in desc["lights"] if l["name"].endswith("Point")][0]
+    ratio = point / addon["Point"]
+    assert np.allclose(ratio, ratio.mean(), rtol=1e-3), (point, addon["Point"])  # the same colour
+
+
 def test_image_textures_agree_with_cycles(bpy_mod, tmp_out):
     """sRGB decoding (after interpolation, as Cycles does for 8-bit images: decoding first
     renders this checker 40% brighter), Non-Color data, bilinear lookup, Repeat and UV maps."""
@@ -358,32 +384,46 @@ def test_animation_renders_every_frame(bpy_mod, tmp_out):
     assert balance[0] > 0.01 and balance[2] < -0.01 and abs(balance[1]) < abs(balance[0]), balance
 
 
-@pytest.mark.parametrize("kind", ["lights", "hdri"])
-def test_blender_usd_export_renders_the_same_outside_blender(bpy_mod, tmp_out, kind):
+@pytest.mark.parametrize("kind, materialx", [("lights", True), ("hdri", True), ("specular", True),
+                                             ("textures", True), ("specular", False)])
+def test_blender_usd_export_renders_the_same_outside_blender(bpy_mod, tmp_out, kind, materialx):
     """F12 in Blender and `gdmlt render` of the same scene exported with Blender's USD exporter
     (read by usd-core, no Blender) agree: area and point lights with Blender's power
-    conventions, cameras, meshes, materials, and an HDRI dome. Tolerance from the spread of
-    two seeds, as in the Cycles comparisons."""
+    conventions, cameras, meshes, an HDRI dome; materials from the MaterialX networks Blender
+    writes (OpenPBR for Principled — specular layer, IOR level —, diffuse, conductor and
+    dielectric BSDFs for Diffuse, Glossy and Glass; image textures through MaterialX image
+    nodes, sRGB and Non-Color), and from UsdPreviewSurface alone. Tolerance from the spread of
+    two seeds, as in the Cycles comparisons (fails without the specular layer: checked)."""
     from gdmlt import usd
 
     bpy = bpy_mod
     imgs = {}
+    spp = 64
     for seed in (1, 2):
-        if kind == "lights":
-            scene = open_scene(bpy, "lights", "GDMLT", 64, seed, keep={"Area", "Point"})
-            scene.render.resolution_x = scene.render.resolution_y = 32
-        else:
+        if kind == "hdri":
             scene = _hdri_scene(bpy, "GDMLT", 64, seed)
             # (Blender 5.0's exporter writes the dome's intensity as 1 whatever the strength)
             scene.world.node_tree.nodes["Background"].inputs["Strength"].default_value = 1.0
+        else:
+            keep = {"Area", "Point"} if kind == "lights" else None
+            scene = open_scene(bpy, kind, "GDMLT", spp, seed, keep=keep)
+            if kind == "lights":
+                scene.render.resolution_x = scene.render.resolution_y = 32
+        if kind == "specular":  # their caustics are too noisy here: the next test checks them
+            for name in ("MirrorBall", "GlassBall"):
+                bpy.data.objects[name].hide_render = True
         imgs["blender", seed] = block_means(render_to_exr(bpy, scene, tmp_out / f"usd{kind}{seed}.exr"), 4)
-        path = tmp_out / f"{kind}{seed}" / "scene.usdc"
-        bpy.ops.wm.usd_export(filepath=str(path))
+        path = tmp_out / f"{kind}{materialx}{seed}" / "scene.usdc"
+        bpy.ops.wm.usd_export(filepath=str(path), generate_materialx_network=materialx, export_textures_mode="NEW")
         r = scene.render
         desc, warnings = usd.load(path, width=r.resolution_x, height=r.resolution_y)
         assert warnings == [], warnings
+        if not materialx:  # Blender writes Diffuse BSDFs as UsdPreviewSurface of the default IOR
+            for m in desc["materials"]:
+                if m["name"] in ("Orange", "Grey"):
+                    m["specular_ior"] = 1.0
         s = scene.gdmlt
-        res = gdmlt.render(gdmlt.Scene(desc), method="pt", spp=64, seed=seed + 10, max_bounces=s.max_bounces)
+        res = gdmlt.render(gdmlt.Scene(desc), method="pt", spp=spp, seed=seed + 10, max_bounces=s.max_bounces)
         imgs["usd", seed] = block_means(res["layers"]["Combined"], 4)
     b = (imgs["blender", 1] + imgs["blender", 2]) / 2
     u = (imgs["usd", 1] + imgs["usd", 2]) / 2
@@ -400,6 +440,48 @@ def test_mix_and_add_shaders_agree_with_cycles(bpy_mod, tmp_out):
         return open_scene(bpy, "mix", engine, spp, seed)
 
     assert_agrees_with_cycles(bpy_mod, build, tmp_out, "mix", block=5)
+
+
+@pytest.mark.parametrize("name", ["specular", "textures"])
+def test_usd_materialx_materials_match_the_addons_translation(bpy_mod, tmp_out, name):
+    """Every material of a scene exported with MaterialX reads back from the stage (no
+    Blender) as the addon translates it from the node tree: Principled through OpenPBR
+    (base colour, roughness, IOR, the specular layer's IOR from Specular IOR Level 0.7),
+    Diffuse, Glossy (conductor with artistic IOR), Glass (dielectric), image textures (the
+    same pixels, sRGB flag and wrap mode)."""
+    from gdmlt import usd
+    from gdmlt_blender import export
+
+    bpy = bpy_mod
+    scene = open_scene(bpy, name, "GDMLT", 16, 1)
+    path = tmp_out / f"mtlx{name}" / "scene.usdc"
+    bpy.ops.wm.usd_export(filepath=str(path), generate_materialx_network=True, export_textures_mode="NEW")
+    desc, warnings = usd.load(path, width=8, height=8)
+    assert warnings == [], warnings
+    read = {m["name"]: m for m in desc["materials"]}
+    textures = export.Textures()
+    compared = 0
+    for mat in bpy.data.materials:
+        if mat.users == 0 or mat.name not in read:
+            continue
+        want, got = export.material_params(mat, [], textures), read[mat.name]
+        metal, glass = want.get("metallic", 0.0), want.get("transmission", 0.0)
+        keys = ["metallic", "transmission", "emission"]
+        keys += ["roughness"] if metal > 0 or glass > 0 or want.get("specular_ior", 1.0) > 1.0 else []
+        keys += ["ior"] if glass > 0 else []
+        keys += ["base_color"] if "base_color_texture" not in want else []
+        for k in keys:
+            assert np.allclose(got.get(k, 0.0), want.get(k, 0.0), atol=1e-4), (mat.name, k, got.get(k), want.get(k))
+        assert got.get("specular_ior", 1.0) == pytest.approx(want.get("specular_ior", 1.0), abs=1e-4), mat.name
+        if "base_color_texture" in want:
+            tw, tg = textures.items[want["base_color_texture"]], desc["textures"][got["base_color_texture"]]
+            assert (tg["width"], tg["height"], tg["srgb"], tg["extension"]) == \
+                (tw["width"], tw["height"], tw["srgb"], tw["extension"]), mat.name
+            # the exported PNG holds the image at 8 bits
+            assert np.allclose(np.asarray(tg["pixels"]).reshape(-1, 3),
+                               np.asarray(tw["pixels"]).reshape(-1, tw.get("channels", 4))[:, :3], atol=1.0 / 255 + 1e-6)
+        compared += 1
+    assert compared >= (6 if name == "specular" else 3), compared
 
 
 def test_gdmlt_export_carries_the_scene_and_its_settings_to_usd(bpy_mod, tmp_out):
