@@ -173,3 +173,45 @@ def test_opacity_is_coverage_and_threshold_cuts_out(tmp_path, opacity, threshold
     sheer = [m for m in desc["materials"] if m["name"] == "Sheer"][0]
     assert sheer.get("transparency", 0.0) == pytest.approx(seen)
     assert not any("opacity" in w for w in warnings)
+
+
+def test_uv_texture_of_a_hand_written_stage(tmp_path):
+    """A UsdUVTexture (an 8-bit PNG: left half red, right half blue, sRGB) read
+    through the `st` primvar into diffuseColor: the left of the image shows the decoded red
+    albedo and the right the blue one, at the analytic radiance ρ/π·E under the small light."""
+    from PIL import Image
+
+    px = np.zeros((2, 16, 3), np.uint8)
+    px[:, :8] = (200, 60, 30)
+    px[:, 8:] = (30, 60, 200)
+    Image.fromarray(px).save(tmp_path / "halves.png")
+    path = _stage(tmp_path / "t.usda")
+    stage = Usd.Stage.Open(str(path))
+    floor = UsdGeom.Mesh(stage.GetPrimAtPath("/World/Floor"))
+    # a floor as wide as the camera's view (0.2 at 5 units), st from 0 to 1 across it
+    floor.GetPointsAttr().Set([(-0.1, -0.1, 0), (0.1, -0.1, 0), (0.1, 0.1, 0), (-0.1, 0.1, 0)])
+    st = UsdGeom.PrimvarsAPI(floor).CreatePrimvar("st", Sdf.ValueTypeNames.TexCoord2fArray, UsdGeom.Tokens.vertex)
+    st.Set([(0, 0), (1, 0), (1, 1), (0, 1)])
+    shader = UsdShade.Shader(stage.GetPrimAtPath("/World/Grey/Surface"))
+    tex = UsdShade.Shader.Define(stage, "/World/Grey/Tex")
+    tex.CreateIdAttr("UsdUVTexture")
+    tex.CreateInput("file", Sdf.ValueTypeNames.Asset).Set("halves.png")
+    tex.CreateInput("sourceColorSpace", Sdf.ValueTypeNames.Token).Set("sRGB")
+    reader = UsdShade.Shader.Define(stage, "/World/Grey/St")
+    reader.CreateIdAttr("UsdPrimvarReader_float2")
+    reader.CreateInput("varname", Sdf.ValueTypeNames.String).Set("st")
+    tex.CreateInput("st", Sdf.ValueTypeNames.Float2).ConnectToSource(reader.ConnectableAPI(), "result")
+    shader.GetInput("diffuseColor").ConnectToSource(tex.ConnectableAPI(), "rgb")
+    stage.GetRootLayer().Save()
+    desc, warnings = usd.load(path, width=16, height=16)
+    assert warnings == []
+    img = gdmlt.render(gdmlt.Scene(desc), method="pt", spp=256, max_bounces=0, seed=1)["layers"]["Combined"]
+
+    def decode(c):  # sRGB → linear
+        c = c / 255.0
+        return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+
+    e = 100.0 * 0.04 / 4.0  # the small light's irradiance at the centre (see the light-units test)
+    for cols, colour in ((slice(1, 6), (200, 60, 30)), (slice(10, 15), (30, 60, 200))):
+        got = img[5:11, cols].mean(axis=(0, 1))
+        assert np.allclose(got, decode(np.array(colour)) / math.pi * e, rtol=0.03), (got, colour)
