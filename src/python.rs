@@ -607,8 +607,9 @@ fn reconstruct<'py>(
     }
     let f = |i: &Image| -> Vec<f64> { i.data.iter().map(|&v| v as f64).collect() };
     let (w, h) = (p.width, p.height);
-    let (combined, _) =
-        py.detach(|| crate::reconstruct::gradient_domain_image(w, h, &f(&p), &f(&gx), &f(&gy), &f(&d), alpha, norm));
+    let (combined, _) = py.detach(|| {
+        crate::reconstruct::gradient_domain_image(w, h, &f(&p), &f(&gx), &f(&gy), &f(&d), alpha, norm, &|| false)
+    });
     let out = Image { width: w, height: h, channels: 3, data: combined.iter().map(|&v| v as f32).collect() };
     image_to_numpy(py, &out)
 }

@@ -141,13 +141,14 @@ fn resolve(
     spp: u32,
     alpha: f64,
     norm: crate::reconstruct::Norm,
+    stop: &(dyn Fn() -> bool + Sync),
 ) -> (Image, Image, Image, Image, Image) {
     let scale = 1.0 / spp.max(1) as f64;
     let primal = to_image(rows, |r| &r.primal, scale);
     let dx = to_image(rows, |r| &r.dx, scale);
     let dy = to_image(rows, |r| &r.dy, scale);
     let direct = to_image(rows, |r| &r.direct, scale);
-    let (combined, primal_full) = gradient_domain_image(w, h, &primal, &dx, &dy, &direct, alpha, norm);
+    let (combined, primal_full) = gradient_domain_image(w, h, &primal, &dx, &dy, &direct, alpha, norm, stop);
     let im = |v: &[f64]| f32_image(w, h, v);
     (im(&combined), im(&primal_full), im(&dx), im(&dy), im(&direct))
 }
@@ -166,13 +167,17 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl)
         }
         control.work_done.fetch_add(w as u64 * h as u64 * (to - done) as u64, Ordering::Relaxed);
         done = to;
-        control.offer_preview(|| resolve(&rows, w, h, done, settings.alpha_rec, crate::reconstruct::Norm::L2).0);
+        control.offer_preview(|| {
+            resolve(&rows, w, h, done, settings.alpha_rec, crate::reconstruct::Norm::L2, &|| false).0
+        });
         if t0.elapsed().as_secs_f64() < 0.1 {
             batch = (batch * 2).min(64);
         }
     }
     let (combined, primal_full, dx, dy, direct) =
-        resolve(&rows, w, h, done, settings.alpha_rec, control.final_norm(settings.reconstruction));
+        resolve(&rows, w, h, done, settings.alpha_rec, control.final_norm(settings.reconstruction), &|| {
+            control.is_cancelled()
+        });
     let scale = 1.0 / done.max(1) as f64;
     let n = |v: &[f64]| f32_image(w, h, v);
     let albedo = to_image(&rows, |r| &r.albedo, scale);

@@ -280,7 +280,7 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl,
         });
         control.offer_preview(|| {
             let groups: Vec<&Group> = states.iter().map(|(g, _)| g).collect();
-            resolve(&groups, b, w, h, gradient, &direct, settings.alpha_rec, Norm::L2).remove(0).1
+            resolve(&groups, b, w, h, gradient, &direct, settings.alpha_rec, Norm::L2, &|| false).remove(0).1
         });
     }
     let groups: Vec<&Group> = states.iter().map(|(g, _)| g).collect();
@@ -300,7 +300,7 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl,
         stats.warnings.push("no light reaches the camera in the bootstrap: the image is black".into());
     }
     let norm = control.final_norm(settings.reconstruction);
-    let mut layers = resolve(&groups, b, w, h, gradient, &direct, settings.alpha_rec, norm);
+    let mut layers = resolve(&groups, b, w, h, gradient, &direct, settings.alpha_rec, norm, &|| control.is_cancelled());
     let img = |v: Vec<f64>| Image { width: w, height: h, channels: 3, data: v.into_iter().map(|x| x as f32).collect() };
     layers.push(("Denoising Albedo".into(), img(albedo)));
     layers.push(("Denoising Normal".into(), img(normal)));
@@ -344,6 +344,7 @@ fn resolve(
     direct: &[f64],
     alpha_rec: f64,
     norm: Norm,
+    stop: &(dyn Fn() -> bool + Sync),
 ) -> Vec<(String, Image)> {
     let mutations: u64 = groups.iter().map(|g| g.mutations).sum();
     let mpp = mutations as f64 / (w * h) as f64;
@@ -374,7 +375,7 @@ fn resolve(
     }
     let dx = sum_layer(DX);
     let dy = sum_layer(DY);
-    let (combined, primal_full) = gradient_domain_image(w, h, &primal, &dx, &dy, direct, alpha_rec, norm);
+    let (combined, primal_full) = gradient_domain_image(w, h, &primal, &dx, &dy, direct, alpha_rec, norm, stop);
     vec![
         ("Combined".into(), img(&combined)),
         ("GD Primal".into(), img(&primal_full)),

@@ -96,7 +96,8 @@ impl<'a> WeightedProblem<'a> {
 }
 
 /// Preconditioned CG from `x0`; stops after `iters` or when ‖r‖ ≤ tol·‖b‖.
-pub fn solve_cg(p: &WeightedProblem, x0: &[f64], iters: usize, tol: f64) -> Vec<f64> {
+/// Stops early, with the current iterate, once `stop()` is true (asked every iteration).
+pub fn solve_cg(p: &WeightedProblem, x0: &[f64], iters: usize, tol: f64, stop: &(dyn Fn() -> bool + Sync)) -> Vec<f64> {
     let n = x0.len();
     let b = p.rhs();
     let dinv: Vec<f64> = p.diagonal().iter().map(|d| 1.0 / d).collect();
@@ -110,7 +111,7 @@ pub fn solve_cg(p: &WeightedProblem, x0: &[f64], iters: usize, tol: f64) -> Vec<
     let mut rz: f64 = r.iter().zip(&z).map(|(a, b)| a * b).sum();
     let mut ad = vec![0.0; n];
     for _ in 0..iters {
-        if r.iter().map(|v| v * v).sum::<f64>().sqrt() <= tol * bnorm {
+        if stop() || r.iter().map(|v| v * v).sum::<f64>().sqrt() <= tol * bnorm {
             break;
         }
         p.apply(&d, &mut ad);

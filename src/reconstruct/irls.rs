@@ -32,13 +32,18 @@ fn normalise(w: &mut [f64]) {
     }
 }
 
-pub fn solve_l1(chans: &[Channel], alpha: f64, params: &IrlsParams) -> Vec<Vec<f64>> {
+/// `stop` is asked between outer iterations and inside every CG iteration: when it turns true
+/// (Esc), the current iterate — the L2 solution refined so far — is returned.
+pub fn solve_l1(chans: &[Channel], alpha: f64, params: &IrlsParams, stop: &(dyn Fn() -> bool + Sync)) -> Vec<Vec<f64>> {
     let (w, h) = (chans[0].width, chans[0].height);
     let n = w * h;
     // channels are independent given the shared weights: solved in parallel
     let mut sol: Vec<Vec<f64>> = chans.par_iter().map(|c| solve_l2_dct(c, alpha)).collect();
     let mut reg = params.reg0;
     for _ in 0..params.outer_iterations {
+        if stop() {
+            break;
+        }
         let weights: Vec<[f64; 3]> = (0..n)
             .into_par_iter()
             .with_min_len(4096)
@@ -66,7 +71,7 @@ pub fn solve_l1(chans: &[Channel], alpha: f64, params: &IrlsParams) -> Vec<Vec<f
         sol.par_iter_mut().zip(chans.par_iter()).for_each(|(s, c)| {
             let p =
                 WeightedProblem { c, alpha, wg: Cow::Borrowed(&wg), wx: Cow::Borrowed(&wx), wy: Cow::Borrowed(&wy) };
-            *s = solve_cg(&p, s, params.cg_iterations, 1e-10);
+            *s = solve_cg(&p, s, params.cg_iterations, 1e-10, stop);
         });
         reg *= params.decay;
     }

@@ -88,7 +88,6 @@ impl Norm {
     }
 }
 
-/// Reconstructs an RGB image from primal, dx, dy (each W·H·3 interleaved, f64).
 /// The gradient-domain image: the reconstruction of (primal, dx, dy) plus the very-direct
 /// light, clipped at 0 (the screened Poisson solve is unconstrained and rings slightly
 /// negative in the dark). Returns (combined, primal + very direct). All RGB, row-major.
@@ -102,21 +101,34 @@ pub fn gradient_domain_image(
     direct: &[f64],
     alpha: f64,
     norm: Norm,
+    stop: &(dyn Fn() -> bool + Sync),
 ) -> (Vec<f64>, Vec<f64>) {
-    let recon = reconstruct_rgb(w, h, primal, dx, dy, alpha, norm);
+    let recon = reconstruct_rgb(w, h, primal, dx, dy, alpha, norm, stop);
     let combined = recon.iter().zip(direct).map(|(a, b)| (a + b).max(0.0)).collect();
     let primal_full = primal.iter().zip(direct).map(|(a, b)| a + b).collect();
     (combined, primal_full)
 }
 
-pub fn reconstruct_rgb(w: usize, h: usize, primal: &[f64], dx: &[f64], dy: &[f64], alpha: f64, norm: Norm) -> Vec<f64> {
+/// Reconstructs an RGB image from primal, dx, dy (each W·H·3 interleaved, f64); an L1 solve
+/// returns early with its current iterate once `stop()` is true.
+#[allow(clippy::too_many_arguments)]
+pub fn reconstruct_rgb(
+    w: usize,
+    h: usize,
+    primal: &[f64],
+    dx: &[f64],
+    dy: &[f64],
+    alpha: f64,
+    norm: Norm,
+    stop: &(dyn Fn() -> bool + Sync),
+) -> Vec<f64> {
     let split = |v: &[f64], c: usize| -> Vec<f64> { v.iter().skip(c).step_by(3).copied().collect() };
     let chans: Vec<[Vec<f64>; 3]> = (0..3).map(|c| [split(primal, c), split(dx, c), split(dy, c)]).collect();
     let views: Vec<Channel> =
         chans.iter().map(|[p, x, y]| Channel { width: w, height: h, primal: p, dx: x, dy: y }).collect();
     let out: Vec<Vec<f64>> = match norm {
         Norm::L2 => views.iter().map(|c| solve_l2_dct(c, alpha)).collect(),
-        Norm::L1 => solve_l1(&views, alpha, &IrlsParams::default()),
+        Norm::L1 => solve_l1(&views, alpha, &IrlsParams::default(), stop),
     };
     let mut rgb = vec![0.0; w * h * 3];
     for (c, ch) in out.iter().enumerate() {
@@ -149,7 +161,7 @@ mod tests {
         // Exact primal and gradients: the image itself is the minimiser for any α.
         let c = Channel { width: w, height: h, primal: &img, dx: &dx, dy: &dy };
         let l2 = solve_l2_dct(&c, 0.2);
-        let l1 = solve_l1(&[c.clone(), c.clone(), c.clone()], 0.2, &IrlsParams::default());
+        let l1 = solve_l1(&[c.clone(), c.clone(), c.clone()], 0.2, &IrlsParams::default(), &|| false);
         for i in 0..w * h {
             assert!((l2[i] - img[i]).abs() < 1e-9, "dct {} vs {}", l2[i], img[i]);
             assert!((l1[0][i] - img[i]).abs() < 1e-6, "l1 {} vs {}", l1[0][i], img[i]);
@@ -161,12 +173,40 @@ mod tests {
         let c = Channel { width: w, height: h, primal: &noisy, dx: &dx, dy: &dy };
         let a = 1e-3;
         let l2 = solve_l2_dct(&c, a);
-        let cg = solve_cg(&WeightedProblem::unweighted(&c, a), &noisy, 2000, 1e-13);
+        let cg = solve_cg(&WeightedProblem::unweighted(&c, a), &noisy, 2000, 1e-13, &|| false);
         // deviation ≤ α²·|noise|/λ_min ≈ 1e-6·0.5/0.0187 ≈ 3e-5
         for i in 0..w * h {
             assert!((l2[i] - (img[i] - shift)).abs() < 1e-4, "dct {} vs {}", l2[i], img[i] - shift);
             assert!((cg[i] - l2[i]).abs() < 1e-6, "cg {} vs dct {}", cg[i], l2[i]);
         }
+    }
+
+    /// An L1 solve asked to stop (Esc) returns its current iterate: the exact L2 solution when
+    /// stopped before the first reweighting, something between L2 and the full L1 after a few
+    /// CG steps; it asks once per outer iteration and once per CG step.
+    #[test]
+    fn a_stopped_l1_solve_returns_its_current_iterate() {
+        use std::sync::atomic::{AtomicUsize, Ordering};
+        let (w, h) = (24, 16);
+        let img = test_image(w, h);
+        let (mut dx, dy) = gradients(&img, w, h);
+        dx[5 * w + 9] += 3.0; // an outlier: L1 and L2 disagree
+        let c = Channel { width: w, height: h, primal: &img, dx: &dx, dy: &dy };
+        let chans = [c.clone(), c.clone(), c.clone()];
+        let params = IrlsParams::default();
+        let l2 = solve_l2_dct(&c, 0.2);
+        let full = solve_l1(&chans, 0.2, &params, &|| false);
+        assert_eq!(solve_l1(&chans, 0.2, &params, &|| true)[0], l2);
+        let asked = AtomicUsize::new(0);
+        let one = solve_l1(&chans, 0.2, &params, &|| asked.fetch_add(1, Ordering::Relaxed) >= 4);
+        let dist = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| (x - y).abs()).sum::<f64>();
+        assert!(dist(&one[0], &l2) > 0.0 && dist(&one[0], &full[0]) < dist(&l2, &full[0]));
+        let counted = AtomicUsize::new(0);
+        solve_l1(&chans, 0.2, &params, &|| counted.fetch_add(1, Ordering::Relaxed) == usize::MAX);
+        // once per outer iteration, and once per CG iteration of each of the three channels
+        let per_outer = 1 + 3 * params.cg_iterations;
+        let n = counted.load(Ordering::Relaxed);
+        assert!(n > params.outer_iterations && n <= params.outer_iterations * per_outer, "{n}");
     }
 
     #[test]
@@ -190,7 +230,7 @@ mod tests {
         let c = Channel { width: w, height: h, primal: &img, dx: &dx, dy: &dy };
         let a = 0.2;
         let l2 = solve_l2_dct(&c, a);
-        let l1 = solve_l1(&[c.clone(), c.clone(), c], a, &IrlsParams::default());
+        let l1 = solve_l1(&[c.clone(), c.clone(), c], a, &IrlsParams::default(), &|| false);
         let err = |v: &[f64]| v.iter().map(|x| (x - 1.0).abs()).fold(0.0, f64::max);
         let spread = |v: &[f64]| v.iter().filter(|x| (**x - 1.0).abs() > 0.05).count();
         assert!(err(&l2) > 1.0 && spread(&l2) > 20, "L2 should smear the outlier: {} {}", err(&l2), spread(&l2));
