@@ -59,16 +59,17 @@ class Textures:
         self.items = []
         self.index = {}
 
-    def add(self, node, warnings, what):
+    def add(self, node, warnings, what, alpha=False):
         """Index of the texture of an Image (or Environment) Texture node, or None (with a
-        warning) if it cannot be used: no image, a missing file, an empty image."""
+        warning) if it cannot be used: no image, a missing file, an empty image. With
+        `alpha`, a grey texture of the image's alpha channel (linear, as Cycles reads it)."""
         img = node.image
         if img is None:
             warnings.append(f"{what}: texture node '{node.name}' has no image; its input uses the socket value")
             return None
         env = node.type == "TEX_ENVIRONMENT"
         ext = "REPEAT" if env else node.extension
-        key = (img.name, node.interpolation, ext)
+        key = (img.name, node.interpolation, ext, alpha)
         if key in self.index:
             return self.index[key]
         w, h = img.size
@@ -80,10 +81,13 @@ class Textures:
         img.pixels.foreach_get(buf)
         px = buf.reshape(-1, img.channels)
         rgb = np.repeat(px[:, :1], 3, axis=1) if img.channels < 3 else px[:, :3]
+        if alpha:
+            a = px[:, 3:4] if img.channels == 4 else np.ones((len(px), 1), np.float32)
+            rgb = np.repeat(a, 3, axis=1)
         cs = img.colorspace_settings.name
         # byte images hold sRGB-encoded values, decoded after interpolation as Cycles does;
-        # float images are linear
-        srgb = cs == "sRGB" and not img.is_float
+        # float images are linear (and alpha always is)
+        srgb = cs == "sRGB" and not img.is_float and not alpha
         if cs not in LINEAR_COLORSPACES and cs != "sRGB":
             warnings.append(f"{what}: image '{img.name}' colour space '{cs}' is treated as linear")
         if node.projection != ("EQUIRECTANGULAR" if env else "FLAT"):
@@ -96,7 +100,7 @@ class Textures:
             warnings.append(f"{what}: Image Texture '{node.name}' extension {ext} is rendered as REPEAT")
             ext = "REPEAT"
         self.index[key] = len(self.items)
-        self.items.append({"name": img.name, "width": w, "height": h, "channels": 3,
+        self.items.append({"name": img.name + (" (alpha)" if alpha else ""), "width": w, "height": h, "channels": 3,
                            "pixels": np.ascontiguousarray(rgb, dtype=np.float32),
                            "interpolation": "Closest" if node.interpolation == "Closest" else "Linear",
                            "extension": ext, "srgb": srgb})
@@ -111,16 +115,17 @@ def _load(img):
     return img.has_data and img.size[0] > 0
 
 
-def _linked_texture(node, name, textures, warnings, what):
-    """If input `name` of `node` is fed by an Image Texture (Color output), its texture index."""
+def _linked_texture(node, name, textures, warnings, what, output="Color"):
+    """If input `name` of `node` is fed by an Image Texture's `output` (Color, or Alpha: then
+    the texture of its alpha channel), its texture index."""
     sock = node.inputs.get(name)
     if sock is None or not sock.is_linked or textures is None:
         return None
     link = sock.links[0]
     src = link.from_node
-    if src.type != "TEX_IMAGE" or link.from_socket.name != "Color":
+    if src.type != "TEX_IMAGE" or link.from_socket.name != output:
         return None
-    return textures.add(src, warnings, what)
+    return textures.add(src, warnings, what, alpha=output == "Alpha")
 
 
 def _color_or_texture(node, name, out, key, textures, warnings, what, default):
@@ -180,7 +185,11 @@ def _node_params(node, textures, warnings, what):
         col = _input_value(node, "Emission Color", warnings, what, (0, 0, 0, 1))[:3]
         strength = _input_value(node, "Emission Strength", warnings, what, 0.0)
         out["emission"] = tuple(c * strength for c in col)
-        out["alpha"] = min(max(_input_value(node, "Alpha", warnings, what, 1.0), 0.0), 1.0)
+        alpha_tex = _linked_texture(node, "Alpha", textures, warnings, what, output="Alpha")
+        if alpha_tex is not None:  # coverage from the image's alpha channel, per shading point
+            out["alpha_texture"], out["alpha"] = alpha_tex, 1.0
+        else:
+            out["alpha"] = min(max(_input_value(node, "Alpha", warnings, what, 1.0), 0.0), 1.0)
     elif t == "BSDF_TRANSPARENT":
         out["base_color"] = (0.0, 0.0, 0.0)
         out["pass"] = tuple(_input_value(node, "Color", warnings, what, (1, 1, 1, 1))[:3])
@@ -291,6 +300,9 @@ def _combine(leaves, warnings, what):
             tex.append((p["base_color_texture"], (1 - m) * (1 - t) > 0.999))
         if "roughness_texture" in p:
             rough_tex.append(p["roughness_texture"])
+        if "alpha_texture" in p:
+            warnings.append(f"{what}: an image's alpha inside a Mix/Add Shader is not supported; that shader is "
+                            f"rendered opaque")
     total = sum(v[0] for v in lobes.values())
     total_all = total + passing[0]
     out = {"emission": tuple(emission.tolist()), "metallic": 0.0, "transmission": 0.0, "roughness": 0.5,

@@ -110,6 +110,7 @@ fn parse_material(d: &Bound<'_, PyDict>) -> PyResult<MaterialDesc> {
         ior: get_or(d, "ior", def.ior, &ctx)?,
         base_color_texture: get_or(d, "base_color_texture", None, &ctx)?,
         roughness_texture: get_or(d, "roughness_texture", None, &ctx)?,
+        alpha_texture: get_or(d, "alpha_texture", None, &ctx)?,
         metal_color: get_or(d, "metal_color", None, &ctx)?,
         glass_color: get_or(d, "glass_color", None, &ctx)?,
         specular_ior: get_or(d, "specular_ior", def.specular_ior, &ctx)?,

@@ -179,8 +179,9 @@ def fresh_material(bpy, ob, name):
 
 def textures(bpy):
     """The lights scene with image textures: an sRGB checker (8-bit, bilinear, repeated twice)
-    into the floor's Diffuse colour and a linear (Non-Color) gradient into the wall's
-    Principled Base Color, both through UV maps."""
+    into the floor's Diffuse colour, a linear (Non-Color) gradient into the wall's
+    Principled Base Color, both through UV maps, and a leaf card whose Principled Alpha is
+    the image's alpha channel."""
     scene = lights(bpy, size=40, bounces=3)
 
     def image(name, pixels, colorspace):
@@ -212,6 +213,29 @@ def textures(bpy):
         uv = ob.data.uv_layers.new(name="UVMap")
         for loop, (u, v) in zip(uv.uv, [(0, 0), (1, 0), (1, 1), (0, 1)]):
             loop.vector = (u * scale, v * scale)
+    # a leaf card: Principled whose Alpha comes from the image's alpha channel (a disc,
+    # opaque inside, half transparent on a ring, clear outside), in front of the wall and in
+    # the area light's way (transparent shadows through the texture)
+    yy, xx = (np.mgrid[0:32, 0:32] + 0.5) / 16.0 - 1.0
+    r = np.hypot(xx, yy)
+    leaf = np.zeros((32, 32, 4))
+    leaf[..., :3] = [0.2, 0.7, 0.15]
+    leaf[..., 3] = np.where(r < 0.6, 1.0, np.where(r < 0.9, 0.5, 0.0))
+    me = bpy.data.meshes.new("Leaf")
+    me.from_pydata([(-1.4, -0.6, 0.1), (-0.2, -0.6, 0.1), (-0.2, -0.6, 1.3), (-1.4, -0.6, 1.3)], [], [(0, 1, 2, 3)])
+    ob = bpy.data.objects.new("Leaf", me)
+    scene.collection.objects.link(ob)
+    nt, out = fresh_material(bpy, ob, "LeafAlpha")
+    bsdf = nt.nodes.new("ShaderNodeBsdfPrincipled")
+    bsdf.inputs["Roughness"].default_value = 1.0
+    tex = nt.nodes.new("ShaderNodeTexImage")
+    tex.image = image("LeafRGBA", leaf, "sRGB")
+    nt.links.new(tex.outputs["Color"], bsdf.inputs["Base Color"])
+    nt.links.new(tex.outputs["Alpha"], bsdf.inputs["Alpha"])
+    nt.links.new(bsdf.outputs[0], out.inputs["Surface"])
+    uv = me.uv_layers.new(name="UVMap")
+    for loop, (u, v) in zip(uv.uv, [(0, 0), (1, 0), (1, 1), (0, 1)]):
+        loop.vector = (u, v)
     return scene
 
 

@@ -132,7 +132,9 @@ class _Reader:
         if inp.HasConnectedSource():
             src = self._source(inp)
             if src is not None and texture_key is not None:
-                index = self._texture(src[0], what)
+                # coverage from an image's alpha: UsdUVTexture's `a` output, MaterialX's channel 3
+                alpha = texture_key == "alpha_texture"
+                index = self._texture(src[0], what, alpha) if not alpha or src[1] in ("a", "out") else None
                 if index is not None:
                     out[texture_key] = index
                     return (1.0, 1.0, 1.0) if isinstance(default, tuple) else default
@@ -163,8 +165,11 @@ class _Reader:
         out["emission"] = p("emissiveColor", (0.0, 0.0, 0.0))
         # opacity as coverage (what Blender writes for Principled alpha); with an
         # opacityThreshold, a cutout: below it fully transparent, else opaque
-        opacity = min(max(p("opacity", 1.0), 0.0), 1.0)
+        opacity = min(max(p("opacity", 1.0, "alpha_texture"), 0.0), 1.0)
         threshold = p("opacityThreshold", 0.0)
+        if threshold > 0.0 and "alpha_texture" in out:
+            self.warn(f"{what}: opacityThreshold with an opacity texture is rendered as coverage (no cutout)")
+            threshold = 0.0
         if threshold > 0.0:
             opacity = 0.0 if opacity < threshold else 1.0
         if opacity < 1.0:
@@ -196,7 +201,7 @@ class _Reader:
             out["transmission"] = p(surface, "transmission_weight", 0.0)
             lum = p(surface, "emission_luminance", 0.0)  # Blender writes its Emission Strength here
             out["emission"] = tuple(c * lum for c in p(surface, "emission_color", (1.0, 1.0, 1.0)))
-            opacity = min(max(p(surface, "geometry_opacity", 1.0), 0.0), 1.0)
+            opacity = min(max(p(surface, "geometry_opacity", 1.0, "alpha_texture"), 0.0), 1.0)
             if opacity < 1.0:
                 out["transparency"] = 1.0 - opacity
             for name, off in self._OPEN_PBR_UNSUPPORTED:
@@ -249,13 +254,18 @@ class _Reader:
     _WRAP = {"repeat": "REPEAT", "periodic": "REPEAT", "clamp": "EXTEND", "black": "CLIP", "constant": "CLIP",
              "useMetadata": "REPEAT", "mirror": "REPEAT"}
 
-    def _texture(self, shader, what):
+    def _texture(self, shader, what, alpha=False):
         """Texture index of a UsdUVTexture or a MaterialX image node (through a colour
-        conversion), read from its file; None (with a warning) when it cannot be."""
+        conversion, or channel 3 extracted: `alpha`), read from its file; None (with a
+        warning) when it cannot be. With `alpha`: a grey texture of the alpha channel."""
         kind = shader.GetIdAttr().Get() or ""
-        if kind.startswith("ND_convert_"):
+        if kind.startswith("ND_convert_") or (kind == "ND_extract_color4" and alpha):
+            if kind == "ND_extract_color4" and self._param(shader, "index", 0.0, what) != 3:
+                return None
             src = self._source(shader.GetInput("in"))
-            return self._texture(src[0], what) if src is not None else None
+            return self._texture(src[0], what, alpha) if src is not None else None
+        if alpha and kind.startswith("ND_") and not kind.endswith("color4"):
+            return None  # a MaterialX image without alpha
         p = lambda name, default: self._param(shader, name, default, what)  # noqa: E731
         if kind == "UsdUVTexture":
             wraps = {shader.GetInput(w).Get() if shader.GetInput(w) else "useMetadata" for w in ("wrapS", "wrapT")}
@@ -293,16 +303,18 @@ class _Reader:
         if "mirror" in wraps or len(wraps) > 1:
             self.warn(f"{what}: texture '{file.name}' wrap modes {sorted(map(str, wraps))}: one mode for both "
                       f"axes, and mirror as repeat")
-        key = (str(file), space, closest, min(wraps, key=str))
+        key = (str(file), space, closest, min(wraps, key=str), alpha)
         if key in self.texture_index:
             return self.texture_index[key]
         image = _read_image(file)
         if image is None:
             self.warn(f"{what}: texture '{asset.path}' could not be read; the input's value is used")
             return None
-        pixels, eight_bit = image
+        pixels, coverage, eight_bit = image
+        if alpha:  # alpha is linear, whatever the colour space
+            pixels, space = np.repeat((coverage if coverage is not None else np.ones(pixels.shape[:2]))[..., None], 3, -1), "raw"
         h, w, _ = pixels.shape
-        self.textures.append({"name": file.name, "width": w, "height": h, "channels": 3,
+        self.textures.append({"name": file.name + (" (alpha)" if alpha else ""), "width": w, "height": h, "channels": 3,
                               "pixels": np.ascontiguousarray(pixels[::-1].reshape(-1, 3)),  # row 0 at the bottom
                               "interpolation": "Closest" if closest else "Linear",
                               "extension": self._WRAP.get(str(min(wraps, key=str)), "REPEAT"),
@@ -534,14 +546,15 @@ class _Reader:
 
 
 def _read_image(path):
-    """(float32 H×W×3 with row 0 at the top, whether it was 8-bit) of an OpenEXR file or of
-    any image Pillow reads (PNG, JPEG, TIFF, …); None when it cannot be read."""
+    """(float32 H×W×3 with row 0 at the top, its alpha channel H×W or None, whether it was
+    8-bit) of an OpenEXR file or of any image Pillow reads (PNG, JPEG, TIFF, …); None when it
+    cannot be read."""
     path = Path(path)
     if not path.is_file():
         return None
     if path.suffix.lower() == ".exr":
         px = _read_exr(path)
-        return None if px is None else (px, False)
+        return None if px is None else (px, None, False)
     try:
         from PIL import Image
     except ImportError:
@@ -550,8 +563,10 @@ def _read_image(path):
         with Image.open(path) as im:
             if im.mode in ("I;16", "I;16B", "I"):
                 px = np.asarray(im, dtype=np.float32) / 65535.0
-                return np.repeat(px[..., None], 3, axis=-1), False
-            return np.asarray(im.convert("RGB"), dtype=np.float32) / 255.0, True
+                return np.repeat(px[..., None], 3, axis=-1), None, False
+            rgba = np.asarray(im.convert("RGBA"), dtype=np.float32) / 255.0
+            has_alpha = "A" in im.getbands() or "transparency" in im.info
+            return rgba[..., :3], (rgba[..., 3] if has_alpha else None), True
     except Exception:  # a broken file is reported by the caller as unreadable
         return None
 

@@ -189,8 +189,8 @@ pub fn cornell_gap(width: u32, height: u32) -> SceneDesc {
 
 /// The Cornell box with a veil: a card between the blocks and the camera that lets 60% of
 /// the light through, tinted orange (Transparent BSDF / alpha), and reflects the rest
-/// diffusely, and a canopy of the same material under the light, which most direct light
-/// crosses (coloured half-shadows: the transparency test scene).
+/// diffusely, and a canopy of lace under the light whose coverage is an alpha texture, which
+/// most direct light crosses (half-shadows: the transparency test scene).
 pub fn cornell_veil(width: u32, height: u32) -> SceneDesc {
     let mut d = cornell_box(width, height);
     d.materials.push(MaterialDesc {
@@ -204,9 +204,31 @@ pub fn cornell_veil(width: u32, height: u32) -> SceneDesc {
     let m = d.materials.len() as u32 - 1;
     let (y, z0, z1) = (-0.75f32, -1.0f32, 0.3f32);
     d.meshes.push(quad("Veil", [[-0.7, y, z0], [0.7, y, z0], [0.7, y, z1], [-0.7, y, z1]], m));
-    // and a canopy of the same stuff under the light: most direct light crosses it
+    // and a canopy of lace under the light, which most direct light crosses: its coverage
+    // (alpha) comes from a texture, a 4×4 checker of alpha 1, 0, 0.5 and 0.25
+    let alpha = [1.0f32, 0.0, 0.5, 0.25];
+    d.textures.push(TextureDesc {
+        name: "LaceAlpha".into(),
+        width: 4,
+        height: 4,
+        pixels: (0..16).map(|i| [alpha[(i % 4 + i / 4) % 4]; 3]).collect(),
+        closest: true,
+        ..Default::default()
+    });
+    d.materials.push(MaterialDesc {
+        name: "Lace".into(),
+        base_color: [0.8; 3],
+        roughness: 1.0,
+        alpha_texture: Some(d.textures.len() as u32 - 1),
+        ..Default::default()
+    });
+    let lace = d.materials.len() as u32 - 1;
     let z = 0.7f32;
-    d.meshes.push(quad("Canopy", [[-0.6, -0.6, z], [0.6, -0.6, z], [0.6, 0.6, z], [-0.6, 0.6, z]], m));
+    let mut canopy = quad("Canopy", [[-0.6, -0.6, z], [0.6, -0.6, z], [0.6, 0.6, z], [-0.6, 0.6, z]], lace);
+    // the quad's triangles are (0, 1, 2) and (0, 2, 3)
+    let uv = [[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]];
+    canopy.corner_uvs = [0, 1, 2, 0, 2, 3].iter().map(|&k| uv[k]).collect();
+    d.meshes.push(canopy);
     d
 }
 

@@ -65,6 +65,9 @@ pub struct MaterialDesc {
     /// the roughness (the texture's luminance), where the material links them.
     pub base_color_texture: Option<u32>,
     pub roughness_texture: Option<u32>,
+    /// A texture whose luminance is the alpha (coverage) of the surface: transparency
+    /// 1 − alpha(uv) replaces `transparency` (an image's alpha channel into Principled Alpha).
+    pub alpha_texture: Option<u32>,
     /// Colours of the metal and glass lobes when they differ from the base colour (a Mix
     /// Shader of Diffuse and Glossy, say); None = the base colour (Principled).
     pub metal_color: Option<[f32; 3]>,
@@ -90,6 +93,7 @@ impl Default for MaterialDesc {
             specular: 1.0,
             base_color_texture: None,
             roughness_texture: None,
+            alpha_texture: None,
             metal_color: None,
             glass_color: None,
             transparency: 0.0,

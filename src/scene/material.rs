@@ -23,6 +23,7 @@ pub struct Material {
     pub specular: f32,
     pub base_color_texture: Option<u32>,
     pub roughness_texture: Option<u32>,
+    pub alpha_texture: Option<u32>,
     pub metal_color: Option<Spectrum>,
     pub glass_color: Option<Spectrum>,
     /// Pass-through probability τ and tint (Transparent BSDF, alpha as coverage).
@@ -33,7 +34,7 @@ pub struct Material {
 impl Material {
     pub fn from_desc(d: &MaterialDesc, textures: usize) -> Result<Material, SceneError> {
         let bad = |what: &str| SceneError::Material { material: d.name.clone(), what: what.to_string() };
-        for t in [d.base_color_texture, d.roughness_texture].into_iter().flatten() {
+        for t in [d.base_color_texture, d.roughness_texture, d.alpha_texture].into_iter().flatten() {
             if t as usize >= textures {
                 return Err(bad(&format!("uses texture {t} but the scene has {textures}")));
             }
@@ -68,6 +69,7 @@ impl Material {
             specular: d.specular.clamp(0.0, 1.0),
             base_color_texture: d.base_color_texture,
             roughness_texture: d.roughness_texture,
+            alpha_texture: d.alpha_texture,
             metal_color: d.metal_color.map(|c| Vec3::from_array(c).clamp(Vec3::ZERO, Vec3::ONE)),
             glass_color: d.glass_color.map(|c| Vec3::from_array(c).clamp(Vec3::ZERO, Vec3::ONE)),
             transparency: d.transparency.clamp(0.0, 1.0),
@@ -83,13 +85,20 @@ impl Material {
     /// geometric normal points to (outside of a closed mesh), which orients refraction.
     #[inline]
     pub fn bsdf(&self, front: bool) -> Bsdf {
-        self.bsdf_with(front, self.base_color, self.roughness)
+        self.bsdf_with(front, self.base_color, self.roughness, self.transparency)
     }
 
-    /// The BSDF with base colour and roughness given (where textures replace them).
+    /// May the surface let light straight through (a transparency, constant or textured)?
     #[inline]
-    pub fn bsdf_with(&self, front: bool, base_color: Spectrum, roughness: f32) -> Bsdf {
-        let (m, t, tau) = (self.metallic, self.transmission, self.transparency);
+    pub fn is_transparent(&self) -> bool {
+        self.transparency > 0.0 || self.alpha_texture.is_some()
+    }
+
+    /// The BSDF with base colour, roughness and transparency τ given (where textures
+    /// replace them).
+    #[inline]
+    pub fn bsdf_with(&self, front: bool, base_color: Spectrum, roughness: f32, tau: f32) -> Bsdf {
+        let (m, t) = (self.metallic, self.transmission);
         let w = [(1.0 - m) * (1.0 - t) * (1.0 - tau), m * (1.0 - tau), (1.0 - m) * t * (1.0 - tau)];
         // the specular layer has the same IOR seen from either side (Cycles inverts it on
         // back faces; opaque surfaces are rarely seen from behind)

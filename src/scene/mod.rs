@@ -252,7 +252,7 @@ impl Scene {
             );
         }
         let accel = if positions.is_empty() { None } else { Some(Accel::build(&positions)) };
-        let has_transparency = materials.iter().any(|m| m.transparency > 0.0);
+        let has_transparency = materials.iter().any(|m| m.is_transparent());
         Ok(Scene {
             positions,
             normals,
@@ -349,11 +349,15 @@ impl Scene {
                 return Some((t, crossed > 0));
             };
             let m = &self.materials[self.tri_material[hit.prim as usize] as usize];
-            if m.transparency <= 0.0 {
+            if !m.is_transparent() {
                 return None;
             }
-            t *= m.transparent_color * m.transparency;
             from = self.interaction(&hit, d);
+            let tau = self.transparency(m, from.uv);
+            if tau <= 0.0 {
+                return None;
+            }
+            t *= m.transparent_color * tau;
         }
         None
     }
@@ -394,14 +398,22 @@ impl Scene {
     #[inline]
     pub fn bsdf(&self, material: u32, front: bool, uv: Vec2) -> Bsdf {
         let m = &self.materials[material as usize];
-        if m.base_color_texture.is_none() && m.roughness_texture.is_none() {
+        if m.base_color_texture.is_none() && m.roughness_texture.is_none() && m.alpha_texture.is_none() {
             return m.bsdf(front);
         }
         let base = m.base_color_texture.map_or(m.base_color, |t| self.textures[t as usize].eval(uv).min(Spectrum::ONE));
         let rough = m
             .roughness_texture
             .map_or(m.roughness, |t| crate::math::luminance(self.textures[t as usize].eval(uv)).clamp(0.0, 1.0));
-        m.bsdf_with(front, base, rough)
+        m.bsdf_with(front, base, rough, self.transparency(m, uv))
+    }
+
+    /// Transparency τ of a material at `uv`: 1 − alpha from its alpha texture, else its constant.
+    #[inline]
+    fn transparency(&self, m: &Material, uv: Vec2) -> f32 {
+        m.alpha_texture.map_or(m.transparency, |t| {
+            1.0 - crate::math::luminance(self.textures[t as usize].eval(uv)).clamp(0.0, 1.0)
+        })
     }
 
     /// The BSDF at a surface point.

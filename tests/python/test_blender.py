@@ -315,7 +315,9 @@ def test_light_colour_temperature_agrees_with_cycles_and_survives_usd(bpy_mod, t
 
 def test_image_textures_agree_with_cycles(bpy_mod, tmp_out):
     """sRGB decoding (after interpolation, as Cycles does for 8-bit images: decoding first
-    renders this checker 40% brighter), Non-Color data, bilinear lookup, Repeat and UV maps."""
+    renders this checker 40% brighter), Non-Color data, bilinear lookup, Repeat and UV maps,
+    and an image's alpha channel into Principled Alpha (a leaf card with a soft-edged disc,
+    casting a transparent shadow)."""
     def build(bpy, engine, spp, seed):
         return open_scene(bpy, "textures", engine, spp, seed)
 
@@ -392,7 +394,8 @@ def test_blender_usd_export_renders_the_same_outside_blender(bpy_mod, tmp_out, k
     conventions, cameras, meshes, an HDRI dome; materials from the MaterialX networks Blender
     writes (OpenPBR for Principled — specular layer, IOR level —, diffuse, conductor and
     dielectric BSDFs for Diffuse, Glossy and Glass; image textures through MaterialX image
-    nodes, sRGB and Non-Color), and from UsdPreviewSurface alone. Tolerance from the spread of
+    nodes, sRGB and Non-Color, and an image's alpha as coverage), and from UsdPreviewSurface
+    alone. Tolerance from the spread of
     two seeds, as in the Cycles comparisons (fails without the specular layer: checked)."""
     from gdmlt import usd
 
@@ -447,8 +450,8 @@ def test_usd_materialx_materials_match_the_addons_translation(bpy_mod, tmp_out, 
     """Every material of a scene exported with MaterialX reads back from the stage (no
     Blender) as the addon translates it from the node tree: Principled through OpenPBR
     (base colour, roughness, IOR, the specular layer's IOR from Specular IOR Level 0.7),
-    Diffuse, Glossy (conductor with artistic IOR), Glass (dielectric), image textures (the
-    same pixels, sRGB flag and wrap mode)."""
+    Diffuse, Glossy (conductor with artistic IOR), Glass (dielectric), image textures and an
+    image's alpha channel as coverage (the same pixels, sRGB flag and wrap mode)."""
     from gdmlt import usd
     from gdmlt_blender import export
 
@@ -473,13 +476,17 @@ def test_usd_materialx_materials_match_the_addons_translation(bpy_mod, tmp_out, 
         for k in keys:
             assert np.allclose(got.get(k, 0.0), want.get(k, 0.0), atol=1e-4), (mat.name, k, got.get(k), want.get(k))
         assert got.get("specular_ior", 1.0) == pytest.approx(want.get("specular_ior", 1.0), abs=1e-4), mat.name
-        if "base_color_texture" in want:
-            tw, tg = textures.items[want["base_color_texture"]], desc["textures"][got["base_color_texture"]]
+        for key in ("base_color_texture", "alpha_texture"):
+            if key not in want:
+                assert key not in got, (mat.name, key)
+                continue
+            tw, tg = textures.items[want[key]], desc["textures"][got[key]]
             assert (tg["width"], tg["height"], tg["srgb"], tg["extension"]) == \
-                (tw["width"], tw["height"], tw["srgb"], tw["extension"]), mat.name
+                (tw["width"], tw["height"], tw["srgb"], tw["extension"]), (mat.name, key)
             # the exported PNG holds the image at 8 bits
             assert np.allclose(np.asarray(tg["pixels"]).reshape(-1, 3),
-                               np.asarray(tw["pixels"]).reshape(-1, tw.get("channels", 4))[:, :3], atol=1.0 / 255 + 1e-6)
+                               np.asarray(tw["pixels"]).reshape(-1, tw.get("channels", 4))[:, :3],
+                               atol=1.0 / 255 + 1e-6), (mat.name, key)
         compared += 1
     assert compared >= (6 if name == "specular" else 3), compared
 
