@@ -11,7 +11,7 @@ export PATH := $(abspath $(VENV))/bin:$(PATH)
 # Keep Blender's user config out of $HOME during demos and tests.
 export BLENDER_USER_RESOURCES := $(abspath out/blender-user)
 
-.PHONY: all setup build demo test test-rust test-python examples addon bench bench-monastery bench-peers scalebench raybench clean
+.PHONY: all setup build demo test test-rust test-python examples addon bench bench-monastery bench-peers scalebench skipbench raybench clean
 
 all: demo
 
@@ -91,6 +91,10 @@ bench-peers: build
 # Time per mutation / per path as the scene grows from 10k to 10M triangles and threads 1 → all.
 scalebench: build
 	$(VENV)/bin/gdmlt scalebench
+
+# What skipping what a scene does not need saves: samples/s with and without the shortcuts.
+skipbench: build
+	$(VENV)/bin/gdmlt skipbench
 
 raybench: build
 	$(PY) -m pip install -q -r requirements-bench.txt

@@ -536,6 +536,14 @@ fn builtin_scene<'py>(py: Python<'py>, name: &str, width: u32, height: u32) -> P
         let idx: Vec<u32> = m.indices.iter().flatten().copied().collect();
         md.set_item("indices", PyArray1::from_vec(py, idx).reshape([m.indices.len(), 3])?)?;
         md.set_item("material_ids", PyArray1::from_slice(py, &m.material_ids))?;
+        if !m.corner_normals.is_empty() {
+            let n: Vec<f32> = m.corner_normals.iter().flatten().copied().collect();
+            md.set_item("normals", PyArray1::from_vec(py, n).reshape([m.corner_normals.len(), 3])?)?;
+        }
+        if !m.corner_uvs.is_empty() {
+            let uv: Vec<f32> = m.corner_uvs.iter().flatten().copied().collect();
+            md.set_item("uvs", PyArray1::from_vec(py, uv).reshape([m.corner_uvs.len(), 2])?)?;
+        }
         meshes.append(md)?;
     }
     out.set_item("meshes", meshes)?;
@@ -549,9 +557,48 @@ fn builtin_scene<'py>(py: Python<'py>, name: &str, width: u32, height: u32) -> P
         md.set_item("metallic", m.metallic)?;
         md.set_item("transmission", m.transmission)?;
         md.set_item("ior", m.ior)?;
+        md.set_item("specular_ior", m.specular_ior)?;
+        md.set_item("specular", m.specular)?;
+        md.set_item("transparency", m.transparency)?;
+        md.set_item("transparent_color", m.transparent_color)?;
+        for (key, value) in [
+            ("base_color_texture", m.base_color_texture),
+            ("roughness_texture", m.roughness_texture),
+            ("alpha_texture", m.alpha_texture),
+        ] {
+            if let Some(t) = value {
+                md.set_item(key, t)?;
+            }
+        }
+        if let Some(c) = m.metal_color {
+            md.set_item("metal_color", c)?;
+        }
+        if let Some(c) = m.glass_color {
+            md.set_item("glass_color", c)?;
+        }
         mats.append(md)?;
     }
     out.set_item("materials", mats)?;
+    let textures = PyList::empty(py);
+    for t in &d.textures {
+        let td = PyDict::new(py);
+        td.set_item("name", &t.name)?;
+        td.set_item("width", t.width)?;
+        td.set_item("height", t.height)?;
+        td.set_item("channels", 3)?;
+        let px: Vec<f32> = t.pixels.iter().flatten().copied().collect();
+        td.set_item("pixels", PyArray1::from_vec(py, px))?;
+        td.set_item("interpolation", if t.closest { "Closest" } else { "Linear" })?;
+        let ext = match t.extension {
+            TextureExtension::Repeat => "REPEAT",
+            TextureExtension::Extend => "EXTEND",
+            TextureExtension::Clip => "CLIP",
+        };
+        td.set_item("extension", ext)?;
+        td.set_item("srgb", t.srgb)?;
+        textures.append(td)?;
+    }
+    out.set_item("textures", textures)?;
     out.set_item("lights", PyList::empty(py))?;
     let c = &d.camera;
     let cd = PyDict::new(py);

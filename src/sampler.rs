@@ -133,16 +133,7 @@ pub const SMALL_STEP_SIGMA: f32 = 0.01;
 
 impl PssSampler {
     pub fn new(seed: u64, stream: u64, large_step_probability: f32) -> Self {
-        PssSampler {
-            rng: IndependentSampler::new(seed, stream),
-            x: Vec::with_capacity(64),
-            index: 0,
-            iteration: 0,
-            last_large_step: 0,
-            large_step: true,
-            sigma: SMALL_STEP_SIGMA,
-            large_step_probability,
-        }
+        PssSampler { x: Vec::with_capacity(64), ..Self::new_empty(seed, stream, large_step_probability) }
     }
 
     /// Starts a proposal: a large step (all coordinates redrawn) with the configured
@@ -175,6 +166,27 @@ impl PssSampler {
 
     /// Gives the state a new random stream (keeping its coordinates): chains that start from
     /// the same bootstrap state must not then make the same proposals.
+    /// The sampler `new(seed, stream, p)` would make, reusing this one's storage (the
+    /// bootstrap restarts one sampler per thread instead of allocating one per sample).
+    pub fn restart(&mut self, seed: u64, stream: u64) {
+        let mut x = std::mem::take(&mut self.x);
+        x.clear();
+        *self = PssSampler { x, ..PssSampler::new_empty(seed, stream, self.large_step_probability) };
+    }
+
+    fn new_empty(seed: u64, stream: u64, large_step_probability: f32) -> Self {
+        PssSampler {
+            rng: IndependentSampler::new(seed, stream),
+            x: Vec::new(),
+            index: 0,
+            iteration: 0,
+            last_large_step: 0,
+            large_step: true,
+            sigma: SMALL_STEP_SIGMA,
+            large_step_probability,
+        }
+    }
+
     pub fn reseed(&mut self, seed: u64, stream: u64) {
         self.rng = IndependentSampler::new(seed, stream);
     }

@@ -107,6 +107,12 @@ def build_parser():
     pb.add_argument("--triangles", type=_positive_int, default=1_000_000)
     pb.add_argument("--max-bounces", type=int, default=8)
     pb.add_argument("--seconds", type=float, default=8.0, help="about how long each cell renders")
+    kb = sub.add_parser("skipbench", help="what skipping what a scene does not need saves (samples/s)",
+                        description="Samples per second of pt and gdpt with the scene's shortcuts and with the "
+                                    "general code paths (GDMLT_NO_SHORTCUTS=1), on the built-in Cornell box, "
+                                    "its glass/mirror/plastic variant and its transparent variant.")
+    kb.add_argument("--size", type=_positive_int, default=96)
+    kb.add_argument("--seconds", type=float, default=2.0, help="about how long each timed render takes")
     sb = sub.add_parser("scalebench", help="time per mutation and per path as scene size and threads grow",
                         description="µs per GDPSSMLT mutation and per PT path on the Cornell box with a bumpy "
                                     "sphere of 10k to 10M triangles, 1 thread and all; build time and memory.")
@@ -239,6 +245,11 @@ def main(argv=None):
         except ValueError:
             parser.error(f"--sizes: '{args.sizes}' is not a comma-separated list of triangle counts")
         scalebench(sizes, args.size)
+        return 0
+    if args.command == "skipbench":
+        from .skipbench import run as skipbench
+
+        skipbench(args.size, args.seconds)
         return 0
     if args.command == "pathbench":
         from .pathbench import run as pathbench

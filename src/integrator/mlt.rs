@@ -169,6 +169,8 @@ struct Group {
     density: Vec<f64>,
     mutations: u64,
     accepted: u64,
+    /// The group's path storage, kept across rounds (no allocation per round).
+    path: Path,
 }
 
 fn splat(group: &mut Group, s: &Splats, weight: f64) {
@@ -192,15 +194,18 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl,
     // Bootstrap (parallel, deterministic): F averaged over the four directions.
     let boot: Vec<(f32, [f32; 4])> = (0..BOOTSTRAP_SAMPLES)
         .into_par_iter()
-        .map_init(Path::default, |path, i| {
-            if control.is_cancelled() {
-                return (0.0, [0.0; 4]); // Esc during the bootstrap: finish at once
-            }
-            let mut s = PssSampler::new(boot_seed, i as u64, p_large);
-            s.start_iteration();
-            let ev = target.evaluate(&mut s, path, None);
-            (ev.f.iter().sum::<f32>() * 0.25, ev.f)
-        })
+        .map_init(
+            || (Path::default(), PssSampler::new(boot_seed, 0, p_large)),
+            |(path, s), i| {
+                if control.is_cancelled() {
+                    return (0.0, [0.0; 4]); // Esc during the bootstrap: finish at once
+                }
+                s.restart(boot_seed, i as u64);
+                s.start_iteration();
+                let ev = target.evaluate(s, path, None);
+                (ev.f.iter().sum::<f32>() * 0.25, ev.f)
+            },
+        )
         .collect();
     let b: f64 = boot.iter().map(|(f, _)| *f as f64).sum::<f64>() / BOOTSTRAP_SAMPLES as f64;
     let starts = Distribution1D::new(&boot.iter().map(|(f, _)| *f).collect::<Vec<_>>());
@@ -231,6 +236,7 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl,
                 density: vec![0.0; w * h],
                 mutations: 0,
                 accepted: 0,
+                path: Path::default(),
             };
             let mut path = Path::default();
             let chains: Vec<Chain> = (g..n_chains)
@@ -265,10 +271,10 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl,
     // stops them at about the same length, and intermediate images can be taken in between.
     while !control.should_stop() && states.iter().any(|(_, chains)| chains.iter().any(|c| c.remaining > 0)) {
         states.par_iter_mut().for_each(|(group, chains)| {
-            let mut path = Path::default();
+            let mut path = std::mem::take(&mut group.path);
             for c in chains.iter_mut() {
                 if control.should_stop() {
-                    return;
+                    break;
                 }
                 let n = c.remaining.min(ROUND);
                 for _ in 0..n {
@@ -277,6 +283,7 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl,
                 c.remaining -= n;
                 control.work_done.fetch_add(n, Ordering::Relaxed);
             }
+            group.path = path;
         });
         control.offer_preview(|| {
             let groups: Vec<&Group> = states.iter().map(|(g, _)| g).collect();

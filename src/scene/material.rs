@@ -29,6 +29,9 @@ pub struct Material {
     /// Pass-through probability τ and tint (Transparent BSDF, alpha as coverage).
     pub transparency: f32,
     pub transparent_color: Spectrum,
+    /// Always the full Principled mixture, even for a single lobe (benchmarks of the
+    /// shortcuts only; set by `Scene::build`).
+    pub general: bool,
 }
 
 impl Material {
@@ -74,6 +77,7 @@ impl Material {
             glass_color: d.glass_color.map(|c| Vec3::from_array(c).clamp(Vec3::ZERO, Vec3::ONE)),
             transparency: d.transparency.clamp(0.0, 1.0),
             transparent_color: Vec3::from_array(d.transparent_color).clamp(Vec3::ZERO, Vec3::ONE),
+            general: false,
         })
     }
 
@@ -111,7 +115,7 @@ impl Material {
         let metal = Conductor { f0: self.metal_color.unwrap_or(base_color), roughness };
         let eta = if front { self.ior } else { 1.0 / self.ior };
         let glass = Dielectric { eta, tint: self.glass_color.unwrap_or(base_color), roughness };
-        if tau > 0.0 {
+        if tau > 0.0 || self.general {
             Bsdf::Principled { diffuse, metal, glass, w, pass: tau, pass_tint: self.transparent_color }
         } else if w[1] <= 0.0 && w[2] <= 0.0 && !diffuse.has_layer() {
             Bsdf::Lambert(diffuse.base)

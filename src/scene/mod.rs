@@ -252,7 +252,15 @@ impl Scene {
             );
         }
         let accel = if positions.is_empty() { None } else { Some(Accel::build(&positions)) };
-        let has_transparency = materials.iter().any(|m| m.is_transparent());
+        // What the scene does not need is decided here, once: no transparent material → shadow
+        // rays are any-hit occlusion tests; single-lobe materials → their BSDF alone, not the
+        // Principled mixture. GDMLT_NO_SHORTCUTS=1 takes the general paths anyway (for
+        // `gdmlt skipbench`, which measures what these decisions save).
+        let shortcuts = std::env::var_os("GDMLT_NO_SHORTCUTS").is_none_or(|v| v.is_empty() || v == "0");
+        if !shortcuts {
+            materials.iter_mut().for_each(|m| m.general = true);
+        }
+        let has_transparency = !shortcuts || materials.iter().any(|m| m.is_transparent());
         Ok(Scene {
             positions,
             normals,

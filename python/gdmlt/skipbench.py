@@ -1,0 +1,75 @@
+"""`gdmlt skipbench`: what "skip what the scene does not need" saves. `Scene::build` decides
+once per scene which general code paths a render can leave out — shadow rays become any-hit
+occlusion tests when no material is transparent, and single-lobe materials use their own BSDF
+rather than the Principled mixture. `GDMLT_NO_SHORTCUTS=1` makes it take the general paths
+anyway; this benchmark renders the same scenes both ways in one run and prints samples per
+second and their ratio. It measures; it does not pass or fail.
+
+Each cell is the best of three timed renders (after a warm-up), alternating the two builds so
+that a machine's slow moments hit both."""
+
+from __future__ import annotations
+
+import os
+import time
+
+
+def _rate(sc, method, size, seconds, threads):
+    import gdmlt
+
+    gdmlt.render(sc, method=method, spp=1, seed=7, threads=threads)
+    spp = 1
+    while True:
+        t = time.perf_counter()
+        gdmlt.render(sc, method=method, spp=spp, seed=1, threads=threads)
+        dt = time.perf_counter() - t
+        if dt > seconds or spp >= 1 << 16:
+            return spp, size * size * spp / dt
+        spp = max(spp * 2, int(spp * seconds / max(dt, 1e-3)))
+
+
+def _timed(sc, method, size, spp, threads):
+    import gdmlt
+
+    t = time.perf_counter()
+    res = gdmlt.render(sc, method=method, spp=spp, seed=1, threads=threads)
+    return size * size * spp / (time.perf_counter() - t), float(res["layers"]["Combined"].mean())
+
+
+def _scene(desc, shortcuts):
+    import gdmlt
+
+    old = os.environ.get("GDMLT_NO_SHORTCUTS")
+    os.environ["GDMLT_NO_SHORTCUTS"] = "0" if shortcuts else "1"
+    try:
+        return gdmlt.Scene(desc)  # the decision is taken while the scene is built
+    finally:
+        if old is None:
+            del os.environ["GDMLT_NO_SHORTCUTS"]
+        else:
+            os.environ["GDMLT_NO_SHORTCUTS"] = old
+
+
+def run(size=96, seconds=2.0, threads=0, out=print):
+    import gdmlt
+
+    out(f"# gdmlt skipbench: samples/s with the scene's shortcuts and with the general paths "
+        f"(GDMLT_NO_SHORTCUTS=1), {size}x{size}, best of 3 runs of ~{seconds:g} s, threads={threads or 'all'}")
+    out(f"{'scene':10} {'method':6} {'shortcuts Ms/s':>15} {'general Ms/s':>13} {'speed-up':>9} {'mean ratio':>11}")
+    rows = []
+    for name in ("cornell", "spheres", "veil"):
+        desc = gdmlt.builtin_scene(name, size, size)
+        fast, general = _scene(desc, True), _scene(desc, False)
+        for method in ("pt", "gdpt"):
+            spp, _ = _rate(fast, method, size, seconds, threads)
+            best = {True: (0.0, 0.0), False: (0.0, 0.0)}
+            for _ in range(3):
+                for shortcuts, sc in ((True, fast), (False, general)):
+                    r = _timed(sc, method, size, spp, threads)
+                    best[shortcuts] = max(best[shortcuts], r)
+            (rf, mf), (rg, mg) = best[True], best[False]
+            rows.append((name, method, rf, rg))
+            out(f"{name:10} {method:6} {rf / 1e6:15.3f} {rg / 1e6:13.3f} {rf / rg:9.2f} {mf / mg:11.4f}")
+    out("# speed-up = shortcuts / general; mean ratio = image means (same seed: the same image up to "
+        "rounding, since both paths compute the same thing)")
+    return rows
