@@ -217,7 +217,30 @@ def _node_params(node, textures, warnings, what):
         out["bsdf"] = False  # no scattering lobe (matters inside Mix/Add Shaders)
     else:
         warnings.append(f"{what}: shader node '{node.name}' ({t}) is not supported; rendered as grey diffuse")
+    _normal_map(node, out, textures, warnings, what)
     return out
+
+
+def _normal_map(node, out, textures, warnings, what):
+    """A Normal input fed by a Normal Map node (Tangent Space, the active UV map) whose Color
+    comes from an Image Texture: out['normal_texture'] and out['normal_strength']. Anything
+    else linked there is ignored, with a warning."""
+    sock = node.inputs.get("Normal")
+    if sock is None or not sock.is_linked:
+        return
+    nm = sock.links[0].from_node
+    if nm.type == "NORMAL_MAP" and nm.space == "TANGENT" and textures is not None:
+        if nm.uv_map:
+            warnings.append(f"{what}: Normal Map '{nm.name}' UV map '{nm.uv_map}' is not read; the active "
+                            f"render UV map is used")
+        tex = _linked_texture(nm, "Color", textures, warnings, what)
+        if tex is not None:
+            out["normal_texture"] = tex
+            out["normal_strength"] = max(float(_input_value(nm, "Strength", warnings, what, 1.0)), 0.0)
+            return
+    warnings.append(f"{what}: the Normal input of '{node.name}' ({nm.type}"
+                    f"{' ' + nm.space if nm.type == 'NORMAL_MAP' else ''}) is not supported; the mesh normal is used "
+                    f"(supported: a tangent-space Normal Map fed by an Image Texture)")
 
 
 def _specular_layer_ior(ior, level):
@@ -273,6 +296,7 @@ def _combine(leaves, warnings, what):
     emission = np.zeros(3)
     rough, iors, tex, rough_tex = [], [], [], []
     layer = [0.0, []]  # diffuse-lobe weight under a specular layer, and the layers' IORs
+    normals = []  # the leaves' normal maps
     for w, p in leaves:
         emission += w * np.array(p["emission"][:3], dtype=np.float64)
         if "pass" in p:
@@ -303,6 +327,8 @@ def _combine(leaves, warnings, what):
         if "alpha_texture" in p:
             warnings.append(f"{what}: an image's alpha inside a Mix/Add Shader is not supported; that shader is "
                             f"rendered opaque")
+        if "normal_texture" in p:
+            normals.append((p["normal_texture"], p["normal_strength"]))
     total = sum(v[0] for v in lobes.values())
     total_all = total + passing[0]
     out = {"emission": tuple(emission.tolist()), "metallic": 0.0, "transmission": 0.0, "roughness": 0.5,
@@ -346,6 +372,12 @@ def _combine(leaves, warnings, what):
                             f"(or diffuse-only Principled) input only; their socket values are used elsewhere")
     if rough_tex:
         out["roughness_texture"] = rough_tex[0]
+    if normals:
+        # one shading normal per point in the core: a normal map shared by every BSDF leaf
+        out["normal_texture"], out["normal_strength"] = normals[0]
+        bsdf_leaves = sum(1 for _, p in leaves if p.get("bsdf", True) and "pass" not in p)
+        if len(set(normals)) > 1 or len(normals) < bsdf_leaves:
+            warnings.append(f"{what}: the mixed shaders have different normals; the first normal map is used for all")
     return out
 
 

@@ -111,6 +111,8 @@ fn parse_material(d: &Bound<'_, PyDict>) -> PyResult<MaterialDesc> {
         base_color_texture: get_or(d, "base_color_texture", None, &ctx)?,
         roughness_texture: get_or(d, "roughness_texture", None, &ctx)?,
         alpha_texture: get_or(d, "alpha_texture", None, &ctx)?,
+        normal_texture: get_or(d, "normal_texture", None, &ctx)?,
+        normal_strength: get_or(d, "normal_strength", def.normal_strength, &ctx)?,
         metal_color: get_or(d, "metal_color", None, &ctx)?,
         glass_color: get_or(d, "glass_color", None, &ctx)?,
         specular_ior: get_or(d, "specular_ior", def.specular_ior, &ctx)?,

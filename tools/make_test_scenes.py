@@ -180,8 +180,8 @@ def fresh_material(bpy, ob, name):
 def textures(bpy):
     """The lights scene with image textures: an sRGB checker (8-bit, bilinear, repeated twice)
     into the floor's Diffuse colour, a linear (Non-Color) gradient into the wall's
-    Principled Base Color, both through UV maps, and a leaf card whose Principled Alpha is
-    the image's alpha channel."""
+    Principled Base Color, both through UV maps, a leaf card whose Principled Alpha is the
+    image's alpha channel, and a floor tile with a tangent-space normal map of ridges."""
     scene = lights(bpy, size=40, bounces=3)
 
     def image(name, pixels, colorspace):
@@ -236,6 +236,33 @@ def textures(bpy):
     uv = me.uv_layers.new(name="UVMap")
     for loop, (u, v) in zip(uv.uv, [(0, 0), (1, 0), (1, 1), (0, 1)]):
         loop.vector = (u, v)
+    # a ridged tile on the floor: a tangent-space normal map (Non-Color) of ridges across u
+    # (tilts up to ±35°), strength 1, under a Principled of roughness 0.4
+    u = (np.arange(64) + 0.5) / 64.0
+    tilt = 0.7 * np.sin(2 * np.pi * 4 * u)
+    ridges = np.zeros((4, 64, 4))
+    ridges[..., 0] = 0.5 + 0.5 * tilt / np.sqrt(1 + tilt ** 2)
+    ridges[..., 1] = 0.5
+    ridges[..., 2] = 0.5 + 0.5 / np.sqrt(1 + tilt ** 2)
+    ridges[..., 3] = 1
+    me = bpy.data.meshes.new("Tile")
+    me.from_pydata([(0.3, -1.6, 0.01), (1.8, -1.6, 0.01), (1.8, -0.4, 0.01), (0.3, -0.4, 0.01)], [], [(0, 1, 2, 3)])
+    ob = bpy.data.objects.new("Tile", me)
+    scene.collection.objects.link(ob)
+    nt, out = fresh_material(bpy, ob, "TileRidges")
+    bsdf = nt.nodes.new("ShaderNodeBsdfPrincipled")
+    bsdf.inputs["Base Color"].default_value = (0.7, 0.6, 0.5, 1)
+    bsdf.inputs["Roughness"].default_value = 0.4
+    nm = nt.nodes.new("ShaderNodeNormalMap")
+    nm.inputs["Strength"].default_value = 1.0  # (UsdPreviewSurface cannot carry another strength)
+    tex = nt.nodes.new("ShaderNodeTexImage")
+    tex.image = image("Ridges", ridges, "Non-Color")
+    nt.links.new(tex.outputs["Color"], nm.inputs["Color"])
+    nt.links.new(nm.outputs["Normal"], bsdf.inputs["Normal"])
+    nt.links.new(bsdf.outputs[0], out.inputs["Surface"])
+    uv = me.uv_layers.new(name="UVMap")
+    for loop, (u_, v_) in zip(uv.uv, [(0, 0), (1, 0), (1, 1), (0, 1)]):
+        loop.vector = (u_, v_)
     return scene
 
 

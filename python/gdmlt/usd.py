@@ -178,6 +178,7 @@ class _Reader:
             self.warn(f"{what}: the specular workflow is rendered as the metallic one")
         if p("clearcoat", 0.0) > 0.0:
             self.warn(f"{what}: clearcoat is not rendered")
+        self._normal_input(shader, "normal", out, what)
 
     # MaterialX / OpenPBR inputs the core leaves out, with their "off" value
     _OPEN_PBR_UNSUPPORTED = (("coat_weight", 0.0), ("fuzz_weight", 0.0), ("subsurface_weight", 0.0),
@@ -209,6 +210,7 @@ class _Reader:
                     self.warn(f"{what}: OpenPBR '{name}' is not rendered (the layer is left out)")
             if any(abs(c - 1.0) > 1e-6 for c in p(surface, "specular_color", (1.0, 1.0, 1.0))):
                 self.warn(f"{what}: OpenPBR 'specular_color' is not rendered (white is used)")
+            self._normal_input(surface, "geometry_normal", out, what)
             return True
         if kind != "ND_surface":
             self.warn(f"{what}: MaterialX surface {kind} is not supported; the UsdPreviewSurface is used")
@@ -244,6 +246,7 @@ class _Reader:
             else:
                 self.warn(f"{what}: MaterialX BSDF {bkind} is not supported; the UsdPreviewSurface is used")
                 return False
+            self._normal_input(sh, "normal", out, what)
         opacity = surface.GetInput("opacity")
         value = opacity.Get(self.time) if opacity and not opacity.HasConnectedSource() else None
         if value is not None and value < 1.0:
@@ -254,7 +257,31 @@ class _Reader:
     _WRAP = {"repeat": "REPEAT", "periodic": "REPEAT", "clamp": "EXTEND", "black": "CLIP", "constant": "CLIP",
              "useMetadata": "REPEAT", "mirror": "REPEAT"}
 
-    def _texture(self, shader, what, alpha=False):
+    def _normal_input(self, shader, name, out, what):
+        """A connected normal input: a tangent-space normal map (MaterialX `normalmap` of an
+        image, or a UsdUVTexture read with scale 2 and bias −1) → out['normal_texture'] and
+        out['normal_strength']; anything else is ignored with a warning."""
+        inp = shader.GetInput(name)
+        if not inp or not inp.HasConnectedSource():
+            return
+        src = self._source(inp)
+        kind = src[0].GetIdAttr().Get() if src is not None else None
+        index, strength = None, 1.0
+        if kind is not None and kind.startswith("ND_normalmap"):
+            space = self._param(src[0], "space", "tangent", what)
+            image = self._source(src[0].GetInput("in"))
+            if space == "tangent" and image is not None:
+                index = self._texture(image[0], what, normal=True)
+                strength = self._param(src[0], "scale", 1.0, what)
+        elif kind == "UsdUVTexture" and src[1] == "rgb":
+            index = self._texture(src[0], what, normal=True)
+        if index is None:
+            self.warn(f"{what}: the '{name}' input ({kind}) is not a tangent-space normal map of an image; "
+                      f"the mesh normal is used")
+            return
+        out["normal_texture"], out["normal_strength"] = index, max(float(strength), 0.0)
+
+    def _texture(self, shader, what, alpha=False, normal=False):
         """Texture index of a UsdUVTexture or a MaterialX image node (through a colour
         conversion, or channel 3 extracted: `alpha`), read from its file; None (with a
         warning) when it cannot be. With `alpha`: a grey texture of the alpha channel."""
@@ -278,8 +305,13 @@ class _Reader:
                 if reader.GetIdAttr().Get() != "UsdPrimvarReader_float2" or str(var) != "st":
                     self.warn(f"{what}: texture '{shader.GetPath().name}' reads other coordinates than primvar "
                               f"'st' (transforms, other UV sets); 'st' is used")
-            if tuple(p("scale", (1.0, 1.0, 1.0))) != (1.0, 1.0, 1.0) or tuple(p("bias", (0.0, 0.0, 0.0))) != (0.0, 0.0, 0.0):
-                self.warn(f"{what}: texture '{shader.GetPath().name}' scale and bias are ignored")
+            # a normal map is read as 2·rgb − 1: the scale and bias UsdPreviewSurface asks for
+            scale, bias = ((2.0,) * 3, (-1.0,) * 3) if normal else ((1.0,) * 3, (0.0,) * 3)
+            if tuple(p("scale", (1.0,) * 3)) != scale or tuple(p("bias", (0.0,) * 3)) != bias:
+                self.warn(f"{what}: texture '{shader.GetPath().name}' scale and bias other than {scale[0]:g} and "
+                          f"{bias[0]:g} are ignored")
+            if normal:
+                space = "raw"
         elif kind.startswith("ND_image_") or kind.startswith("ND_tiledimage_"):
             wraps = {shader.GetInput(w).Get() if shader.GetInput(w) else "periodic"
                      for w in ("uaddressmode", "vaddressmode")}

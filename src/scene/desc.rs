@@ -68,6 +68,10 @@ pub struct MaterialDesc {
     /// A texture whose luminance is the alpha (coverage) of the surface: transparency
     /// 1 − alpha(uv) replaces `transparency` (an image's alpha channel into Principled Alpha).
     pub alpha_texture: Option<u32>,
+    /// A tangent-space normal map (linear RGB, 0.5 = no tilt; Blender's Normal Map node in
+    /// Tangent space) and its strength, perturbing the shading normal.
+    pub normal_texture: Option<u32>,
+    pub normal_strength: f32,
     /// Colours of the metal and glass lobes when they differ from the base colour (a Mix
     /// Shader of Diffuse and Glossy, say); None = the base colour (Principled).
     pub metal_color: Option<[f32; 3]>,
@@ -94,6 +98,8 @@ impl Default for MaterialDesc {
             base_color_texture: None,
             roughness_texture: None,
             alpha_texture: None,
+            normal_texture: None,
+            normal_strength: 1.0,
             metal_color: None,
             glass_color: None,
             transparency: 0.0,

@@ -24,6 +24,8 @@ pub struct Material {
     pub base_color_texture: Option<u32>,
     pub roughness_texture: Option<u32>,
     pub alpha_texture: Option<u32>,
+    pub normal_texture: Option<u32>,
+    pub normal_strength: f32,
     pub metal_color: Option<Spectrum>,
     pub glass_color: Option<Spectrum>,
     /// Pass-through probability τ and tint (Transparent BSDF, alpha as coverage).
@@ -37,12 +39,21 @@ pub struct Material {
 impl Material {
     pub fn from_desc(d: &MaterialDesc, textures: usize) -> Result<Material, SceneError> {
         let bad = |what: &str| SceneError::Material { material: d.name.clone(), what: what.to_string() };
-        for t in [d.base_color_texture, d.roughness_texture, d.alpha_texture].into_iter().flatten() {
+        for t in [d.base_color_texture, d.roughness_texture, d.alpha_texture, d.normal_texture].into_iter().flatten() {
             if t as usize >= textures {
                 return Err(bad(&format!("uses texture {t} but the scene has {textures}")));
             }
         }
-        let scalars = [d.roughness, d.metallic, d.transmission, d.ior, d.transparency, d.specular_ior, d.specular];
+        let scalars = [
+            d.roughness,
+            d.metallic,
+            d.transmission,
+            d.ior,
+            d.transparency,
+            d.specular_ior,
+            d.specular,
+            d.normal_strength,
+        ];
         let lobe_colors = d.metal_color.iter().chain(d.glass_color.iter()).flatten().chain(d.transparent_color.iter());
         if d.base_color.iter().chain(d.emission.iter()).chain(scalars.iter()).chain(lobe_colors).any(|x| !x.is_finite())
         {
@@ -73,6 +84,8 @@ impl Material {
             base_color_texture: d.base_color_texture,
             roughness_texture: d.roughness_texture,
             alpha_texture: d.alpha_texture,
+            normal_texture: d.normal_texture,
+            normal_strength: d.normal_strength.max(0.0),
             metal_color: d.metal_color.map(|c| Vec3::from_array(c).clamp(Vec3::ZERO, Vec3::ONE)),
             glass_color: d.glass_color.map(|c| Vec3::from_array(c).clamp(Vec3::ZERO, Vec3::ONE)),
             transparency: d.transparency.clamp(0.0, 1.0),

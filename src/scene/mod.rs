@@ -86,6 +86,9 @@ pub struct Scene {
     /// Some material lets light through (pass-through lobe): shadow rays then cross such
     /// surfaces instead of stopping (decided once; without it shadow rays stay any-hit tests).
     has_transparency: bool,
+    /// Some material has a normal map (decided once: without one, hits never look up
+    /// their material to shade).
+    has_normal_maps: bool,
     pub bounds_center: Vec3,
     pub bounds_radius: f32,
     pub report: SceneReport,
@@ -261,6 +264,7 @@ impl Scene {
             materials.iter_mut().for_each(|m| m.general = true);
         }
         let has_transparency = !shortcuts || materials.iter().any(|m| m.is_transparent());
+        let has_normal_maps = materials.iter().any(|m| m.normal_texture.is_some());
         Ok(Scene {
             positions,
             normals,
@@ -278,6 +282,7 @@ impl Scene {
             env,
             accel,
             has_transparency,
+            has_normal_maps,
             bounds_center,
             bounds_radius,
             report,
@@ -382,6 +387,10 @@ impl Scene {
             Some(n) => (n[0] * b0 + n[1] * b1 + n[2] * b2).normalize_or(ng),
             None => ng,
         };
+        let uv = self.uvs[t].map_or(Vec2::ZERO, |u| u[0] * b0 + u[1] * b1 + u[2] * b2);
+        if self.has_normal_maps {
+            ns = self.normal_mapped(t, ns, uv);
+        }
         let front = ng.dot(d) <= 0.0;
         if !front {
             ng = -ng;
@@ -397,8 +406,35 @@ impl Scene {
             material: self.tri_material[t],
             t: hit.t,
             front,
-            uv: self.uvs[t].map_or(Vec2::ZERO, |u| u[0] * b0 + u[1] * b1 + u[2] * b2),
+            uv,
         }
+    }
+
+    /// The shading normal `ns` of triangle `t` perturbed by its material's tangent-space
+    /// normal map at `uv`, as Cycles' Normal Map node: n' = T·c.x + B·c.y + N·c.z with
+    /// c = 2·rgb − 1, the tangent T = ∂p/∂u of the triangle made orthogonal to N, B = ±N × T
+    /// (the sign of the UV mapping's handedness), then N + strength·(n' − N), normalized.
+    fn normal_mapped(&self, t: usize, ns: Vec3, uv: Vec2) -> Vec3 {
+        let m = &self.materials[self.tri_material[t] as usize];
+        let (Some(tex), Some(uvs)) = (m.normal_texture, self.uvs[t]) else { return ns };
+        let p = &self.positions[t];
+        let (e1, e2) = (p[1] - p[0], p[2] - p[0]);
+        let (d1, d2) = (uvs[1] - uvs[0], uvs[2] - uvs[0]);
+        let det = d1.x * d2.y - d1.y * d2.x;
+        if det.abs() < 1e-20 {
+            return ns; // degenerate UVs: no tangent frame
+        }
+        let dpdu = (e1 * d2.y - e2 * d1.y) / det;
+        let dpdv = (e2 * d1.x - e1 * d2.x) / det;
+        let tangent = (dpdu - ns * ns.dot(dpdu)).normalize_or_zero();
+        if tangent == Vec3::ZERO {
+            return ns;
+        }
+        let sign = if ns.cross(dpdu).dot(dpdv) < 0.0 { -1.0 } else { 1.0 };
+        let bitangent = ns.cross(tangent) * sign;
+        let c = self.textures[tex as usize].eval(uv) * 2.0 - Vec3::ONE;
+        let mapped = (tangent * c.x + bitangent * c.y + ns * c.z).normalize_or(ns);
+        (ns + (mapped - ns) * m.normal_strength).normalize_or(ns)
     }
 
     /// The BSDF of `material` at texture coordinates `uv` (textures replace the base colour
@@ -627,5 +663,59 @@ impl Scene {
     /// which naive path tracing cannot find.
     pub fn delta_lights(&self) -> Vec<&str> {
         self.lights.iter().filter(|l| l.is_delta()).map(|l| l.name.as_str()).collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::builtin::camera_looking_along_y;
+
+    /// A unit quad at z = 0 (facing +z) with a constant normal-map texture `rgb` and UVs
+    /// `uv` at its corners; returns the shading normal where a ray from above hits it.
+    fn mapped_normal(rgb: [f32; 3], uv: [[f32; 2]; 4], strength: f32) -> Vec3 {
+        let quad = MeshDesc {
+            name: "Quad".into(),
+            positions: vec![[-1.0, -1.0, 0.0], [1.0, -1.0, 0.0], [1.0, 1.0, 0.0], [-1.0, 1.0, 0.0]],
+            indices: vec![[0, 1, 2], [0, 2, 3]],
+            corner_uvs: [0, 1, 2, 0, 2, 3].iter().map(|&k| uv[k]).collect(),
+            material_ids: vec![0, 0],
+            ..Default::default()
+        };
+        let texture = TextureDesc { name: "n".into(), width: 1, height: 1, pixels: vec![rgb], ..Default::default() };
+        let material = MaterialDesc { normal_texture: Some(0), normal_strength: strength, ..Default::default() };
+        let desc = SceneDesc {
+            meshes: vec![quad],
+            materials: vec![material],
+            textures: vec![texture],
+            camera: camera_looking_along_y([0.0, -3.0, 0.0], 35.0, 4, 4),
+            ..Default::default()
+        };
+        let scene = Scene::build(&desc).unwrap();
+        let (o, d) = (Vec3::new(0.2, 0.1, 2.0), Vec3::new(0.0, 0.0, -1.0));
+        let hit = scene.intersect(o, d, 0.0, f32::INFINITY).unwrap();
+        scene.interaction(&hit, d).frame.n
+    }
+
+    /// Tangent-space normal maps tilt the shading normal along the texture's u (red) and v
+    /// (green) directions on the surface, follow a mirrored UV mapping, leave it unchanged
+    /// for the flat colour (0.5, 0.5, 1) and scale the tilt with the strength.
+    #[test]
+    fn normal_maps_tilt_along_the_uv_directions() {
+        let plain = [[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]];
+        let mirrored_v = [[0.0, 1.0], [1.0, 1.0], [1.0, 0.0], [0.0, 0.0]];
+        let rotated = [[0.0, 1.0], [0.0, 0.0], [1.0, 0.0], [1.0, 1.0]]; // u along +y, v along −x
+        let tilt_u = [0.8, 0.5, 0.9]; // c = (0.6, 0, 0.8)
+        let tilt_v = [0.5, 0.8, 0.9]; // c = (0, 0.6, 0.8)
+        let close = |a: Vec3, b: Vec3| (a - b).length() < 1e-4;
+        assert!(close(mapped_normal([0.5, 0.5, 1.0], plain, 1.0), Vec3::Z));
+        assert!(close(mapped_normal(tilt_u, plain, 1.0), Vec3::new(0.6, 0.0, 0.8)));
+        assert!(close(mapped_normal(tilt_v, plain, 1.0), Vec3::new(0.0, 0.6, 0.8)));
+        assert!(close(mapped_normal(tilt_v, mirrored_v, 1.0), Vec3::new(0.0, -0.6, 0.8)));
+        assert!(close(mapped_normal(tilt_u, rotated, 1.0), Vec3::new(0.0, 0.6, 0.8)));
+        assert!(close(mapped_normal(tilt_v, rotated, 1.0), Vec3::new(-0.6, 0.0, 0.8)));
+        // strength 0.5: halfway between N and the mapped normal, normalized
+        assert!(close(mapped_normal(tilt_u, plain, 0.5), Vec3::new(0.3, 0.0, 0.9).normalize()));
+        assert!(close(mapped_normal(tilt_u, plain, 0.0), Vec3::Z));
     }
 }

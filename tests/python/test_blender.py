@@ -387,7 +387,7 @@ def test_animation_renders_every_frame(bpy_mod, tmp_out):
 
 
 @pytest.mark.parametrize("kind, materialx", [("lights", True), ("hdri", True), ("specular", True),
-                                             ("textures", True), ("specular", False)])
+                                             ("textures", True), ("specular", False), ("textures", False)])
 def test_blender_usd_export_renders_the_same_outside_blender(bpy_mod, tmp_out, kind, materialx):
     """F12 in Blender and `gdmlt render` of the same scene exported with Blender's USD exporter
     (read by usd-core, no Blender) agree: area and point lights with Blender's power
@@ -401,7 +401,7 @@ def test_blender_usd_export_renders_the_same_outside_blender(bpy_mod, tmp_out, k
 
     bpy = bpy_mod
     imgs = {}
-    spp = 64
+    spp = 256 if kind == "textures" else 64  # (the normal-mapped tile is small: checked to fail without it)
     for seed in (1, 2):
         if kind == "hdri":
             scene = _hdri_scene(bpy, "GDMLT", 64, seed)
@@ -422,8 +422,10 @@ def test_blender_usd_export_renders_the_same_outside_blender(bpy_mod, tmp_out, k
         desc, warnings = usd.load(path, width=r.resolution_x, height=r.resolution_y)
         assert warnings == [], warnings
         if not materialx:  # Blender writes Diffuse BSDFs as UsdPreviewSurface of the default IOR
+            diffuse = {m.name for m in bpy.data.materials if m.node_tree and any(
+                n.type == "BSDF_DIFFUSE" for n in m.node_tree.nodes)}
             for m in desc["materials"]:
-                if m["name"] in ("Orange", "Grey"):
+                if m["name"] in diffuse:
                     m["specular_ior"] = 1.0
         s = scene.gdmlt
         res = gdmlt.render(gdmlt.Scene(desc), method="pt", spp=spp, seed=seed + 10, max_bounces=s.max_bounces)
@@ -450,8 +452,9 @@ def test_usd_materialx_materials_match_the_addons_translation(bpy_mod, tmp_out, 
     """Every material of a scene exported with MaterialX reads back from the stage (no
     Blender) as the addon translates it from the node tree: Principled through OpenPBR
     (base colour, roughness, IOR, the specular layer's IOR from Specular IOR Level 0.7),
-    Diffuse, Glossy (conductor with artistic IOR), Glass (dielectric), image textures and an
-    image's alpha channel as coverage (the same pixels, sRGB flag and wrap mode)."""
+    Diffuse, Glossy (conductor with artistic IOR), Glass (dielectric), image textures, an
+    image's alpha channel as coverage and a tangent-space normal map with its strength (the
+    same pixels, sRGB flag and wrap mode)."""
     from gdmlt import usd
     from gdmlt_blender import export
 
@@ -476,7 +479,8 @@ def test_usd_materialx_materials_match_the_addons_translation(bpy_mod, tmp_out, 
         for k in keys:
             assert np.allclose(got.get(k, 0.0), want.get(k, 0.0), atol=1e-4), (mat.name, k, got.get(k), want.get(k))
         assert got.get("specular_ior", 1.0) == pytest.approx(want.get("specular_ior", 1.0), abs=1e-4), mat.name
-        for key in ("base_color_texture", "alpha_texture"):
+        assert got.get("normal_strength", 1.0) == pytest.approx(want.get("normal_strength", 1.0)), mat.name
+        for key in ("base_color_texture", "alpha_texture", "normal_texture"):
             if key not in want:
                 assert key not in got, (mat.name, key)
                 continue
