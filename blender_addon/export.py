@@ -288,8 +288,9 @@ def _shader_leaves(node, weight, leaves, textures, warnings, what):
 def _combine(leaves, warnings, what):
     """One material from weighted leaves: the diffuse, metal and glass lobes of every leaf
     (Principled weights (1−m)(1−t), m, (1−m)t) are summed per kind — exact, since lobes of
-    one kind differ only in colour — and emission adds up. Roughness and IOR are shared by
-    the metal and glass lobes in the core: different values are averaged (with a warning).
+    one kind differ only in colour — and emission adds up. The specular layer, the metal and
+    the glass lobes keep their own roughness; lobes of one kind with different roughness, or
+    glass lobes with different IOR, are averaged (with a warning).
     A total BSDF weight above 1 (Add Shader of two BSDFs) is normalized, with a warning."""
     lobes = {"d": [0.0, np.zeros(3)], "m": [0.0, np.zeros(3)], "g": [0.0, np.zeros(3)]}
     passing = [0.0, np.zeros(3)]  # Transparent BSDF leaves (and 1 − alpha)
@@ -315,9 +316,9 @@ def _combine(leaves, warnings, what):
         if has_layer:
             layer[0] += w * (1 - m) * (1 - t)
             layer[1].append(p["specular_ior"])
-        rough_w = w * (m + (1 - m) * t) + (w * (1 - m) * (1 - t) if has_layer else 0.0)
-        if rough_w > 0:
-            rough.append((rough_w, p["roughness"]))
+        for kind, wk in (("layer", w * (1 - m) * (1 - t) if has_layer else 0.0), ("m", w * m), ("g", w * (1 - m) * t)):
+            if wk > 0:
+                rough.append((kind, wk, p["roughness"]))
         if w * (1 - m) * t > 0:
             iors.append(p["ior"])
         if "base_color_texture" in p:
@@ -354,12 +355,22 @@ def _combine(leaves, warnings, what):
         if max(layer[1]) - min(layer[1]) > 1e-4:
             warnings.append(f"{what}: the mixed Principled specular layers have different IOR; {layer[1][0]:.3f} "
                             f"is used")
-    if rough:
-        wsum = sum(w for w, _ in rough)
-        out["roughness"] = sum(w * r for w, r in rough) / wsum
-        if max(r for _, r in rough) - min(r for _, r in rough) > 1e-3:
-            warnings.append(f"{what}: the mixed glossy/glass/specular lobes have different roughness; their weighted mean "
-                            f"{out['roughness']:.3f} is used")
+    # each lobe kind keeps its own roughness (the specular layer's is `roughness`); lobes of
+    # one kind with different roughness share their weighted mean
+    means = {}
+    for kind in ("layer", "m", "g"):
+        rs = [(w, r) for k, w, r in rough if k == kind]
+        if rs:
+            means[kind] = sum(w * r for w, r in rs) / sum(w for w, _ in rs)
+            if max(r for _, r in rs) - min(r for _, r in rs) > 1e-3:
+                name = {"layer": "specular layers", "m": "glossy/metal lobes", "g": "glass lobes"}[kind]
+                warnings.append(f"{what}: the mixed {name} have different roughness; their weighted mean "
+                                f"{means[kind]:.3f} is used")
+    if means:
+        out["roughness"] = means.get("layer", means.get("m", means.get("g")))
+        for kind, key in (("m", "metal_roughness"), ("g", "glass_roughness")):
+            if kind in means and abs(means[kind] - out["roughness"]) > 1e-6:
+                out[key] = means[kind]
     if len(set(iors)) > 1:
         warnings.append(f"{what}: the mixed glass lobes have different IOR; {iors[0]} is used")
     if tex:

@@ -113,6 +113,8 @@ fn parse_material(d: &Bound<'_, PyDict>) -> PyResult<MaterialDesc> {
         alpha_texture: get_or(d, "alpha_texture", None, &ctx)?,
         normal_texture: get_or(d, "normal_texture", None, &ctx)?,
         normal_strength: get_or(d, "normal_strength", def.normal_strength, &ctx)?,
+        metal_roughness: get_or(d, "metal_roughness", None, &ctx)?,
+        glass_roughness: get_or(d, "glass_roughness", None, &ctx)?,
         metal_color: get_or(d, "metal_color", None, &ctx)?,
         glass_color: get_or(d, "glass_color", None, &ctx)?,
         specular_ior: get_or(d, "specular_ior", def.specular_ior, &ctx)?,
@@ -577,6 +579,12 @@ fn builtin_scene<'py>(py: Python<'py>, name: &str, width: u32, height: u32) -> P
         }
         if let Some(c) = m.glass_color {
             md.set_item("glass_color", c)?;
+        }
+        if let Some(r) = m.metal_roughness {
+            md.set_item("metal_roughness", r)?;
+        }
+        if let Some(r) = m.glass_roughness {
+            md.set_item("glass_roughness", r)?;
         }
         mats.append(md)?;
     }

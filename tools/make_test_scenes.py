@@ -268,7 +268,8 @@ def textures(bpy):
 
 def mix(bpy):
     """The lights scene with shader trees: the card is Mix(Diffuse, Glossy) (a "plastic"), the
-    wall Mix(Principled metal, Diffuse), the floor Add(Diffuse, Emission); in front, a veil
+    wall Mix(Principled metal, Principled paint) of different roughness, the floor Add(Diffuse,
+    Emission); in front, a veil
     Mix(Transparent (orange), Diffuse) and a curtain of Principled with alpha 0.35 (coverage).
     GGX distributions set to single scattering, as GDMLT's."""
     scene = lights(bpy, size=40, bounces=3)
@@ -301,12 +302,17 @@ def mix(bpy):
         return mix_node(nt, 0.4, diffuse(nt, (0.8, 0.4, 0.1)), g)
 
     def metal_and_paint(nt):
+        # rough gold over glossy blue paint: each lobe keeps its own roughness (0.4 and 0.1)
         p = nt.nodes.new("ShaderNodeBsdfPrincipled")
         p.distribution = "GGX"
         p.inputs["Base Color"].default_value = (0.9, 0.7, 0.3, 1)
         p.inputs["Metallic"].default_value = 1.0
         p.inputs["Roughness"].default_value = 0.4
-        return mix_node(nt, 0.5, p, diffuse(nt, (0.2, 0.5, 0.7)))
+        paint = nt.nodes.new("ShaderNodeBsdfPrincipled")
+        paint.distribution = "GGX"
+        paint.inputs["Base Color"].default_value = (0.2, 0.5, 0.7, 1)
+        paint.inputs["Roughness"].default_value = 0.1
+        return mix_node(nt, 0.5, p, paint)
 
     def glowing_floor(nt):
         e = nt.nodes.new("ShaderNodeEmission")

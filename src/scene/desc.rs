@@ -76,6 +76,10 @@ pub struct MaterialDesc {
     /// Shader of Diffuse and Glossy, say); None = the base colour (Principled).
     pub metal_color: Option<[f32; 3]>,
     pub glass_color: Option<[f32; 3]>,
+    /// Roughness of the metal and glass lobes when it differs from `roughness` (which then is
+    /// the specular layer's): a Mix Shader of a rough Glossy and a smooth Glass, say.
+    pub metal_roughness: Option<f32>,
+    pub glass_roughness: Option<f32>,
     /// Probability τ of passing straight through the surface (Blender's Transparent BSDF, or
     /// Principled alpha = 1 − τ as coverage); the other lobes share 1 − τ.
     pub transparency: f32,
@@ -102,6 +106,8 @@ impl Default for MaterialDesc {
             normal_strength: 1.0,
             metal_color: None,
             glass_color: None,
+            metal_roughness: None,
+            glass_roughness: None,
             transparency: 0.0,
             transparent_color: [1.0; 3],
         }

@@ -28,6 +28,8 @@ pub struct Material {
     pub normal_strength: f32,
     pub metal_color: Option<Spectrum>,
     pub glass_color: Option<Spectrum>,
+    pub metal_roughness: Option<f32>,
+    pub glass_roughness: Option<f32>,
     /// Pass-through probability τ and tint (Transparent BSDF, alpha as coverage).
     pub transparency: f32,
     pub transparent_color: Spectrum,
@@ -54,7 +56,14 @@ impl Material {
             d.specular,
             d.normal_strength,
         ];
-        let lobe_colors = d.metal_color.iter().chain(d.glass_color.iter()).flatten().chain(d.transparent_color.iter());
+        let lobe_colors = d
+            .metal_color
+            .iter()
+            .chain(d.glass_color.iter())
+            .flatten()
+            .chain(d.transparent_color.iter())
+            .chain(d.metal_roughness.iter())
+            .chain(d.glass_roughness.iter());
         if d.base_color.iter().chain(d.emission.iter()).chain(scalars.iter()).chain(lobe_colors).any(|x| !x.is_finite())
         {
             return Err(bad("NaN or Inf parameter"));
@@ -88,6 +97,8 @@ impl Material {
             normal_strength: d.normal_strength.max(0.0),
             metal_color: d.metal_color.map(|c| Vec3::from_array(c).clamp(Vec3::ZERO, Vec3::ONE)),
             glass_color: d.glass_color.map(|c| Vec3::from_array(c).clamp(Vec3::ZERO, Vec3::ONE)),
+            metal_roughness: d.metal_roughness.map(|r| r.clamp(0.0, 1.0)),
+            glass_roughness: d.glass_roughness.map(|r| r.clamp(0.0, 1.0)),
             transparency: d.transparency.clamp(0.0, 1.0),
             transparent_color: Vec3::from_array(d.transparent_color).clamp(Vec3::ZERO, Vec3::ONE),
             general: false,
@@ -125,9 +136,15 @@ impl Material {
             roughness,
             coverage: self.specular,
         };
-        let metal = Conductor { f0: self.metal_color.unwrap_or(base_color), roughness };
+        // a roughness texture drives every lobe; else each lobe may have its own
+        let (rm, rg) = if self.roughness_texture.is_some() {
+            (roughness, roughness)
+        } else {
+            (self.metal_roughness.unwrap_or(roughness), self.glass_roughness.unwrap_or(roughness))
+        };
+        let metal = Conductor { f0: self.metal_color.unwrap_or(base_color), roughness: rm };
         let eta = if front { self.ior } else { 1.0 / self.ior };
-        let glass = Dielectric { eta, tint: self.glass_color.unwrap_or(base_color), roughness };
+        let glass = Dielectric { eta, tint: self.glass_color.unwrap_or(base_color), roughness: rg };
         if tau > 0.0 || self.general {
             Bsdf::Principled { diffuse, metal, glass, w, pass: tau, pass_tint: self.transparent_color }
         } else if w[1] <= 0.0 && w[2] <= 0.0 && !diffuse.has_layer() {
