@@ -565,26 +565,26 @@ fn builtin_scene<'py>(py: Python<'py>, name: &str, width: u32, height: u32) -> P
         md.set_item("specular", m.specular)?;
         md.set_item("transparency", m.transparency)?;
         md.set_item("transparent_color", m.transparent_color)?;
+        md.set_item("normal_strength", m.normal_strength)?;
         for (key, value) in [
             ("base_color_texture", m.base_color_texture),
             ("roughness_texture", m.roughness_texture),
             ("alpha_texture", m.alpha_texture),
+            ("normal_texture", m.normal_texture),
         ] {
             if let Some(t) = value {
                 md.set_item(key, t)?;
             }
         }
-        if let Some(c) = m.metal_color {
-            md.set_item("metal_color", c)?;
+        for (key, value) in [("metal_color", m.metal_color), ("glass_color", m.glass_color)] {
+            if let Some(c) = value {
+                md.set_item(key, c)?;
+            }
         }
-        if let Some(c) = m.glass_color {
-            md.set_item("glass_color", c)?;
-        }
-        if let Some(r) = m.metal_roughness {
-            md.set_item("metal_roughness", r)?;
-        }
-        if let Some(r) = m.glass_roughness {
-            md.set_item("glass_roughness", r)?;
+        for (key, value) in [("metal_roughness", m.metal_roughness), ("glass_roughness", m.glass_roughness)] {
+            if let Some(r) = value {
+                md.set_item(key, r)?;
+            }
         }
         mats.append(md)?;
     }

@@ -221,11 +221,8 @@ def textures(bpy):
     leaf = np.zeros((32, 32, 4))
     leaf[..., :3] = [0.2, 0.7, 0.15]
     leaf[..., 3] = np.where(r < 0.6, 1.0, np.where(r < 0.9, 0.5, 0.0))
-    me = bpy.data.meshes.new("Leaf")
-    me.from_pydata([(-1.4, -0.6, 0.1), (-0.2, -0.6, 0.1), (-0.2, -0.6, 1.3), (-1.4, -0.6, 1.3)], [], [(0, 1, 2, 3)])
-    ob = bpy.data.objects.new("Leaf", me)
-    scene.collection.objects.link(ob)
-    nt, out = fresh_material(bpy, ob, "LeafAlpha")
+    nt, out = uv_card(bpy, scene, "Leaf", [(-1.4, -0.6, 0.1), (-0.2, -0.6, 0.1), (-0.2, -0.6, 1.3), (-1.4, -0.6, 1.3)],
+                      "LeafAlpha")
     bsdf = nt.nodes.new("ShaderNodeBsdfPrincipled")
     bsdf.inputs["Roughness"].default_value = 1.0
     tex = nt.nodes.new("ShaderNodeTexImage")
@@ -233,9 +230,6 @@ def textures(bpy):
     nt.links.new(tex.outputs["Color"], bsdf.inputs["Base Color"])
     nt.links.new(tex.outputs["Alpha"], bsdf.inputs["Alpha"])
     nt.links.new(bsdf.outputs[0], out.inputs["Surface"])
-    uv = me.uv_layers.new(name="UVMap")
-    for loop, (u, v) in zip(uv.uv, [(0, 0), (1, 0), (1, 1), (0, 1)]):
-        loop.vector = (u, v)
     # a ridged tile on the floor: a tangent-space normal map (Non-Color) of ridges across u
     # (tilts up to ±35°), strength 1, under a Principled of roughness 0.4
     u = (np.arange(64) + 0.5) / 64.0
@@ -245,11 +239,8 @@ def textures(bpy):
     ridges[..., 1] = 0.5
     ridges[..., 2] = 0.5 + 0.5 / np.sqrt(1 + tilt ** 2)
     ridges[..., 3] = 1
-    me = bpy.data.meshes.new("Tile")
-    me.from_pydata([(0.3, -1.6, 0.01), (1.8, -1.6, 0.01), (1.8, -0.4, 0.01), (0.3, -0.4, 0.01)], [], [(0, 1, 2, 3)])
-    ob = bpy.data.objects.new("Tile", me)
-    scene.collection.objects.link(ob)
-    nt, out = fresh_material(bpy, ob, "TileRidges")
+    nt, out = uv_card(bpy, scene, "Tile", [(0.3, -1.6, 0.01), (1.8, -1.6, 0.01), (1.8, -0.4, 0.01), (0.3, -0.4, 0.01)],
+                      "TileRidges")
     bsdf = nt.nodes.new("ShaderNodeBsdfPrincipled")
     bsdf.inputs["Base Color"].default_value = (0.7, 0.6, 0.5, 1)
     bsdf.inputs["Roughness"].default_value = 0.4
@@ -260,10 +251,19 @@ def textures(bpy):
     nt.links.new(tex.outputs["Color"], nm.inputs["Color"])
     nt.links.new(nm.outputs["Normal"], bsdf.inputs["Normal"])
     nt.links.new(bsdf.outputs[0], out.inputs["Surface"])
-    uv = me.uv_layers.new(name="UVMap")
-    for loop, (u_, v_) in zip(uv.uv, [(0, 0), (1, 0), (1, 1), (0, 1)]):
-        loop.vector = (u_, v_)
     return scene
+
+
+def uv_card(bpy, scene, name, corners, material):
+    """A quad object with a UV map from (0, 0) to (1, 1) and a new node material: (tree, output)."""
+    me = bpy.data.meshes.new(name)
+    me.from_pydata(corners, [], [(0, 1, 2, 3)])
+    ob = bpy.data.objects.new(name, me)
+    scene.collection.objects.link(ob)
+    uv = me.uv_layers.new(name="UVMap")
+    for loop, (u, v) in zip(uv.uv, [(0, 0), (1, 0), (1, 1), (0, 1)]):
+        loop.vector = (u, v)
+    return fresh_material(bpy, ob, material)
 
 
 def mix(bpy):
