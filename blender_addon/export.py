@@ -218,6 +218,9 @@ def _node_params(node, textures, warnings, what):
     else:
         warnings.append(f"{what}: shader node '{node.name}' ({t}) is not supported; rendered as grey diffuse")
     _normal_map(node, out, textures, warnings, what)
+    if t in ("BSDF_PRINCIPLED", "BSDF_GLOSSY", "BSDF_ANISOTROPIC"):
+        # Multiscatter GGX (Blender's default) compensates the metal lobe's lost energy
+        out["multiscatter"] = getattr(node, "distribution", "GGX") == "MULTI_GGX"
     return out
 
 
@@ -298,6 +301,7 @@ def _combine(leaves, warnings, what):
     rough, iors, tex, rough_tex = [], [], [], []
     layer = [0.0, []]  # diffuse-lobe weight under a specular layer, and the layers' IORs
     normals = []  # the leaves' normal maps
+    multiscatter = []  # the metal leaves' distributions (Multiscatter GGX or not)
     for w, p in leaves:
         emission += w * np.array(p["emission"][:3], dtype=np.float64)
         if "pass" in p:
@@ -330,6 +334,8 @@ def _combine(leaves, warnings, what):
                             f"rendered opaque")
         if "normal_texture" in p:
             normals.append((p["normal_texture"], p["normal_strength"]))
+        if w * m > 0:
+            multiscatter.append(p.get("multiscatter", False))
     total = sum(v[0] for v in lobes.values())
     total_all = total + passing[0]
     out = {"emission": tuple(emission.tolist()), "metallic": 0.0, "transmission": 0.0, "roughness": 0.5,
@@ -383,6 +389,11 @@ def _combine(leaves, warnings, what):
                             f"(or diffuse-only Principled) input only; their socket values are used elsewhere")
     if rough_tex:
         out["roughness_texture"] = rough_tex[0]
+    if multiscatter:
+        out["multiscatter"] = multiscatter[0]
+        if len(set(multiscatter)) > 1:
+            warnings.append(f"{what}: the mixed glossy/metal lobes use different distributions; "
+                            f"{'Multiscatter GGX' if multiscatter[0] else 'GGX'} is used for all")
     if normals:
         # one shading normal per point in the core: a normal map shared by every BSDF leaf
         out["normal_texture"], out["normal_strength"] = normals[0]

@@ -115,6 +115,7 @@ fn parse_material(d: &Bound<'_, PyDict>) -> PyResult<MaterialDesc> {
         normal_strength: get_or(d, "normal_strength", def.normal_strength, &ctx)?,
         metal_roughness: get_or(d, "metal_roughness", None, &ctx)?,
         glass_roughness: get_or(d, "glass_roughness", None, &ctx)?,
+        multiscatter: get_or(d, "multiscatter", false, &ctx)?,
         metal_color: get_or(d, "metal_color", None, &ctx)?,
         glass_color: get_or(d, "glass_color", None, &ctx)?,
         specular_ior: get_or(d, "specular_ior", def.specular_ior, &ctx)?,
@@ -566,6 +567,7 @@ fn builtin_scene<'py>(py: Python<'py>, name: &str, width: u32, height: u32) -> P
         md.set_item("transparency", m.transparency)?;
         md.set_item("transparent_color", m.transparent_color)?;
         md.set_item("normal_strength", m.normal_strength)?;
+        md.set_item("multiscatter", m.multiscatter)?;
         for (key, value) in [
             ("base_color_texture", m.base_color_texture),
             ("roughness_texture", m.roughness_texture),

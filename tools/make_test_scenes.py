@@ -302,12 +302,13 @@ def mix(bpy):
         return mix_node(nt, 0.4, diffuse(nt, (0.8, 0.4, 0.1)), g)
 
     def metal_and_paint(nt):
-        # rough gold over glossy blue paint: each lobe keeps its own roughness (0.4 and 0.1)
+        # rough gold (Multiscatter GGX, Blender's default) over glossy blue paint (GGX): each
+        # lobe keeps its own roughness (0.6 and 0.1)
         p = nt.nodes.new("ShaderNodeBsdfPrincipled")
-        p.distribution = "GGX"
+        p.distribution = "MULTI_GGX"
         p.inputs["Base Color"].default_value = (0.9, 0.7, 0.3, 1)
         p.inputs["Metallic"].default_value = 1.0
-        p.inputs["Roughness"].default_value = 0.4
+        p.inputs["Roughness"].default_value = 0.6
         paint = nt.nodes.new("ShaderNodeBsdfPrincipled")
         paint.distribution = "GGX"
         paint.inputs["Base Color"].default_value = (0.2, 0.5, 0.7, 1)

@@ -157,6 +157,7 @@ class _Reader:
         p = lambda name, default, key=None: self._param(shader, name, default, what, out, key)  # noqa: E731
         out["base_color"] = p("diffuseColor", (0.18, 0.18, 0.18), "base_color_texture")
         out["metallic"] = p("metallic", 0.0)
+        out["multiscatter"] = True  # as Blender's default (Multiscatter GGX), which writes this shader
         out["roughness"] = p("roughness", 0.5, "roughness_texture")
         out["ior"] = p("ior", 1.5)
         # the specular lobe: a dielectric layer of that IOR over the diffuse base (Principled's,
@@ -195,6 +196,7 @@ class _Reader:
             color = p(surface, "base_color", (0.8, 0.8, 0.8), "base_color_texture")
             out["base_color"] = tuple(c * weight for c in color)
             out["metallic"] = p(surface, "base_metalness", 0.0)
+            out["multiscatter"] = True  # OpenPBR's metal conserves energy (Blender's default, too)
             out["roughness"] = p(surface, "specular_roughness", 0.3, "roughness_texture")
             out["ior"] = p(surface, "specular_ior", 1.5)
             # OpenPBR's specular_weight is twice Principled's Specular IOR Level
@@ -239,7 +241,7 @@ class _Reader:
                     self.warn(f"{what}: MaterialX conductor without artistic IOR; the UsdPreviewSurface is used")
                     return False
                 out["base_color"] = tuple(c * weight for c in p(ior[0], "reflectivity", (0.8, 0.8, 0.8)))
-                out["metallic"], out["roughness"] = 1.0, rough()
+                out["metallic"], out["roughness"], out["multiscatter"] = 1.0, rough(), True
             elif bkind == "ND_dielectric_bsdf" and p(sh, "scatter_mode", "R") in ("RT", "T"):
                 out["base_color"] = tuple(c * weight for c in p(sh, "tint", (1.0, 1.0, 1.0)))
                 out["transmission"], out["ior"], out["roughness"] = 1.0, p(sh, "ior", 1.5), rough()

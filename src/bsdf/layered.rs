@@ -4,14 +4,13 @@
 //! and s its coverage: the "albedo scaling" layering Cycles uses since 4.0, which keeps a
 //! white base exactly energy-conserving (E + (1 − E)·1 = 1 for every θo).
 //!
-//! E(cos θo, roughness, η) is tabulated once per process (single-scattering GGX, integrated
-//! with the visible-normal estimator F·G2/G1 on a stratified grid) and read trilinearly.
+//! E(cos θo, roughness, η) comes from albedo.rs's table.
 
+use super::albedo::specular_albedo;
 use super::microfacet::{fresnel_dielectric, reflect, Ggx};
 use super::{BsdfSample, Lambert, LobeKind, SPECULAR_ROUGHNESS_THRESHOLD};
 use crate::math::{luminance, Spectrum};
 use glam::{Vec2, Vec3};
-use std::sync::OnceLock;
 
 #[derive(Clone, Copy, Debug)]
 pub struct Layered {
@@ -151,77 +150,6 @@ impl Layered {
     }
 }
 
-// ---- the directional albedo table ----------------------------------------------------------
-
-/// Nodes along √cos θo, roughness and x = (η − 1)/(η + 1) ∈ [0, 1/2] (η ∈ [1, 3]).
-const N_MU: usize = 32;
-const N_ROUGH: usize = 24;
-const N_ETA: usize = 16;
-/// Stratified visible-normal samples per table entry (STRATA²).
-const STRATA: usize = 20;
-
-/// E(θo) = ∫ F(ωo·h, η)·D(h)·G2(ωo, ωi) / (4 cos θo) dωi, estimated as the mean of
-/// F·G2/G1 over visible normals h (the estimator of conductor.rs's `sample`).
-pub fn specular_albedo_integral(cos_o: f32, roughness: f32, eta: f32) -> f32 {
-    let cos_o = cos_o.clamp(1e-4, 1.0);
-    let wo = Vec3::new((1.0 - cos_o * cos_o).sqrt(), 0.0, cos_o);
-    let g = Ggx::from_roughness(roughness);
-    let mut sum = 0.0f64;
-    for i in 0..STRATA {
-        for j in 0..STRATA {
-            let u = Vec2::new((i as f32 + 0.5) / STRATA as f32, (j as f32 + 0.5) / STRATA as f32);
-            let h = g.sample_visible(wo, u);
-            let wi = reflect(wo, h);
-            if wi.z > 0.0 {
-                sum += (fresnel_dielectric(wo.dot(h), eta) * g.g2(wo, wi) / g.g1(wo)) as f64;
-            }
-        }
-    }
-    (sum / (STRATA * STRATA) as f64) as f32
-}
-
-fn table() -> &'static [f32] {
-    use rayon::prelude::*;
-    static TABLE: OnceLock<Vec<f32>> = OnceLock::new();
-    TABLE.get_or_init(|| {
-        (0..N_MU * N_ROUGH * N_ETA)
-            .into_par_iter()
-            .map(|n| {
-                let (i, j, k) = (n % N_MU, (n / N_MU) % N_ROUGH, n / (N_MU * N_ROUGH));
-                let x = 0.5 * k as f32 / (N_ETA - 1) as f32;
-                let eta = (1.0 + x) / (1.0 - x);
-                let s = i as f32 / (N_MU - 1) as f32;
-                specular_albedo_integral(s * s, j as f32 / (N_ROUGH - 1) as f32, eta)
-            })
-            .collect()
-    })
-}
-
-/// Position of `v` on an axis of `n` nodes over [0, 1]: (lower node, fraction).
-#[inline]
-fn axis(v: f32, n: usize) -> (usize, f32) {
-    let p = v.clamp(0.0, 1.0) * (n - 1) as f32;
-    let i = (p as usize).min(n - 2);
-    (i, p - i as f32)
-}
-
-/// The tabulated E(cos θo, roughness, η), trilinear (η above 3 reads the η = 3 entries).
-pub fn specular_albedo(cos_o: f32, roughness: f32, eta: f32) -> f32 {
-    let t = table();
-    let x = ((eta - 1.0) / (eta + 1.0)).abs();
-    let (i, fi) = axis(cos_o.max(0.0).sqrt(), N_MU);
-    let (j, fj) = axis(roughness, N_ROUGH);
-    let (k, fk) = axis(2.0 * x, N_ETA);
-    let at = |i: usize, j: usize, k: usize| t[(k * N_ROUGH + j) * N_MU + i];
-    let lerp = |a: f32, b: f32, f: f32| a + (b - a) * f;
-    let plane = |k: usize| {
-        let r0 = lerp(at(i, j, k), at(i + 1, j, k), fi);
-        let r1 = lerp(at(i, j + 1, k), at(i + 1, j + 1, k), fi);
-        lerp(r0, r1, fj)
-    };
-    lerp(plane(k), plane(k + 1), fk)
-}
-
 #[cfg(test)]
 mod tests {
     use super::super::testing::{chi2_test, white_furnace};
@@ -230,29 +158,6 @@ mod tests {
 
     fn layered(albedo: f32, eta: f32, roughness: f32) -> Bsdf {
         Bsdf::Layered(Layered { base: Lambert { albedo: Spectrum::splat(albedo) }, eta, roughness, coverage: 1.0 })
-    }
-
-    /// The table reads back the integral between its nodes: within 0.0025 for cos θo ≥ 0.2
-    /// and 0.012 at grazing angles, where E climbs steeply to 1 with low roughness (measured
-    /// worst over these 300 points: 0.0017 and 0.0098; both include the integral's own
-    /// quadrature error).
-    #[test]
-    fn albedo_table_interpolates_the_integral() {
-        let mut s = crate::sampler::IndependentSampler::new(3, 0);
-        use crate::sampler::Sampler;
-        let (mut worst, mut worst_grazing) = (0.0f32, 0.0f32);
-        for _ in 0..300 {
-            let (mu, r, eta) = (s.next_1d().max(0.02), s.next_1d(), 1.05 + 1.5 * s.next_1d());
-            let err = (specular_albedo(mu, r, eta) - specular_albedo_integral(mu, r, eta)).abs();
-            if mu >= 0.2 {
-                worst = worst.max(err);
-            } else {
-                worst_grazing = worst_grazing.max(err);
-            }
-        }
-        assert!(worst < 2.5e-3 && worst_grazing < 0.012, "table off the integral by {worst} ({worst_grazing} grazing)");
-        // a smooth layer reflects the Fresnel term: 4% at normal incidence for η = 1.5
-        assert!((specular_albedo(1.0, 0.0, 1.5) - 0.04).abs() < 1e-3);
     }
 
     /// The layering keeps a white base exactly energy-conserving: albedo 1 at every angle,

@@ -3,6 +3,7 @@
 //! which kind of lobe produced a sample, which the shift mapping needs to decide between
 //! reconnection and half-vector copy (Kettunen et al. 2015).
 
+pub mod albedo;
 mod conductor;
 mod dielectric;
 mod lambert;
@@ -14,7 +15,7 @@ pub(crate) mod testing;
 pub use conductor::Conductor;
 pub use dielectric::{refraction_half_vector, Dielectric};
 pub use lambert::Lambert;
-pub use layered::{specular_albedo, Layered};
+pub use layered::Layered;
 
 use crate::math::Spectrum;
 use glam::{Vec2, Vec3};
@@ -277,7 +278,7 @@ mod tests {
     fn principled(w: [f32; 3], roughness: f32) -> Bsdf {
         Bsdf::Principled {
             diffuse: Layered::plain(Lambert { albedo: Spectrum::ONE }),
-            metal: Conductor { f0: Spectrum::ONE, roughness },
+            metal: Conductor { f0: Spectrum::ONE, roughness, multiscatter: false },
             glass: Dielectric { eta: 1.5, tint: Spectrum::ONE, roughness: 0.0 },
             w,
             pass: 0.0,
@@ -301,7 +302,7 @@ mod tests {
         let tint = Spectrum::new(0.5, 0.5, 0.5);
         let b = Bsdf::Principled {
             diffuse: Layered::plain(Lambert { albedo: Spectrum::ONE }),
-            metal: Conductor { f0: Spectrum::ONE, roughness: 0.5 },
+            metal: Conductor { f0: Spectrum::ONE, roughness: 0.5, multiscatter: false },
             glass: Dielectric { eta: 1.5, tint: Spectrum::ONE, roughness: 0.0 },
             w: [0.4, 0.0, 0.0],
             pass: 0.6,

@@ -80,6 +80,9 @@ pub struct MaterialDesc {
     /// the specular layer's): a Mix Shader of a rough Glossy and a smooth Glass, say.
     pub metal_roughness: Option<f32>,
     pub glass_roughness: Option<f32>,
+    /// The metal lobe compensates the energy single scattering loses (Blender's Multiscatter
+    /// GGX, its default distribution).
+    pub multiscatter: bool,
     /// Probability τ of passing straight through the surface (Blender's Transparent BSDF, or
     /// Principled alpha = 1 − τ as coverage); the other lobes share 1 − τ.
     pub transparency: f32,
@@ -108,6 +111,7 @@ impl Default for MaterialDesc {
             glass_color: None,
             metal_roughness: None,
             glass_roughness: None,
+            multiscatter: false,
             transparency: 0.0,
             transparent_color: [1.0; 3],
         }

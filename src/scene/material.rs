@@ -30,6 +30,7 @@ pub struct Material {
     pub glass_color: Option<Spectrum>,
     pub metal_roughness: Option<f32>,
     pub glass_roughness: Option<f32>,
+    pub multiscatter: bool,
     /// Pass-through probability τ and tint (Transparent BSDF, alpha as coverage).
     pub transparency: f32,
     pub transparent_color: Spectrum,
@@ -99,6 +100,7 @@ impl Material {
             glass_color: d.glass_color.map(|c| Vec3::from_array(c).clamp(Vec3::ZERO, Vec3::ONE)),
             metal_roughness: d.metal_roughness.map(|r| r.clamp(0.0, 1.0)),
             glass_roughness: d.glass_roughness.map(|r| r.clamp(0.0, 1.0)),
+            multiscatter: d.multiscatter,
             transparency: d.transparency.clamp(0.0, 1.0),
             transparent_color: Vec3::from_array(d.transparent_color).clamp(Vec3::ZERO, Vec3::ONE),
             general: false,
@@ -142,7 +144,8 @@ impl Material {
         } else {
             (self.metal_roughness.unwrap_or(roughness), self.glass_roughness.unwrap_or(roughness))
         };
-        let metal = Conductor { f0: self.metal_color.unwrap_or(base_color), roughness: rm };
+        let metal =
+            Conductor { f0: self.metal_color.unwrap_or(base_color), roughness: rm, multiscatter: self.multiscatter };
         let eta = if front { self.ior } else { 1.0 / self.ior };
         let glass = Dielectric { eta, tint: self.glass_color.unwrap_or(base_color), roughness: rg };
         if tau > 0.0 || self.general {
