@@ -69,7 +69,8 @@ class Textures:
             return None
         env = node.type == "TEX_ENVIRONMENT"
         ext = "REPEAT" if env else node.extension
-        key = (img.name, node.interpolation, ext, alpha)
+        transform = None if env else _uv_transform(node, warnings, what)
+        key = (img.name, node.interpolation, ext, alpha, transform)
         if key in self.index:
             return self.index[key]
         w, h = img.size
@@ -93,9 +94,9 @@ class Textures:
         if node.projection != ("EQUIRECTANGULAR" if env else "FLAT"):
             warnings.append(f"{what}: texture '{node.name}' projection {node.projection} is not supported "
                             f"(rendered as {'EQUIRECTANGULAR' if env else 'FLAT'})")
-        if node.inputs["Vector"].is_linked:
-            warnings.append(f"{what}: the Vector input of texture '{node.name}' (mapping, other UV maps) is "
-                            f"ignored; {'the world direction' if env else 'the active render UV map'} is used")
+        if env and node.inputs["Vector"].is_linked:
+            warnings.append(f"{what}: the Vector input of texture '{node.name}' is ignored; the world direction "
+                            f"is used")
         if ext not in ("REPEAT", "EXTEND", "CLIP"):
             warnings.append(f"{what}: Image Texture '{node.name}' extension {ext} is rendered as REPEAT")
             ext = "REPEAT"
@@ -104,7 +105,54 @@ class Textures:
                            "pixels": np.ascontiguousarray(rgb, dtype=np.float32),
                            "interpolation": "Closest" if node.interpolation == "Closest" else "Linear",
                            "extension": ext, "srgb": srgb})
+        if transform is not None:
+            self.items[-1]["transform"] = transform
         return self.index[key]
+
+
+def _uv_transform(node, warnings, what):
+    """The affine map of UV coordinates an Image Texture's Vector input applies, as the core's
+    texture transform (m0..m5: u' = m0·u + m1·v + m2, v' = m3·u + m4·v + m5): None for the
+    active UV map (unlinked, a Texture Coordinate's UV, a UV Map node), the matrix of a Mapping
+    node (Point, Texture or Vector type, unlinked parameters) on those. Anything else uses the
+    active UV map, with a warning."""
+    sock = node.inputs["Vector"]
+    if not sock.is_linked:
+        return None
+
+    def uv_source(link):
+        n = link.from_node
+        if n.type == "TEX_COORD" and link.from_socket.name == "UV":
+            return True
+        if n.type == "UVMAP":
+            if n.uv_map:
+                warnings.append(f"{what}: UV Map node '{n.name}' ('{n.uv_map}') is read as the active render UV map")
+            return True
+        return False
+
+    link = sock.links[0]
+    if uv_source(link):
+        return None
+    m = link.from_node
+    if m.type == "MAPPING" and m.vector_type in ("POINT", "TEXTURE", "VECTOR") and m.inputs["Vector"].is_linked \
+            and uv_source(m.inputs["Vector"].links[0]) \
+            and not any(m.inputs[k].is_linked for k in ("Location", "Rotation", "Scale") if k in m.inputs):
+        from mathutils import Euler, Matrix, Vector
+
+        rot = Euler(tuple(m.inputs["Rotation"].default_value), "XYZ").to_matrix()
+        scale = Vector(tuple(m.inputs["Scale"].default_value))
+        loc = Vector(tuple(m.inputs["Location"].default_value)) if m.vector_type != "VECTOR" else Vector((0, 0, 0))
+        if m.vector_type == "TEXTURE":  # the inverse of Point: (R⁻¹·(v − L)) / S
+            inv_s = Matrix.Diagonal(tuple(1.0 / x if abs(x) > 1e-12 else 0.0 for x in scale))
+            lin = inv_s @ rot.transposed()
+            t = -(lin @ loc)
+        else:  # Point (and Vector without location): R·(v ⊙ S) + L
+            lin = rot @ Matrix.Diagonal(tuple(scale))
+            t = loc
+        return (lin[0][0], lin[0][1], t[0], lin[1][0], lin[1][1], t[1])
+    warnings.append(f"{what}: the Vector input of texture '{node.name}' ({m.type}) is not supported; the active "
+                    f"render UV map is used (supported: UV, UV Map, and a Mapping node on those)")
+    return None
 
 
 def _load(img):

@@ -149,6 +149,7 @@ fn parse_texture(d: &Bound<'_, PyDict>) -> PyResult<TextureDesc> {
         other => return Err(verr(format!("{ctx}: unknown extension '{other}' (REPEAT, EXTEND or CLIP)"))),
     };
     let srgb: bool = get_or(d, "srgb", false, &ctx)?;
+    let transform: Option<[f32; 6]> = get_or(d, "transform", None, &ctx)?;
     Ok(TextureDesc {
         name,
         width,
@@ -157,6 +158,7 @@ fn parse_texture(d: &Bound<'_, PyDict>) -> PyResult<TextureDesc> {
         closest: interpolation.eq_ignore_ascii_case("closest"),
         extension,
         srgb,
+        transform,
     })
 }
 

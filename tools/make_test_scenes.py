@@ -180,7 +180,8 @@ def fresh_material(bpy, ob, name):
 def textures(bpy):
     """The lights scene with image textures: an sRGB checker (8-bit, bilinear, repeated twice)
     into the floor's Diffuse colour, a linear (Non-Color) gradient into the wall's
-    Principled Base Color, both through UV maps, a leaf card whose Principled Alpha is the
+    Principled Base Color (tiled twice and turned 20° by a Mapping node), both through UV
+    maps, a leaf card whose Principled Alpha is the
     image's alpha channel, and a floor tile with a tangent-space normal map of ridges."""
     scene = lights(bpy, size=40, bounces=3)
 
@@ -209,6 +210,14 @@ def textures(bpy):
         tex = nt.nodes.new("ShaderNodeTexImage")
         tex.image = img
         nt.links.new(tex.outputs["Color"], bsdf.inputs[socket])
+        if ob_name == "Wall":  # tiled and turned by a Mapping node on the UVs
+            coords = nt.nodes.new("ShaderNodeTexCoord")
+            mapping = nt.nodes.new("ShaderNodeMapping")
+            mapping.inputs["Scale"].default_value = (2.0, 1.0, 1.0)
+            mapping.inputs["Rotation"].default_value = (0.0, 0.0, math.radians(20))
+            mapping.inputs["Location"].default_value = (0.1, 0.0, 0.0)
+            nt.links.new(coords.outputs["UV"], mapping.inputs["Vector"])
+            nt.links.new(mapping.outputs["Vector"], tex.inputs["Vector"])
         nt.links.new(bsdf.outputs[0], out.inputs["Surface"])
         uv = ob.data.uv_layers.new(name="UVMap")
         for loop, (u, v) in zip(uv.uv, [(0, 0), (1, 0), (1, 1), (0, 1)]):

@@ -67,6 +67,10 @@ def _light_color(light, time, warnings, name):
     return color
 
 
+class _PreviewInstead(Exception):
+    """A MaterialX network the reader does not follow: use the UsdPreviewSurface."""
+
+
 class _Reader:
     def __init__(self, stage, time, warnings):
         pxr = _pxr()
@@ -102,7 +106,16 @@ class _Reader:
         mtlx = usd_material.ComputeSurfaceSource("mtlx")[0]
         done = False
         if mtlx and (mtlx.GetIdAttr().Get() or "").startswith("ND_"):
-            done = self._materialx(mtlx, out, what)
+            work = dict(out)
+            try:
+                done = self._materialx(mtlx, work, what)
+            except _PreviewInstead as e:
+                # a MaterialX graph the reader does not follow (math on texture coordinates):
+                # Blender's UsdPreviewSurface beside it says the same for a Principled BSDF
+                if mtlx.GetIdAttr().Get() != "ND_open_pbr_surface_surfaceshader":
+                    self.warn(f"{what}: MaterialX {e} is not read; the UsdPreviewSurface is used")
+            if done:
+                out = work
         if not done:
             shader = usd_material.ComputeSurfaceSource()[0]
             if shader and shader.GetIdAttr().Get() == "UsdPreviewSurface":
@@ -296,17 +309,28 @@ class _Reader:
         if alpha and kind.startswith("ND_") and not kind.endswith("color4"):
             return None  # a MaterialX image without alpha
         p = lambda name, default: self._param(shader, name, default, what)  # noqa: E731
+        p_of = lambda sh, name, default: self._param(sh, name, default, what)  # noqa: E731
         if kind == "UsdUVTexture":
             wraps = {shader.GetInput(w).Get() if shader.GetInput(w) else "useMetadata" for w in ("wrapS", "wrapT")}
             space = shader.GetInput("sourceColorSpace").Get() if shader.GetInput("sourceColorSpace") else "auto"
             closest = False
+            transform = None
             st = self._source(shader.GetInput("st"))
+            if st is not None and st[0].GetIdAttr().Get() == "UsdTransform2d":
+                # in·scale, turned by `rotation` degrees, + translation (as Blender's Mapping)
+                tr = st[0]
+                sx, sy = (tuple(p_of(tr, "scale", (1.0, 1.0, 1.0)))[:2])
+                a = math.radians(p_of(tr, "rotation", 0.0))
+                tx, ty = (tuple(p_of(tr, "translation", (0.0, 0.0, 0.0)))[:2])
+                c, s_ = math.cos(a), math.sin(a)
+                transform = (c * sx, -s_ * sy, tx, s_ * sx, c * sy, ty)
+                st = self._source(tr.GetInput("in"))
             if st is not None:
                 reader = st[0]
                 var = reader.GetInput("varname").Get() if reader.GetInput("varname") else None
                 if reader.GetIdAttr().Get() != "UsdPrimvarReader_float2" or str(var) != "st":
                     self.warn(f"{what}: texture '{shader.GetPath().name}' reads other coordinates than primvar "
-                              f"'st' (transforms, other UV sets); 'st' is used")
+                              f"'st' (other UV sets, other transforms); 'st' is used")
             # a normal map is read as 2·rgb − 1: the scale and bias UsdPreviewSurface asks for
             scale, bias = ((2.0,) * 3, (-1.0,) * 3) if normal else ((1.0,) * 3, (0.0,) * 3)
             if tuple(p("scale", (1.0,) * 3)) != scale or tuple(p("bias", (0.0,) * 3)) != bias:
@@ -323,6 +347,12 @@ class _Reader:
             # sRGB images "srgb_texture" and writes Non-Color ones as vector images
             space = "sRGB" if "srgb" in cs.lower() else "raw"
             closest = p("filtertype", "linear") == "closest"
+            transform = None
+            coords = self._source(shader.GetInput("texcoord"))
+            while coords is not None and (coords[0].GetIdAttr().Get() or "").startswith("ND_convert_"):
+                coords = self._source(coords[0].GetInput("in"))
+            if coords is not None and coords[0].GetIdAttr().Get() != "ND_texcoord_vector2":
+                raise _PreviewInstead(f"texture coordinates from {coords[0].GetIdAttr().Get()}")
             if kind.startswith("ND_tiledimage_"):
                 self.warn(f"{what}: tiling of texture '{shader.GetPath().name}' is ignored")
         else:
@@ -337,7 +367,7 @@ class _Reader:
         if "mirror" in wraps or len(wraps) > 1:
             self.warn(f"{what}: texture '{file.name}' wrap modes {sorted(map(str, wraps))}: one mode for both "
                       f"axes, and mirror as repeat")
-        key = (str(file), space, closest, min(wraps, key=str), alpha)
+        key = (str(file), space, closest, min(wraps, key=str), alpha, transform)
         if key in self.texture_index:
             return self.texture_index[key]
         image = _read_image(file)
@@ -353,6 +383,8 @@ class _Reader:
                               "interpolation": "Closest" if closest else "Linear",
                               "extension": self._WRAP.get(str(min(wraps, key=str)), "REPEAT"),
                               "srgb": space == "sRGB" or (space == "auto" and eight_bit)})
+        if transform is not None:
+            self.textures[-1]["transform"] = transform
         self.texture_index[key] = len(self.textures) - 1
         return self.texture_index[key]
 

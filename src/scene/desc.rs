@@ -41,6 +41,10 @@ pub struct TextureDesc {
     pub extension: TextureExtension,
     /// The pixels are sRGB-encoded: decode after interpolating.
     pub srgb: bool,
+    /// Affine map of the texture coordinates before the lookup (Blender's Mapping node on a
+    /// UV input): (u, v) → (m0·u + m1·v + m2, m3·u + m4·v + m5). None = identity. Surface
+    /// textures only (the world's importance sampling assumes none).
+    pub transform: Option<[f32; 6]>,
 }
 
 /// A material, as the parameters of one uber-material close to Blender's Principled BSDF.

@@ -153,6 +153,7 @@ mod tests {
             closest: false,
             extension: TextureExtension::Repeat,
             srgb: false,
+            transform: None,
         })
         .unwrap()
     }

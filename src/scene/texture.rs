@@ -18,6 +18,7 @@ pub struct Texture {
     closest: bool,
     extension: TextureExtension,
     srgb: bool,
+    transform: Option<[f32; 6]>,
 }
 
 /// The sRGB transfer function, inverted (IEC 61966-2-1).
@@ -38,6 +39,9 @@ impl Texture {
         }
         if d.pixels.len() != d.width * d.height {
             return Err(bad(format!("{} pixels for {}×{}", d.pixels.len(), d.width, d.height)));
+        }
+        if d.transform.is_some_and(|m| m.iter().any(|v| !v.is_finite())) {
+            return Err(bad("NaN or Inf in its coordinate transform".into()));
         }
         // NaN/Inf pixels (a broken EXR) are replaced by black rather than poisoning the render.
         let pixels = d
@@ -60,6 +64,7 @@ impl Texture {
             closest: d.closest,
             extension: d.extension,
             srgb: d.srgb,
+            transform: d.transform,
         })
     }
 
@@ -85,8 +90,12 @@ impl Texture {
         Some(self.pixels[(y * w + x) as usize])
     }
 
-    /// Linear colour at texture coordinates `uv`.
+    /// Linear colour at texture coordinates `uv` (mapped by the texture's transform first).
     pub fn eval(&self, uv: Vec2) -> Spectrum {
+        let uv = match &self.transform {
+            Some(m) => Vec2::new(m[0] * uv.x + m[1] * uv.y + m[2], m[3] * uv.x + m[4] * uv.y + m[5]),
+            None => uv,
+        };
         let c = self.interpolate(uv);
         if self.srgb {
             Spectrum::new(srgb_to_linear(c.x), srgb_to_linear(c.y), srgb_to_linear(c.z))
@@ -129,6 +138,7 @@ mod tests {
             closest,
             extension: ext,
             srgb: false,
+            transform: None,
         })
         .unwrap()
     }
@@ -162,6 +172,7 @@ mod tests {
             closest: false,
             extension: TextureExtension::Repeat,
             srgb: false,
+            transform: None,
         };
         assert!(Texture::from_desc(&d).unwrap_err().to_string().contains("broken"));
         d.width = 1;
@@ -170,6 +181,30 @@ mod tests {
         d.height = 1;
         let t = Texture::from_desc(&d).unwrap();
         assert_eq!(t.eval(Vec2::new(0.5, 0.5)), Spectrum::ZERO);
+    }
+
+    /// A coordinate transform maps (u, v) before the lookup: scaled by 2 and shifted, the
+    /// texture repeats twice; swapped, it turns by 90°; a NaN in it is an error.
+    #[test]
+    fn coordinate_transforms_map_before_the_lookup() {
+        let mut d = TextureDesc {
+            name: "t".into(),
+            width: 2,
+            height: 2,
+            pixels: vec![[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 1.0, 1.0]],
+            closest: true,
+            transform: Some([2.0, 0.0, 0.25, 0.0, 2.0, 0.0]),
+            ..Default::default()
+        };
+        let t = Texture::from_desc(&d).unwrap();
+        // u' = 2u + 0.25: u = 0.2 → 0.65 (green column), u = 0.45 → 1.15 → 0.15 (red column)
+        assert_eq!(t.eval(Vec2::new(0.2, 0.1)), Spectrum::new(0.0, 1.0, 0.0));
+        assert_eq!(t.eval(Vec2::new(0.45, 0.1)), Spectrum::new(1.0, 0.0, 0.0));
+        d.transform = Some([0.0, 1.0, 0.0, 1.0, 0.0, 0.0]); // (u, v) → (v, u)
+        let swapped = Texture::from_desc(&d).unwrap();
+        assert_eq!(swapped.eval(Vec2::new(0.75, 0.25)), Spectrum::new(0.0, 0.0, 1.0));
+        d.transform = Some([f32::NAN, 0.0, 0.0, 0.0, 1.0, 0.0]);
+        assert!(Texture::from_desc(&d).is_err());
     }
 
     /// sRGB images decode after interpolating: halfway between encoded 0 and 1 is
@@ -184,6 +219,7 @@ mod tests {
             closest: false,
             extension: TextureExtension::Extend,
             srgb: true,
+            transform: None,
         })
         .unwrap();
         let mid = t.eval(Vec2::new(0.5, 0.5)).x;

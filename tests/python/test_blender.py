@@ -454,7 +454,7 @@ def test_usd_materialx_materials_match_the_addons_translation(bpy_mod, tmp_out, 
     (base colour, roughness, IOR, the specular layer's IOR from Specular IOR Level 0.7),
     Diffuse, Glossy (conductor with artistic IOR), Glass (dielectric), image textures, an
     image's alpha channel as coverage and a tangent-space normal map with its strength (the
-    same pixels, sRGB flag and wrap mode)."""
+    same pixels, sRGB flag, wrap mode and Mapping-node transform)."""
     from gdmlt import usd
     from gdmlt_blender import export
 
@@ -487,6 +487,9 @@ def test_usd_materialx_materials_match_the_addons_translation(bpy_mod, tmp_out, 
             tw, tg = textures.items[want[key]], desc["textures"][got[key]]
             assert (tg["width"], tg["height"], tg["srgb"], tg["extension"]) == \
                 (tw["width"], tw["height"], tw["srgb"], tw["extension"]), (mat.name, key)
+            # the Mapping node's UV transform (UsdTransform2d), as the addon computes it
+            assert np.allclose(tg.get("transform", (1, 0, 0, 0, 1, 0)), tw.get("transform", (1, 0, 0, 0, 1, 0)),
+                               atol=1e-5), (mat.name, key)
             # the exported PNG holds the image at 8 bits
             assert np.allclose(np.asarray(tg["pixels"]).reshape(-1, 3),
                                np.asarray(tw["pixels"]).reshape(-1, tw.get("channels", 4))[:, :3],
