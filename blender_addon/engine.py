@@ -104,20 +104,17 @@ class GDMLTRenderEngine(bpy.types.RenderEngine):
         for name, channels, chan_id, _ in PASSES:
             if name in wanted:
                 self.add_pass(name, channels, chan_id, layer=layer_name)
+        # with a render region the core renders only that window (w × h): Blender's render
+        # result is then that region, with its origin at the region's corner
         result = self.begin_result(0, 0, w, h, layer=layer_name)
         try:
-            r = scene.render
-            crop = (slice(None), slice(None))
-            if r.use_border:  # the result comes back clipped to the border rectangle
-                crop = (slice(round(r.border_min_y * h), round(r.border_max_y * h)),
-                        slice(round(r.border_min_x * w), round(r.border_max_x * w)))
             passes = result.layers[0].passes
             channels_of = dict([("Combined", 4)] + [(p[0], p[1]) for p in PASSES])
             previews = 0
 
             def write(name, img):
                 if passes.get(name) is not None:
-                    buf = _to_blender_rows(img, channels_of[name])[crop]
+                    buf = _to_blender_rows(img, channels_of[name])
                     passes[name].rect.foreach_set(np.ascontiguousarray(buf).ravel())
 
             def preview(img):  # intermediate image: shown while the render goes on

@@ -579,7 +579,30 @@ def camera_dict(scene, cam_ob):
             target = np.array(cam.dof.focus_object.matrix_world.translation)
             focus = float(np.dot(target - m[:3, 3], axis))
         d["focus_distance"] = focus
+    window = render_region(scene)
+    if window is not None:
+        x, y_bottom, w, h = window
+        d["window"] = (x, _final_height(r) - y_bottom - h, w, h)  # the core counts rows from the top
     return d
+
+
+def _final_height(r):
+    return max(1, r.resolution_y * r.resolution_percentage // 100)
+
+
+def render_region(scene):
+    """The render region (Blender's border) in final pixels: (x, y from the bottom, width,
+    height), as Blender's render result places it; None without one (or when it covers
+    nothing)."""
+    r = scene.render
+    if not r.use_border:
+        return None
+    w, h = max(1, r.resolution_x * r.resolution_percentage // 100), _final_height(r)
+    x0, x1 = round(r.border_min_x * w), round(r.border_max_x * w)
+    y0, y1 = round(r.border_min_y * h), round(r.border_max_y * h)
+    if x1 <= x0 or y1 <= y0:
+        return None
+    return x0, y0, x1 - x0, y1 - y0
 
 
 def export_scene(depsgraph, test_break=lambda: False):

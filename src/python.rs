@@ -249,6 +249,7 @@ fn parse_camera(d: &Bound<'_, PyDict>) -> PyResult<CameraDesc> {
         resolution_x: get_or(d, "resolution_x", def.resolution_x, ctx)?,
         resolution_y: get_or(d, "resolution_y", def.resolution_y, ctx)?,
         resolution_percentage: get_or(d, "resolution_percentage", 100, ctx)?,
+        window: get_or(d, "window", None, ctx)?,
         pixel_aspect_x: get_or(d, "pixel_aspect_x", 1.0, ctx)?,
         pixel_aspect_y: get_or(d, "pixel_aspect_y", 1.0, ctx)?,
         fstop: get_or(d, "fstop", 0.0, ctx)?,

@@ -20,8 +20,12 @@ pub struct CameraRay {
 pub struct Camera {
     to_world: Mat4,
     projection: Projection,
+    /// The rendered image (the render region when there is one).
     pub width: u32,
     pub height: u32,
+    /// The full frame, and the region's top-left corner in it.
+    full: Vec2,
+    offset: Vec2,
     ext: Vec2,
     center: Vec2,
     clip_start: f32,
@@ -111,11 +115,24 @@ impl Camera {
         };
         let focus_distance =
             if d.focus_distance.is_finite() && d.focus_distance > 0.0 { d.focus_distance } else { 1.0 };
+        let (offset, size) = match d.window {
+            None => (Vec2::ZERO, (width, height)),
+            Some([x, y, w, h]) => {
+                if w == 0 || h == 0 || x.saturating_add(w) > width || y.saturating_add(h) > height {
+                    return Err(SceneError::Camera(format!(
+                        "render region {w}×{h} at ({x}, {y}) is empty or outside the {width}×{height} image"
+                    )));
+                }
+                (Vec2::new(x as f32, y as f32), (w, h))
+            }
+        };
         Ok(Camera {
             to_world,
             projection: d.projection,
-            width,
-            height,
+            width: size.0,
+            height: size.1,
+            full: Vec2::new(width as f32, height as f32),
+            offset,
             ext,
             center,
             clip_start,
@@ -126,11 +143,12 @@ impl Camera {
     }
 
     /// Point on the image plane (x, y at depth 1 for perspective) for a raster position
-    /// with y measured from the top of the image.
+    /// with y measured from the top of the image (of the render region, if any).
     #[inline]
     fn plane_point(&self, raster: Vec2) -> Vec2 {
-        let u = raster.x / self.width as f32;
-        let v = 1.0 - raster.y / self.height as f32;
+        let raster = raster + self.offset;
+        let u = raster.x / self.full.x;
+        let v = 1.0 - raster.y / self.full.y;
         Vec2::new(self.center.x + (u - 0.5) * self.ext.x, self.center.y + (v - 0.5) * self.ext.y)
     }
 
@@ -175,7 +193,7 @@ impl Camera {
         };
         let u = (q.x - self.center.x) / self.ext.x + 0.5;
         let v = (q.y - self.center.y) / self.ext.y + 0.5;
-        Some(Vec2::new(u * self.width as f32, (1.0 - v) * self.height as f32))
+        Some(Vec2::new(u * self.full.x, (1.0 - v) * self.full.y) - self.offset)
     }
 
     pub fn position(&self) -> Vec3 {
@@ -202,6 +220,30 @@ mod tests {
         // vertical extent is 0.72 · 100/200 = 0.36 → top edge at y = 0.18 per unit depth
         let top = cam.project(Vec3::new(0.0, 0.18 * 2.0, -2.0)).unwrap();
         assert!(top.y.abs() < 1e-3, "{top:?}");
+    }
+
+    /// A render region renders the pixels of the full frame it covers: its pixel (i, j) gets
+    /// the full camera's ray through (x + i, y + j), and bad regions are errors.
+    #[test]
+    fn render_region_is_a_window_of_the_full_frame() {
+        let full = Camera::new(&look_down_neg_z()).unwrap();
+        let mut d = look_down_neg_z();
+        d.window = Some([50, 20, 60, 30]);
+        let region = Camera::new(&d).unwrap();
+        assert_eq!((region.width, region.height), (60, 30));
+        for (i, j) in [(0.5f32, 0.5f32), (59.5, 29.5), (13.25, 7.75)] {
+            let (a, b) = (
+                region.generate_ray(Vec2::new(i, j), Vec2::ZERO),
+                full.generate_ray(Vec2::new(50.0 + i, 20.0 + j), Vec2::ZERO),
+            );
+            assert!((a.dir - b.dir).length() < 1e-6 && (a.origin - b.origin).length() < 1e-6);
+            let p = a.origin + a.dir * 4.0;
+            assert!((region.project(p).unwrap() - Vec2::new(i, j)).length() < 1e-3);
+        }
+        for bad in [[0, 0, 0, 10], [190, 0, 20, 10], [0, 95, 10, 10]] {
+            d.window = Some(bad);
+            assert!(Camera::new(&d).is_err(), "{bad:?}");
+        }
     }
 
     #[test]

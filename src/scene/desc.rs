@@ -202,6 +202,9 @@ pub struct CameraDesc {
     /// Depth of field: f-stop (0 = pinhole) and focus distance along the view axis.
     pub fstop: f32,
     pub focus_distance: f32,
+    /// Render region (Blender's border): [x, y, width, height] in pixels of the final image,
+    /// y from the top. Only that window is rendered; the image is the window's size.
+    pub window: Option<[u32; 4]>,
 }
 
 impl Default for CameraDesc {
@@ -225,6 +228,7 @@ impl Default for CameraDesc {
             pixel_aspect_y: 1.0,
             fstop: 0.0,
             focus_distance: 10.0,
+            window: None,
         }
     }
 }

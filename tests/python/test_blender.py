@@ -204,6 +204,94 @@ def open_scene(bpy, name, engine, spp, seed, keep=None):
     return scene
 
 
+@pytest.mark.parametrize("crop", [True, False])
+def test_render_region_renders_only_that_window(bpy_mod, tmp_out, crop):
+    """A render region (border) renders only its window: cropped, the image is the window's
+    size; uncropped, the window sits in a full-size image that is black outside it. Inside,
+    the window matches the full render (rms block difference within 2× the noise measured
+    from two seeds, as in the Cycles comparisons)."""
+    bpy = bpy_mod
+    from gdmlt_blender import engine
+
+    def render(border, seed):
+        bpy.ops.wm.open_mainfile(filepath=str(ROOT / "examples" / "cornell.blend"))
+        scene = bpy.context.scene
+        r = scene.render
+        r.resolution_x, r.resolution_y, r.resolution_percentage = 64, 48, 100
+        scene.gdmlt.method, scene.gdmlt.samples, scene.gdmlt.seed = "PT", 64, seed
+        r.use_border, r.use_crop_to_border = border, crop
+        r.border_min_x, r.border_max_x, r.border_min_y, r.border_max_y = 0.25, 0.75, 0.5, 1.0
+        img = render_to_exr(bpy, scene, tmp_out / f"border{border}{crop}{seed}.exr")
+        return img, engine.last_stats
+
+    full = [render(False, s)[0] for s in (1, 2)]
+    window = [render(True, s) for s in (1, 2)]
+    rows, cols = slice(0, 24), slice(16, 48)  # the top half, middle columns (rows from the top)
+    for img, stats in window:
+        assert img.shape == ((24, 32, 3) if crop else (48, 64, 3))
+        if not crop:
+            outside = img.copy()
+            outside[rows, cols] = 0
+            assert outside.max() == 0.0
+    win = [w[0] if crop else w[0][rows, cols] for w in window]
+    ref = [f[rows, cols] for f in full]
+    a, b = (block_means(win[0], 4) + block_means(win[1], 4)) / 2, (block_means(ref[0], 4) + block_means(ref[1], 4)) / 2
+    noise = np.sqrt((np.mean((block_means(win[0], 4) - block_means(win[1], 4)) ** 2)
+                     + np.mean((block_means(ref[0], 4) - block_means(ref[1], 4)) ** 2)) / 4)
+    assert np.sqrt(np.mean((a - b) ** 2)) < 2 * noise + 1e-3 * b.mean(), (np.sqrt(np.mean((a - b) ** 2)), noise)
+    assert a.mean() > 0.01
+
+
+def test_smooth_flat_and_custom_split_normals_are_exported(bpy_mod):
+    """Per-corner shading normals as Blender computes them: a flat-shaded sphere gets its face
+    normals, a smooth one its vertex normals, custom split normals (all set to +Z here) come
+    through as set; the object's transform (rotation, non-uniform scale) is applied as to
+    normals (inverse transpose)."""
+    bpy = bpy_mod
+    from gdmlt_blender import export
+
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    scene = bpy.context.scene
+    bpy.ops.object.camera_add(location=(0, -6, 0), rotation=(math.pi / 2, 0, 0))
+    scene.camera = bpy.context.object
+    spheres = {}
+    for name, x in (("Flat", -2.5), ("Smooth", 0.0), ("Custom", 2.5)):
+        bpy.ops.mesh.primitive_uv_sphere_add(radius=1.0, location=(x, 0, 0), segments=12, ring_count=6)
+        ob = bpy.context.object
+        ob.name = name
+        if name != "Flat":
+            bpy.ops.object.shade_smooth()
+        spheres[name] = ob
+    spheres["Smooth"].rotation_euler = (0.3, 0.0, 0.7)
+    spheres["Smooth"].scale = (1.0, 2.0, 0.5)
+    me = spheres["Custom"].data
+    me.normals_split_custom_set_from_vertices([(0.0, 0.0, 1.0)] * len(me.vertices))
+    desc, _ = export.export_scene(bpy.context.evaluated_depsgraph_get())
+    meshes = {m["name"]: m for m in desc["meshes"]}
+    for name, m in meshes.items():
+        pos = np.asarray(m["positions"], np.float64)[np.asarray(m["indices"])]  # (T, 3, 3)
+        nrm = np.asarray(m["normals"], np.float64).reshape(-1, 3, 3)
+        nrm /= np.linalg.norm(nrm, axis=-1, keepdims=True)
+        face = np.cross(pos[:, 1] - pos[:, 0], pos[:, 2] - pos[:, 0])
+        face /= np.linalg.norm(face, axis=-1, keepdims=True)
+        if name == "Flat":
+            assert np.allclose(nrm, face[:, None, :], atol=1e-4)
+        elif name == "Custom":
+            bad = np.abs(nrm - (0.0, 0.0, 1.0)).max(axis=-1) > 1e-3  # (Blender stores them compressed)
+            assert not bad.any(), (nrm[bad][:5], bad.sum(), bad.size)
+        else:  # smooth: the object-space vertex normals, transformed as normals
+            ob = spheres["Smooth"]
+            local = np.array([v.normal for v in ob.data.vertices])
+            ob.data.calc_loop_triangles()
+            tris = np.array([t.vertices[:] for t in ob.data.loop_triangles])
+            m3 = np.array(ob.matrix_world)[:3, :3]
+            world = local @ np.linalg.inv(m3)  # (M⁻¹)ᵀ applied to row vectors
+            world /= np.linalg.norm(world, axis=-1, keepdims=True)
+            assert np.allclose(nrm, world[tris], atol=1e-3)
+            # smooth normals differ from the faces', unlike the flat sphere's
+            assert np.abs(nrm - face[:, None, :]).max() > 0.1
+
+
 def test_area_and_point_light_agree_with_cycles(bpy_mod, tmp_out):
     def _lights_scene(bpy, engine, spp, seed):
         return open_scene(bpy, "lights", engine, spp, seed, keep={"Area", "Point"})
