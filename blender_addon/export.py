@@ -230,9 +230,7 @@ def _node_params(node, textures, warnings, what):
                                                                            what, 0.5))
         out["transmission"] = _input_value(node, "Transmission Weight", warnings, what, 0.0)
         _warn_unsupported_layers(node, warnings, what)
-        col = _input_value(node, "Emission Color", warnings, what, (0, 0, 0, 1))[:3]
-        strength = _input_value(node, "Emission Strength", warnings, what, 0.0)
-        out["emission"] = tuple(c * strength for c in col)
+        _emission(node, "Emission Color", "Emission Strength", out, textures, warnings, what, (0, 0, 0, 1), 0.0)
         alpha_tex = _linked_texture(node, "Alpha", textures, warnings, what, output="Alpha")
         if alpha_tex is not None:  # coverage from the image's alpha channel, per shading point
             out["alpha_texture"], out["alpha"] = alpha_tex, 1.0
@@ -258,10 +256,8 @@ def _node_params(node, textures, warnings, what):
         if t == "BSDF_REFRACTION":
             warnings.append(f"{what}: Refraction BSDF is rendered as Glass (with Fresnel reflection)")
     elif t == "EMISSION":
-        col = _input_value(node, "Color", warnings, what, (1, 1, 1, 1))[:3]
-        strength = _input_value(node, "Strength", warnings, what, 1.0)
+        _emission(node, "Color", "Strength", out, textures, warnings, what, (1, 1, 1, 1), 1.0)
         out["base_color"] = (0.0, 0.0, 0.0)
-        out["emission"] = tuple(c * strength for c in col)
         out["bsdf"] = False  # no scattering lobe (matters inside Mix/Add Shaders)
     else:
         warnings.append(f"{what}: shader node '{node.name}' ({t}) is not supported; rendered as grey diffuse")
@@ -292,6 +288,17 @@ def _normal_map(node, out, textures, warnings, what):
     warnings.append(f"{what}: the Normal input of '{node.name}' ({nm.type}"
                     f"{' ' + nm.space if nm.type == 'NORMAL_MAP' else ''}) is not supported; the mesh normal is used "
                     f"(supported: a tangent-space Normal Map fed by an Image Texture)")
+
+
+def _emission(node, color, strength, out, textures, warnings, what, default_color, default_strength):
+    """Emission colour × strength; with an Image Texture in the colour, the image per point
+    (out['emission_texture']) times the strength."""
+    s = _input_value(node, strength, warnings, what, default_strength)
+    tex = _linked_texture(node, color, textures, warnings, what)
+    if tex is not None:
+        out["emission_texture"], out["emission"] = tex, (s, s, s)
+    else:
+        out["emission"] = tuple(c * s for c in _input_value(node, color, warnings, what, default_color)[:3])
 
 
 def _specular_layer_ior(ior, level):
@@ -350,6 +357,7 @@ def _combine(leaves, warnings, what):
     layer = [0.0, []]  # diffuse-lobe weight under a specular layer, and the layers' IORs
     normals = []  # the leaves' normal maps
     multiscatter = []  # the metal leaves' distributions (Multiscatter GGX or not)
+    glowing = [p for w, p in leaves if w > 0 and max(p["emission"][:3]) > 0]
     for w, p in leaves:
         emission += w * np.array(p["emission"][:3], dtype=np.float64)
         if "pass" in p:
@@ -386,8 +394,15 @@ def _combine(leaves, warnings, what):
             multiscatter.append(p.get("multiscatter", False))
     total = sum(v[0] for v in lobes.values())
     total_all = total + passing[0]
+    textured = [p["emission_texture"] for p in glowing if "emission_texture" in p]
     out = {"emission": tuple(emission.tolist()), "metallic": 0.0, "transmission": 0.0, "roughness": 0.5,
            "ior": iors[0] if iors else 1.5}
+    if textured:  # an emission image multiplies all emission: right when it is the only emitter
+        if len(glowing) == 1:
+            out["emission_texture"] = textured[0]
+        else:
+            warnings.append(f"{what}: an emission image mixed with other emission is not supported; its "
+                            f"strength is used as white light")
     scale = min(total_all, 1.0)
     if total_all > 1.0 + 1e-6:
         warnings.append(f"{what}: Add Shader of BSDFs with total weight {total_all:.2f} is normalized to 1")

@@ -113,6 +113,7 @@ fn parse_material(d: &Bound<'_, PyDict>) -> PyResult<MaterialDesc> {
         alpha_texture: get_or(d, "alpha_texture", None, &ctx)?,
         normal_texture: get_or(d, "normal_texture", None, &ctx)?,
         normal_strength: get_or(d, "normal_strength", def.normal_strength, &ctx)?,
+        emission_texture: get_or(d, "emission_texture", None, &ctx)?,
         metal_roughness: get_or(d, "metal_roughness", None, &ctx)?,
         glass_roughness: get_or(d, "glass_roughness", None, &ctx)?,
         multiscatter: get_or(d, "multiscatter", false, &ctx)?,
@@ -576,6 +577,7 @@ fn builtin_scene<'py>(py: Python<'py>, name: &str, width: u32, height: u32) -> P
             ("roughness_texture", m.roughness_texture),
             ("alpha_texture", m.alpha_texture),
             ("normal_texture", m.normal_texture),
+            ("emission_texture", m.emission_texture),
         ] {
             if let Some(t) = value {
                 md.set_item(key, t)?;

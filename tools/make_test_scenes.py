@@ -181,8 +181,8 @@ def textures(bpy):
     """The lights scene with image textures: an sRGB checker (8-bit, bilinear, repeated twice)
     into the floor's Diffuse colour, a linear (Non-Color) gradient into the wall's
     Principled Base Color (tiled twice and turned 20° by a Mapping node), both through UV
-    maps, a leaf card whose Principled Alpha is the
-    image's alpha channel, and a floor tile with a tangent-space normal map of ridges."""
+    maps, a leaf card whose Principled Alpha is the image's alpha channel, a floor tile with a
+    tangent-space normal map of ridges and a screen whose emission colour is an image."""
     scene = lights(bpy, size=40, bounces=3)
 
     def image(name, pixels, colorspace):
@@ -260,6 +260,20 @@ def textures(bpy):
     nt.links.new(tex.outputs["Color"], nm.inputs["Color"])
     nt.links.new(nm.outputs["Normal"], bsdf.inputs["Normal"])
     nt.links.new(bsdf.outputs[0], out.inputs["Surface"])
+    # a glowing screen in front of the wall: an Emission shader whose Color is an image
+    # (8-bit sRGB, four coloured bars), Strength 3 — it lights the floor in its colours
+    bars = np.zeros((4, 8, 4))
+    bars[..., 3] = 1
+    for i, c in enumerate([(1.0, 0.2, 0.1), (0.2, 1.0, 0.2), (0.1, 0.3, 1.0), (1.0, 1.0, 0.9)]):
+        bars[:, 2 * i:2 * i + 2, :3] = c
+    nt, out = uv_card(bpy, scene, "Screen", [(0.6, 1.9, 0.3), (1.6, 1.9, 0.3), (1.6, 1.9, 0.9), (0.6, 1.9, 0.9)],
+                      "ScreenGlow")
+    em = nt.nodes.new("ShaderNodeEmission")
+    em.inputs["Strength"].default_value = 3.0
+    tex = nt.nodes.new("ShaderNodeTexImage")
+    tex.image = image("ScreenBars", bars, "sRGB")
+    nt.links.new(tex.outputs["Color"], em.inputs["Color"])
+    nt.links.new(em.outputs[0], out.inputs["Surface"])
     return scene
 
 

@@ -237,7 +237,7 @@ class _Reader:
                 self.warn(f"{what}: MaterialX EDF {edf[0].GetIdAttr().Get()} is not supported; the "
                           f"UsdPreviewSurface is used")
                 return False
-            out["emission"] = p(edf[0], "color", (1.0, 1.0, 1.0))
+            out["emission"] = self._emission_color(edf[0], out, what)
         out["specular_ior"] = 1.0
         if bsdf is None:
             out["base_color"] = (0.0, 0.0, 0.0)
@@ -271,6 +271,23 @@ class _Reader:
     # ---- textures --------------------------------------------------------------------
     _WRAP = {"repeat": "REPEAT", "periodic": "REPEAT", "clamp": "EXTEND", "black": "CLIP", "constant": "CLIP",
              "useMetadata": "REPEAT", "mirror": "REPEAT"}
+
+    def _emission_color(self, edf, out, what):
+        """A uniform EDF's colour: a constant, or an image (× a constant colour, the way Blender
+        writes Emission Color × Strength) → out['emission_texture'] and the factor."""
+        inp = edf.GetInput("color")
+        src = self._source(inp) if inp else None
+        factor = (1.0, 1.0, 1.0)
+        if src is not None and src[0].GetIdAttr().Get() == "ND_multiply_color3" and \
+                not src[0].GetInput("in2").HasConnectedSource():
+            factor = self._param(src[0], "in2", factor, what)
+            src = self._source(src[0].GetInput("in1"))
+        if src is not None:
+            index = self._texture(src[0], what)
+            if index is not None:
+                out["emission_texture"] = index
+                return factor
+        return self._param(edf, "color", (1.0, 1.0, 1.0), what)
 
     def _normal_input(self, shader, name, out, what):
         """A connected normal input: a tangent-space normal map (MaterialX `normalmap` of an

@@ -76,6 +76,9 @@ pub struct MaterialDesc {
     /// Tangent space) and its strength, perturbing the shading normal.
     pub normal_texture: Option<u32>,
     pub normal_strength: f32,
+    /// An image that multiplies `emission` per point (an Image Texture into Emission Color:
+    /// `emission` is then the strength, and the image the colour).
+    pub emission_texture: Option<u32>,
     /// Colours of the metal and glass lobes when they differ from the base colour (a Mix
     /// Shader of Diffuse and Glossy, say); None = the base colour (Principled).
     pub metal_color: Option<[f32; 3]>,
@@ -111,6 +114,7 @@ impl Default for MaterialDesc {
             alpha_texture: None,
             normal_texture: None,
             normal_strength: 1.0,
+            emission_texture: None,
             metal_color: None,
             glass_color: None,
             metal_roughness: None,

@@ -26,6 +26,7 @@ pub struct Material {
     pub alpha_texture: Option<u32>,
     pub normal_texture: Option<u32>,
     pub normal_strength: f32,
+    pub emission_texture: Option<u32>,
     pub metal_color: Option<Spectrum>,
     pub glass_color: Option<Spectrum>,
     pub metal_roughness: Option<f32>,
@@ -42,7 +43,8 @@ pub struct Material {
 impl Material {
     pub fn from_desc(d: &MaterialDesc, textures: usize) -> Result<Material, SceneError> {
         let bad = |what: &str| SceneError::Material { material: d.name.clone(), what: what.to_string() };
-        for t in [d.base_color_texture, d.roughness_texture, d.alpha_texture, d.normal_texture].into_iter().flatten() {
+        let used = [d.base_color_texture, d.roughness_texture, d.alpha_texture, d.normal_texture, d.emission_texture];
+        for t in used.into_iter().flatten() {
             if t as usize >= textures {
                 return Err(bad(&format!("uses texture {t} but the scene has {textures}")));
             }
@@ -96,6 +98,7 @@ impl Material {
             alpha_texture: d.alpha_texture,
             normal_texture: d.normal_texture,
             normal_strength: d.normal_strength.max(0.0),
+            emission_texture: d.emission_texture,
             metal_color: d.metal_color.map(|c| Vec3::from_array(c).clamp(Vec3::ZERO, Vec3::ONE)),
             glass_color: d.glass_color.map(|c| Vec3::from_array(c).clamp(Vec3::ZERO, Vec3::ONE)),
             metal_roughness: d.metal_roughness.map(|r| r.clamp(0.0, 1.0)),

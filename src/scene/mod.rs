@@ -231,8 +231,12 @@ impl Scene {
         let mut weights: Vec<f32> = lights
             .iter()
             .map(|l| {
-                let a = if let LightShape::Triangle { prim } = l.shape { areas[prim as usize] } else { 0.0 };
-                l.power_estimate(bounds_radius, a)
+                let LightShape::Triangle { prim } = l.shape else { return l.power_estimate(bounds_radius, 0.0) };
+                // a textured emitter: its image's mean brightness scales the selection weight
+                let mat = &materials[tri_material[prim as usize] as usize];
+                let tex =
+                    mat.emission_texture.map_or(1.0, |t| crate::math::luminance(textures[t as usize].mean()).max(1e-6));
+                l.power_estimate(bounds_radius, areas[prim as usize]) * tex
             })
             .collect();
         // the world, last: power through the scene's bounding sphere, π·L·4πR²
@@ -410,6 +414,38 @@ impl Scene {
         }
     }
 
+    /// Emitted radiance of emissive triangle `t` (factor `emission`) at texture coordinates
+    /// `uv`: the factor, times the material's emission image where it has one.
+    #[inline]
+    fn emission_at(&self, t: usize, emission: Spectrum, uv: Vec2) -> Spectrum {
+        match self.materials[self.tri_material[t] as usize].emission_texture {
+            Some(tex) => emission * self.textures[tex as usize].eval(uv),
+            None => emission,
+        }
+    }
+
+    /// The same at barycentric coordinates (b1, b2) of the triangle.
+    #[inline]
+    fn triangle_radiance(&self, t: usize, emission: Spectrum, b1: f32, b2: f32) -> Spectrum {
+        if self.materials[self.tri_material[t] as usize].emission_texture.is_none() {
+            return emission;
+        }
+        let uv = self.uvs[t].map_or(Vec2::ZERO, |u| u[0] * (1.0 - b1 - b2) + u[1] * b1 + u[2] * b2);
+        self.emission_at(t, emission, uv)
+    }
+
+    /// Barycentric coordinates (b1, b2) of point `p` (on the plane of) triangle `t`.
+    fn barycentrics(&self, t: usize, p: Vec3) -> (f32, f32) {
+        let v = &self.positions[t];
+        let (e1, e2, d) = (v[1] - v[0], v[2] - v[0], p - v[0]);
+        let n = e1.cross(e2);
+        let n2 = n.length_squared();
+        if n2 <= 0.0 {
+            return (0.0, 0.0);
+        }
+        (d.cross(e2).dot(n) / n2, e1.cross(d).dot(n) / n2)
+    }
+
     /// The shading normal `ns` of triangle `t` perturbed by its material's tangent-space
     /// normal map at `uv`, as Cycles' Normal Map node: n' = T·c.x + B·c.y + N·c.z with
     /// c = 2·rgb − 1, the tangent T = ∂p/∂u of the triangle made orthogonal to N, B = ±N × T
@@ -491,6 +527,7 @@ impl Scene {
                 let v = &self.positions[prim as usize];
                 let (b1, b2) = square_to_triangle(u);
                 let lp = v[0] * (1.0 - b1 - b2) + v[1] * b1 + v[2] * b2;
+                let radiance = self.triangle_radiance(prim as usize, light.emission, b1, b2);
                 let to = lp - p;
                 let d2 = to.length_squared();
                 if d2 == 0.0 {
@@ -508,7 +545,7 @@ impl Scene {
                     n: if wi.dot(n) < 0.0 { n } else { -n },
                     wi,
                     dist,
-                    radiance: light.emission,
+                    radiance,
                     pdf: d2 / (cos_l * self.areas[prim as usize]),
                     is_delta: false,
                 }
@@ -529,7 +566,7 @@ impl Scene {
         if li == u32::MAX {
             return None;
         }
-        let le = self.lights[li as usize].emission;
+        let le = self.emission_at(si.prim as usize, self.lights[li as usize].emission, si.uv);
         let cos_l = dir.dot(si.ng).abs();
         let d2 = (si.p - from).length_squared();
         let pdf = if cos_l > 0.0 {
@@ -609,7 +646,9 @@ impl Scene {
                 let to = from - z;
                 let d2 = to.length_squared();
                 let cos = (to.dot(n) / d2.sqrt()).abs();
-                (cos > 1e-7).then(|| (light.emission, pmf * d2 / (cos * self.areas[*prim as usize])))
+                let (b1, b2) = self.barycentrics(*prim as usize, z);
+                let le = self.triangle_radiance(*prim as usize, light.emission, b1, b2);
+                (cos > 1e-7).then(|| (le, pmf * d2 / (cos * self.areas[*prim as usize])))
             }
             LightShape::Planar { normal, area, .. } => {
                 let to = from - z;
@@ -695,6 +734,32 @@ mod tests {
         let (o, d) = (Vec3::new(0.2, 0.1, 2.0), Vec3::new(0.0, 0.0, -1.0));
         let hit = scene.intersect(o, d, 0.0, f32::INFINITY).unwrap();
         scene.interaction(&hit, d).frame.n
+    }
+
+    /// Barycentric coordinates invert the triangle's parametrisation (what the shift uses to
+    /// find an emission image's value at a reconnected light point).
+    #[test]
+    fn barycentrics_invert_the_parametrisation() {
+        let quad = MeshDesc {
+            name: "Tri".into(),
+            positions: vec![[0.3, -1.0, 0.2], [1.5, 0.4, -0.3], [-0.7, 0.9, 1.1]],
+            indices: vec![[0, 1, 2]],
+            material_ids: vec![0],
+            ..Default::default()
+        };
+        let desc = SceneDesc {
+            meshes: vec![quad],
+            materials: vec![MaterialDesc::default()],
+            camera: camera_looking_along_y([0.0, -3.0, 0.0], 35.0, 4, 4),
+            ..Default::default()
+        };
+        let scene = Scene::build(&desc).unwrap();
+        let v = scene.positions[0];
+        for (b1, b2) in [(0.2f32, 0.3f32), (0.0, 1.0), (0.7, 0.1)] {
+            let p = v[0] * (1.0 - b1 - b2) + v[1] * b1 + v[2] * b2;
+            let (c1, c2) = scene.barycentrics(0, p);
+            assert!((c1 - b1).abs() < 1e-5 && (c2 - b2).abs() < 1e-5, "({b1}, {b2}) → ({c1}, {c2})");
+        }
     }
 
     /// Tangent-space normal maps tilt the shading normal along the texture's u (red) and v

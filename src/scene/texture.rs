@@ -73,6 +73,23 @@ impl Texture {
         (self.width, self.height)
     }
 
+    /// The mean linear colour over the image (each pixel decoded), for light power estimates.
+    pub fn mean(&self) -> Spectrum {
+        let sum: glam::DVec3 = self
+            .pixels
+            .iter()
+            .map(|p| {
+                let c = if self.srgb {
+                    Spectrum::new(srgb_to_linear(p.x), srgb_to_linear(p.y), srgb_to_linear(p.z))
+                } else {
+                    *p
+                };
+                c.as_dvec3()
+            })
+            .sum();
+        (sum / self.pixels.len() as f64).as_vec3()
+    }
+
     /// The pixel at integer coordinates after the extension mode (None = transparent black).
     #[inline]
     fn texel(&self, x: i64, y: i64) -> Option<Spectrum> {
