@@ -192,6 +192,11 @@ def textures(bpy):
         img.pixels.foreach_set(np.ascontiguousarray(pixels, dtype=np.float32).ravel())
         return img
 
+    def image_node(nt, name, pixels, colorspace):
+        tex = nt.nodes.new("ShaderNodeTexImage")
+        tex.image = image(name, pixels, colorspace)
+        return tex
+
     yy, xx = np.mgrid[0:8, 0:8]
     checker = np.where(((xx + yy) % 2 == 0)[..., None], [0.9, 0.8, 0.2, 1.0], [0.1, 0.3, 0.7, 1.0])
     ramp = np.zeros((4, 16, 4))
@@ -234,8 +239,7 @@ def textures(bpy):
                       "LeafAlpha")
     bsdf = nt.nodes.new("ShaderNodeBsdfPrincipled")
     bsdf.inputs["Roughness"].default_value = 1.0
-    tex = nt.nodes.new("ShaderNodeTexImage")
-    tex.image = image("LeafRGBA", leaf, "sRGB")
+    tex = image_node(nt, "LeafRGBA", leaf, "sRGB")
     nt.links.new(tex.outputs["Color"], bsdf.inputs["Base Color"])
     nt.links.new(tex.outputs["Alpha"], bsdf.inputs["Alpha"])
     nt.links.new(bsdf.outputs[0], out.inputs["Surface"])
@@ -255,8 +259,7 @@ def textures(bpy):
     bsdf.inputs["Roughness"].default_value = 0.4
     nm = nt.nodes.new("ShaderNodeNormalMap")
     nm.inputs["Strength"].default_value = 1.0  # (UsdPreviewSurface cannot carry another strength)
-    tex = nt.nodes.new("ShaderNodeTexImage")
-    tex.image = image("Ridges", ridges, "Non-Color")
+    tex = image_node(nt, "Ridges", ridges, "Non-Color")
     nt.links.new(tex.outputs["Color"], nm.inputs["Color"])
     nt.links.new(nm.outputs["Normal"], bsdf.inputs["Normal"])
     nt.links.new(bsdf.outputs[0], out.inputs["Surface"])
@@ -270,8 +273,7 @@ def textures(bpy):
                       "ScreenGlow")
     em = nt.nodes.new("ShaderNodeEmission")
     em.inputs["Strength"].default_value = 3.0
-    tex = nt.nodes.new("ShaderNodeTexImage")
-    tex.image = image("ScreenBars", bars, "sRGB")
+    tex = image_node(nt, "ScreenBars", bars, "sRGB")
     nt.links.new(tex.outputs["Color"], em.inputs["Color"])
     nt.links.new(em.outputs[0], out.inputs["Surface"])
     return scene
