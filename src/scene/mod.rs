@@ -228,15 +228,18 @@ impl Scene {
             }
         };
         let env = Environment::new(Vec3::from_array(desc.world), world_tex, rotation);
+        // a textured emitter: its image's mean brightness scales the selection weight (the
+        // mean of each emission image once, not once per emissive triangle)
+        let emission_scale: Vec<f32> = materials
+            .iter()
+            .map(|m| m.emission_texture.map_or(1.0, |t| crate::math::luminance(textures[t as usize].mean()).max(1e-6)))
+            .collect();
         let mut weights: Vec<f32> = lights
             .iter()
             .map(|l| {
                 let LightShape::Triangle { prim } = l.shape else { return l.power_estimate(bounds_radius, 0.0) };
-                // a textured emitter: its image's mean brightness scales the selection weight
-                let mat = &materials[tri_material[prim as usize] as usize];
-                let tex =
-                    mat.emission_texture.map_or(1.0, |t| crate::math::luminance(textures[t as usize].mean()).max(1e-6));
-                l.power_estimate(bounds_radius, areas[prim as usize]) * tex
+                let scale = emission_scale[tri_material[prim as usize] as usize];
+                l.power_estimate(bounds_radius, areas[prim as usize]) * scale
             })
             .collect();
         // the world, last: power through the scene's bounding sphere, π·L·4πR²
