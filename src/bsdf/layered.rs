@@ -86,28 +86,30 @@ impl Layered {
         (f, pdf)
     }
 
-    pub fn eval(&self, wo: Vec3, wi: Vec3) -> Spectrum {
+    /// f·cos θi and the sampling density together, for the layer albedo `e` = s·E(θo): the
+    /// table is read and the microfacet terms evaluated once for both.
+    #[inline]
+    fn eval_pdf(&self, wo: Vec3, wi: Vec3, e: f32) -> (Spectrum, f32) {
         if wo.z <= 0.0 || wi.z <= 0.0 {
-            return Spectrum::ZERO;
+            return (Spectrum::ZERO, 0.0);
         }
-        let e = self.layer_albedo(wo.z);
+        let ps = self.layer_probability(e);
         let mut f = self.base.eval(wo, wi) * (1.0 - e);
+        let mut p = (1.0 - ps) * self.base.pdf(wo, wi);
         if e > 0.0 && !self.is_smooth() {
-            f += Spectrum::splat(self.rough_layer(wo, wi).0);
+            let (fl, pl) = self.rough_layer(wo, wi);
+            f += Spectrum::splat(fl);
+            p += ps * pl;
         }
-        f
+        (f, p)
+    }
+
+    pub fn eval(&self, wo: Vec3, wi: Vec3) -> Spectrum {
+        self.eval_pdf(wo, wi, self.layer_albedo(wo.z)).0
     }
 
     pub fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
-        if wo.z <= 0.0 || wi.z <= 0.0 {
-            return 0.0;
-        }
-        let ps = self.layer_probability(self.layer_albedo(wo.z));
-        let mut p = (1.0 - ps) * self.base.pdf(wo, wi);
-        if ps > 0.0 && !self.is_smooth() {
-            p += ps * self.rough_layer(wo, wi).1;
-        }
-        p
+        self.eval_pdf(wo, wi, self.layer_albedo(wo.z)).1
     }
 
     pub fn sample(&self, wo: Vec3, u_lobe: f32, u: Vec2) -> Option<BsdfSample> {
@@ -117,12 +119,11 @@ impl Layered {
         let e = self.layer_albedo(wo.z);
         let ps = self.layer_probability(e);
         if u_lobe < ps && self.is_smooth() {
-            // the mirror lobe: s·F as a discrete measure, chosen with probability ps
+            // the mirror lobe: e = s·F as a discrete measure, chosen with probability ps
             let wi = Vec3::new(-wo.x, -wo.y, wo.z);
-            let f = self.coverage * fresnel_dielectric(wo.z, self.eta);
             return Some(BsdfSample {
                 wi,
-                weight: Spectrum::splat(f / ps),
+                weight: Spectrum::splat(e / ps),
                 pdf: ps,
                 lobe: LobeKind::Specular,
                 eta: 1.0,
@@ -133,11 +134,11 @@ impl Layered {
         } else {
             self.base.sample(wo, u)?.wi
         };
-        let pdf = self.pdf(wo, wi);
+        let (f, pdf) = self.eval_pdf(wo, wi, e);
         if wi.z <= 0.0 || !(pdf > 0.0) {
             return None;
         }
-        Some(BsdfSample { wi, weight: self.eval(wo, wi) / pdf, pdf, lobe: LobeKind::Diffuse, eta: 1.0 })
+        Some(BsdfSample { wi, weight: f / pdf, pdf, lobe: LobeKind::Diffuse, eta: 1.0 })
     }
 
     /// The smooth layer's mirror lobe: (s·F as a discrete measure, its probability, wi).
