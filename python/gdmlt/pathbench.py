@@ -34,19 +34,21 @@ def cornell_with_sphere(size: int, triangles: int) -> dict:
     return desc
 
 
-def _rate_gdmlt(sc, w, h, nee, bounces, threads, seconds):
+def rate_gdmlt(sc, w, h, nee, bounces, threads, seconds, method="pt"):
+    """Samples/s of one render of `method` long enough to measure (over seconds/4, after a
+    warm-up): (rate, image, samples per pixel of that render)."""
     import gdmlt
 
-    gdmlt.render(sc, method="pt", spp=1, nee=nee, seed=7, threads=threads, max_bounces=bounces)
+    gdmlt.render(sc, method=method, spp=1, nee=nee, seed=7, threads=threads, max_bounces=bounces)
     spp = 1
     while True:
         t = time.perf_counter()
-        res = gdmlt.render(sc, method="pt", spp=spp, nee=nee, seed=1, threads=threads, max_bounces=bounces)
+        res = gdmlt.render(sc, method=method, spp=spp, nee=nee, seed=1, threads=threads, max_bounces=bounces)
         dt = time.perf_counter() - t
         if dt > seconds / 4 or spp >= 1 << 16:
             break
         spp = max(spp * 2, int(spp * seconds / max(dt, 1e-3)))
-    return w * h * spp / dt, res["layers"]["Combined"]
+    return w * h * spp / dt, res["layers"]["Combined"], spp
 
 
 def _rate_mitsuba(mi, scene, w, h, seconds, rate_hint):
@@ -84,7 +86,7 @@ def run(size=128, triangles=1_000_000, bounces=8, seconds=8.0, thread_counts=Non
             if mi is not None:
                 msc = peers.mitsuba_scene(mi, simple, bounces, nee)
             for th in thread_counts:
-                rg, img = _rate_gdmlt(sc, size, size, nee, bounces, th, seconds)
+                rg, img, _ = rate_gdmlt(sc, size, size, nee, bounces, th, seconds)
                 ref_mean = float(img.mean())
                 rm = mm = float("nan")
                 if msc is not None:

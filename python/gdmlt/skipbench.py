@@ -13,19 +13,7 @@ from __future__ import annotations
 import os
 import time
 
-
-def _rate(sc, method, size, seconds, threads):
-    import gdmlt
-
-    gdmlt.render(sc, method=method, spp=1, seed=7, threads=threads)
-    spp = 1
-    while True:
-        t = time.perf_counter()
-        gdmlt.render(sc, method=method, spp=spp, seed=1, threads=threads)
-        dt = time.perf_counter() - t
-        if dt > seconds or spp >= 1 << 16:
-            return spp, size * size * spp / dt
-        spp = max(spp * 2, int(spp * seconds / max(dt, 1e-3)))
+from .pathbench import rate_gdmlt
 
 
 def _timed(sc, method, size, spp, threads):
@@ -61,7 +49,8 @@ def run(size=96, seconds=2.0, threads=0, out=print):
         desc = gdmlt.builtin_scene(name, size, size)
         fast, general = _scene(desc, True), _scene(desc, False)
         for method in ("pt", "gdpt"):
-            spp, _ = _rate(fast, method, size, seconds, threads)
+            # the sample count of a ~`seconds` render (pathbench's calibration: over seconds/4)
+            spp = rate_gdmlt(fast, size, size, True, 8, threads, 4 * seconds, method)[2]
             best = {True: (0.0, 0.0), False: (0.0, 0.0)}
             for _ in range(3):
                 for shortcuts, sc in ((True, fast), (False, general)):
