@@ -560,17 +560,23 @@ fn builtin_scene<'py>(py: Python<'py>, name: &str, width: u32, height: u32) -> P
     for m in &d.materials {
         let md = PyDict::new(py);
         md.set_item("name", &m.name)?;
-        md.set_item("base_color", m.base_color)?;
-        md.set_item("emission", m.emission)?;
-        md.set_item("roughness", m.roughness)?;
-        md.set_item("metallic", m.metallic)?;
-        md.set_item("transmission", m.transmission)?;
-        md.set_item("ior", m.ior)?;
-        md.set_item("specular_ior", m.specular_ior)?;
-        md.set_item("specular", m.specular)?;
-        md.set_item("transparency", m.transparency)?;
-        md.set_item("transparent_color", m.transparent_color)?;
-        md.set_item("normal_strength", m.normal_strength)?;
+        for (key, c) in
+            [("base_color", m.base_color), ("emission", m.emission), ("transparent_color", m.transparent_color)]
+        {
+            md.set_item(key, c)?;
+        }
+        for (key, v) in [
+            ("roughness", m.roughness),
+            ("metallic", m.metallic),
+            ("transmission", m.transmission),
+            ("ior", m.ior),
+            ("specular_ior", m.specular_ior),
+            ("specular", m.specular),
+            ("transparency", m.transparency),
+            ("normal_strength", m.normal_strength),
+        ] {
+            md.set_item(key, v)?;
+        }
         md.set_item("multiscatter", m.multiscatter)?;
         for (key, value) in [
             ("base_color_texture", m.base_color_texture),
