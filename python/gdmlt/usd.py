@@ -106,7 +106,7 @@ class _Reader:
         mtlx = usd_material.ComputeSurfaceSource("mtlx")[0]
         done = False
         if mtlx and (mtlx.GetIdAttr().Get() or "").startswith("ND_"):
-            work = dict(out)
+            work, kept = dict(out), (len(self.textures), dict(self.texture_index))
             try:
                 done = self._materialx(mtlx, work, what)
             except _PreviewInstead as e:
@@ -116,6 +116,9 @@ class _Reader:
                     self.warn(f"{what}: MaterialX {e} is not read; the UsdPreviewSurface is used")
             if done:
                 out = work
+            else:  # textures read for the abandoned attempt are dropped again
+                del self.textures[kept[0]:]
+                self.texture_index = kept[1]
         if not done:
             shader = usd_material.ComputeSurfaceSource()[0]
             if shader and shader.GetIdAttr().Get() == "UsdPreviewSurface":
