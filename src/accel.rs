@@ -1,5 +1,8 @@
 //! Ray–triangle acceleration: obvhs' compressed wide BVH (CWBVH, Ylitie et al. 2017) behind
-//! two calls, closest hit and occlusion. Triangles are stored in BVH leaf order for locality.
+//! two calls, closest hit and occlusion. The triangles of each node's leaf children are
+//! stored in blocks of eight in structure-of-arrays layout, aligned to the node, and tested
+//! eight at a time (Möller–Trumbore in SIMD lanes, as Embree's Triangle8 leaves) the moment
+//! the node is entered, instead of one by one.
 
 use glam::{UVec2, Vec3, Vec3A};
 use obvhs::cwbvh::builder::build_cwbvh_from_tris;
@@ -19,50 +22,78 @@ pub struct TriHit {
     pub b2: f32,
 }
 
-#[derive(Clone, Copy)]
-struct LeafTri {
-    v0: Vec3A,
-    e1: Vec3A,
-    e2: Vec3A,
+/// Lanes of a triangle block.
+const LANES: usize = 8;
+
+/// Eight triangles as vertex v0 and edges e1 = v1 − v0, e2 = v2 − v0, one array per
+/// coordinate (x, y, z), so that one SIMD load fetches a coordinate of all eight. 288 bytes.
+#[derive(Clone, Copy, Default)]
+#[repr(C, align(32))]
+struct TriBlock {
+    v0: [[f32; LANES]; 3],
+    e1: [[f32; LANES]; 3],
+    e2: [[f32; LANES]; 3],
 }
 
-pub struct Accel {
-    bvh: CwBvh,
-    leaf_tris: Vec<LeafTri>,
-    leaf_prim: Vec<u32>,
-    /// Whether the traversal prefetches (only when the BVH outgrows the caches: on small
-    /// scenes everything is cached and the prefetches are pure overhead, −7% on the Cornell box).
-    prefetch: bool,
-}
-
-/// BVH sizes (nodes + leaf triangles) above this are prefetched during traversal.
-const PREFETCH_ABOVE_BYTES: usize = 1 << 20;
-
-/// Möller–Trumbore (1997). Returns (t, b1, b2) inside (tmin, tmax).
+/// Möller–Trumbore (1997) on the eight triangles of a block, without its division: with
+/// det = e1·(d × e2), the scaled barycentrics U = s·(d × e2), V = d·(s × e1) and distance
+/// T = e2·(s × e1) are compared against det-scaled bounds (b1 = U/det, b2 = V/det, t = T/det),
+/// so that only a hit pays for a division. Returns per lane (det, U, V, T) and the mask of
+/// lanes in `lanes` hit inside (tmin, tmax). Written lane by lane over fixed-size arrays so
+/// that the compiler vectorises it (AVX2 in the x86-64-v3 build, SSE2 pairs in the portable
+/// one).
 #[inline(always)]
-fn intersect(tri: &LeafTri, o: Vec3A, d: Vec3A, tmin: f32, tmax: f32) -> Option<(f32, f32, f32)> {
-    let p = d.cross(tri.e2);
-    let det = tri.e1.dot(p);
-    if det == 0.0 || !det.is_finite() {
-        return None;
+fn intersect_block(b: &TriBlock, lanes: u32, o: Vec3A, d: Vec3A, tmin: f32, tmax: f32) -> ([[f32; LANES]; 4], u32) {
+    let mut out = [[0.0f32; LANES]; 4];
+    let mut ok = [false; LANES];
+    for i in 0..LANES {
+        let (e1, e2) = ([b.e1[0][i], b.e1[1][i], b.e1[2][i]], [b.e2[0][i], b.e2[1][i], b.e2[2][i]]);
+        // p = d × e2, det = e1 · p
+        let p = [d.y * e2[2] - d.z * e2[1], d.z * e2[0] - d.x * e2[2], d.x * e2[1] - d.y * e2[0]];
+        let det = e1[0] * p[0] + e1[1] * p[1] + e1[2] * p[2];
+        let s = [o.x - b.v0[0][i], o.y - b.v0[1][i], o.z - b.v0[2][i]];
+        let u = s[0] * p[0] + s[1] * p[1] + s[2] * p[2];
+        // q = s × e1
+        let q = [s[1] * e1[2] - s[2] * e1[1], s[2] * e1[0] - s[0] * e1[2], s[0] * e1[1] - s[1] * e1[0]];
+        let v = d.x * q[0] + d.y * q[1] + d.z * q[2];
+        let t = e2[0] * q[0] + e2[1] * q[1] + e2[2] * q[2];
+        // the bounds 0 ≤ b1, 0 ≤ b2, b1 + b2 ≤ 1, tmin < t < tmax, multiplied by |det|
+        let (adet, sign) = (det.abs(), if det < 0.0 { -1.0 } else { 1.0 });
+        let (us, vs, ts) = (u * sign, v * sign, t * sign);
+        // |det| > 0 and finite; every comparison with NaN fails
+        ok[i] = adet > 0.0
+            && adet < f32::INFINITY
+            && us >= 0.0
+            && vs >= 0.0
+            && us + vs <= adet
+            && ts > tmin * adet
+            && ts < tmax * adet;
+        (out[0][i], out[1][i], out[2][i], out[3][i]) = (det, u, v, t);
     }
-    let inv = 1.0 / det;
-    let s = o - tri.v0;
-    let b1 = s.dot(p) * inv;
-    if !(0.0..=1.0).contains(&b1) {
-        return None;
+    let mut mask = 0u32;
+    for (i, &hit) in ok.iter().enumerate() {
+        mask |= (hit as u32) << i;
     }
-    let q = s.cross(tri.e1);
-    let b2 = d.dot(q) * inv;
-    if b2 < 0.0 || b1 + b2 > 1.0 {
-        return None;
+    (out, mask & lanes)
+}
+
+/// The nearest hit among the `lanes` of a block: (lane, t, b1, b2).
+#[inline(always)]
+fn closest_in_block(b: &TriBlock, lanes: u32, o: Vec3A, d: Vec3A, tmin: f32, tmax: f32) -> Option<(u32, f32, f32, f32)> {
+    let ([det, u, v, t], mut mask) = intersect_block(b, lanes, o, d, tmin, tmax);
+    let mut best: Option<(u32, f32, f32, f32)> = None;
+    while mask != 0 {
+        let i = mask.trailing_zeros();
+        mask &= mask - 1;
+        let k = i as usize;
+        let inv = 1.0 / det[k];
+        let tk = t[k] * inv;
+        // (the quotient is rounded: keep it inside the interval the scaled test accepted)
+        if tk > tmin && tk < tmax && best.is_none_or(|h| tk < h.1) {
+            best = Some((i, tk, u[k] * inv, v[k] * inv));
+        }
     }
-    let t = tri.e2.dot(q) * inv;
-    if t > tmin && t < tmax {
-        Some((t, b1, b2))
-    } else {
-        None
-    }
+    best
 }
 
 /// Which children of a CWBVH node the ray's segment meets, as the traversal's hit mask
@@ -115,16 +146,14 @@ unsafe fn node_hits_avx2(node: &CwBvhNode, ray: &Ray, oct_inv4: u32) -> u32 {
     hits
 }
 
-/// Asks the memory system early for what the traversal will read next: the node's inner
-/// children the ray entered and the triangles of the leaves it entered. Incoherent rays on
-/// large meshes spend half their time waiting for those loads (perf, 1M triangles).
+/// Asks the memory system early for the inner children a ray entered (incoherent rays on
+/// large meshes spend half their time waiting for node loads: perf, 1M triangles).
 #[inline(always)]
-fn prefetch_children(bvh: &CwBvh, leaf_tris: &[LeafTri], node: &CwBvhNode, hits: u32) {
+fn prefetch_children(bvh: &CwBvh, node: &CwBvhNode, hits: u32) {
     #[cfg(target_arch = "x86_64")]
     {
         use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
-        let inner = (hits >> 24).count_ones() as usize;
-        if inner > 0 {
+        if hits >> 24 != 0 {
             let base = node.child_base_idx as usize;
             let nodes = &bvh.nodes[base.min(bvh.nodes.len())..(base + 8).min(bvh.nodes.len())];
             for n in nodes.iter().take(node.imask.count_ones() as usize) {
@@ -132,18 +161,37 @@ fn prefetch_children(bvh: &CwBvh, leaf_tris: &[LeafTri], node: &CwBvhNode, hits:
                 unsafe { _mm_prefetch::<_MM_HINT_T0>(n as *const CwBvhNode as *const i8) };
             }
         }
-        let mut tri = hits & 0x00ff_ffff;
-        while tri != 0 {
-            let i = node.primitive_base_idx as usize + tri.trailing_zeros() as usize;
-            tri &= tri - 1;
-            if let Some(t) = leaf_tris.get(i) {
-                // SAFETY: as above.
-                unsafe { _mm_prefetch::<_MM_HINT_T0>(t as *const LeafTri as *const i8) };
-            }
-        }
     }
     #[cfg(not(target_arch = "x86_64"))]
-    let _ = (bvh, leaf_tris, node, hits);
+    let _ = (bvh, node, hits);
+}
+
+pub struct Accel {
+    bvh: CwBvh,
+    /// Leaf triangles: node n's leaf triangles k = 0..24 (its hit-mask bits) are slot
+    /// `n.primitive_base_idx + k`, i.e. lane k % 8 of block `n.primitive_base_idx / 8 + k / 8`
+    /// (each node's base is rewritten to a multiple of 8 at build).
+    blocks: Vec<TriBlock>,
+    /// Scene triangle index of each slot (u32::MAX for padding lanes).
+    slot_prim: Vec<u32>,
+    /// Whether the traversal prefetches (only when the BVH outgrows the caches: on small
+    /// scenes everything is cached and the prefetches are pure overhead, −7% on the Cornell box).
+    prefetch: bool,
+}
+
+/// BVH sizes (nodes + leaf triangles) above this are prefetched during traversal.
+const PREFETCH_ABOVE_BYTES: usize = 1 << 20;
+
+/// Number of leaf triangles a node references (offsets 0..24 from its primitive base):
+/// the end of its furthest leaf child (child_meta: low 5 bits the offset, high 3 the count
+/// in unary; inner children have offsets 24..32, empty slots are 0).
+fn node_leaf_triangles(node: &CwBvhNode) -> usize {
+    node.child_meta
+        .iter()
+        .filter(|&&m| m != 0 && (m & 0x1f) < 24)
+        .map(|&m| (m & 0x1f) as usize + (m >> 5).count_ones() as usize)
+        .max()
+        .unwrap_or(0)
 }
 
 impl Accel {
@@ -155,43 +203,106 @@ impl Accel {
         // preset here (0.6 s) and traces a few per cent faster; the slow preset costs 45% more
         // build time for no measurable gain (2026-11-25, `make raybench`).
         let params = BvhBuildParams::medium_build();
-        let bvh = build_cwbvh_from_tris(&obvhs_tris, params, &mut Duration::default());
-        let leaf_prim: Vec<u32> = bvh.primitive_indices.clone();
-        let leaf_tris = leaf_prim
-            .iter()
-            .map(|&i| {
-                let t = &tris[i as usize];
-                LeafTri { v0: t[0].into(), e1: (t[1] - t[0]).into(), e2: (t[2] - t[0]).into() }
-            })
-            .collect();
-        let bytes = bvh.nodes.len() * std::mem::size_of::<CwBvhNode>() + tris.len() * std::mem::size_of::<LeafTri>();
-        Accel { bvh, leaf_tris, leaf_prim, prefetch: bytes > PREFETCH_ABOVE_BYTES }
+        let mut bvh = build_cwbvh_from_tris(&obvhs_tris, params, &mut Duration::default());
+        drop(obvhs_tris);
+        // Lay each node's leaf triangles out as whole blocks of eight starting at a block
+        // boundary, in the order of its hit-mask bits.
+        let mut blocks: Vec<TriBlock> = Vec::new();
+        let mut slot_prim: Vec<u32> = Vec::new();
+        for node in bvh.nodes.iter_mut() {
+            let n = node_leaf_triangles(node);
+            if n == 0 {
+                continue;
+            }
+            let old = node.primitive_base_idx as usize;
+            node.primitive_base_idx = (blocks.len() * LANES) as u32;
+            for g in 0..n.div_ceil(LANES) {
+                let mut b = TriBlock::default();
+                for lane in 0..LANES {
+                    let k = g * LANES + lane;
+                    let prim = if k < n { bvh.primitive_indices.get(old + k).copied() } else { None };
+                    slot_prim.push(prim.unwrap_or(u32::MAX));
+                    let Some(t) = prim.and_then(|p| tris.get(p as usize)) else { continue };
+                    let (e1, e2) = (t[1] - t[0], t[2] - t[0]);
+                    for c in 0..3 {
+                        b.v0[c][lane] = t[0][c];
+                        b.e1[c][lane] = e1[c];
+                        b.e2[c][lane] = e2[c];
+                    }
+                }
+                blocks.push(b);
+            }
+        }
+        bvh.primitive_indices = Vec::new(); // replaced by slot_prim
+        let bytes = bvh.nodes.len() * std::mem::size_of::<CwBvhNode>() + blocks.len() * std::mem::size_of::<TriBlock>();
+        Accel { bvh, blocks, slot_prim, prefetch: bytes > PREFETCH_ABOVE_BYTES }
     }
 
+    /// Bytes held by the BVH nodes and the triangle blocks.
+    pub fn bytes(&self) -> usize {
+        self.bvh.nodes.len() * std::mem::size_of::<CwBvhNode>()
+            + self.blocks.len() * std::mem::size_of::<TriBlock>()
+            + self.slot_prim.len() * 4
+    }
+
+    /// The node's child hit mask; with prefetching of the entered inner children on large BVHs.
     #[inline(always)]
     fn visit(&self, node: &CwBvhNode, ray: &Ray, oct_inv4: u32) -> u32 {
         let hits = node_hits(node, ray, oct_inv4);
         if self.prefetch {
-            prefetch_children(&self.bvh, &self.leaf_tris, node, hits);
+            prefetch_children(&self.bvh, node, hits);
         }
         hits
+    }
+
+    /// Calls `f(slot, block, lanes)` for each block of the node's leaf triangles that the
+    /// hit mask `hits` entered (lanes: the entered triangles of that block).
+    #[inline(always)]
+    fn for_each_block(&self, node: &CwBvhNode, hits: u32, mut f: impl FnMut(usize, &TriBlock, u32) -> bool) -> bool {
+        let mut tri = hits & 0x00ff_ffff;
+        let base = node.primitive_base_idx as usize;
+        while tri != 0 {
+            let g = tri.trailing_zeros() as usize / LANES;
+            let lanes = (tri >> (g * LANES)) & 0xff;
+            tri &= !(0xff << (g * LANES));
+            let slot = base + g * LANES;
+            if let Some(b) = self.blocks.get(slot / LANES) {
+                if f(slot, b, lanes) {
+                    return true;
+                }
+            }
+        }
+        false
     }
 
     #[inline]
     pub fn closest(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> Option<TriHit> {
         let (oa, da) = (Vec3A::from(o), Vec3A::from(d));
         let mut ray = Ray::new(oa, da, tmin, tmax);
-        let (mut prim, mut b1, mut b2) = (u32::MAX, 0.0, 0.0);
+        let (mut slot, mut b1, mut b2) = (usize::MAX, 0.0, 0.0);
         let mut state = self.bvh.new_traversal(da);
         let mut node;
-        obvhs::traverse!(self.bvh, node, state, self.visit(node, &ray, state.oct_inv4), {
-            let id = state.primitive_id as usize;
-            if let Some((t, u, v)) = intersect(&self.leaf_tris[id], oa, da, tmin, ray.tmax) {
-                ray.tmax = t;
-                (prim, b1, b2) = (id as u32, u, v);
-            }
-        });
-        (prim != u32::MAX).then(|| TriHit { prim: self.leaf_prim[prim as usize], t: ray.tmax, b1, b2 })
+        // Leaf triangles are tested inside the node step (the macro's per-primitive block
+        // stays empty): the node's hit mask goes back with its triangle bits cleared.
+        obvhs::traverse!(
+            self.bvh,
+            node,
+            state,
+            {
+                let hits = self.visit(node, &ray, state.oct_inv4);
+                self.for_each_block(node, hits, |s, b, lanes| {
+                    if let Some((lane, t, u, v)) = closest_in_block(b, lanes, oa, da, tmin, ray.tmax) {
+                        ray.tmax = t;
+                        (slot, b1, b2) = (s + lane as usize, u, v);
+                    }
+                    false
+                });
+                hits & 0xff00_0000
+            },
+            {}
+        );
+        let prim = *self.slot_prim.get(slot)?;
+        Some(TriHit { prim, t: ray.tmax, b1, b2 })
     }
 
     #[inline]
@@ -200,17 +311,24 @@ impl Accel {
         let ray = Ray::new(oa, da, tmin, tmax);
         let mut state = self.bvh.new_traversal(da);
         let mut node;
-        let mut hit = false;
-        // (a plain `break` would only leave the macro's inner loop over a leaf's triangles)
+        // (a plain `break` would only leave the macro's inner loop)
         'traversal: {
-            obvhs::traverse!(self.bvh, node, state, self.visit(node, &ray, state.oct_inv4), {
-                if intersect(&self.leaf_tris[state.primitive_id as usize], oa, da, tmin, tmax).is_some() {
-                    hit = true;
-                    break 'traversal;
-                }
-            });
+            obvhs::traverse!(
+                self.bvh,
+                node,
+                state,
+                {
+                    let hits = self.visit(node, &ray, state.oct_inv4);
+                    if self.for_each_block(node, hits, |_, b, lanes| intersect_block(b, lanes, oa, da, tmin, tmax).1 != 0)
+                    {
+                        break 'traversal true;
+                    }
+                    hits & 0xff00_0000
+                },
+                {}
+            );
+            false
         }
-        hit
     }
 }
 
@@ -219,13 +337,29 @@ mod tests {
     use super::*;
     use crate::sampler::{IndependentSampler, Sampler};
 
+    /// Scalar Möller–Trumbore in f64, independent of the block test: (t) of the hit, if any.
+    fn reference_hit(t: &[Vec3; 3], o: Vec3, d: Vec3) -> Option<f64> {
+        let f = |v: Vec3| glam::DVec3::new(v.x as f64, v.y as f64, v.z as f64);
+        let (v0, e1, e2, o, d) = (f(t[0]), f(t[1] - t[0]), f(t[2] - t[0]), f(o), f(d));
+        let p = d.cross(e2);
+        let det = e1.dot(p);
+        if det == 0.0 {
+            return None;
+        }
+        let s = o - v0;
+        let b1 = s.dot(p) / det;
+        let q = s.cross(e1);
+        let b2 = d.dot(q) / det;
+        let tt = e2.dot(q) / det;
+        (b1 >= 0.0 && b2 >= 0.0 && b1 + b2 <= 1.0 && tt > 0.0).then_some(tt)
+    }
+
     fn brute_force(tris: &[[Vec3; 3]], o: Vec3, d: Vec3) -> Option<(u32, f32)> {
         let mut best: Option<(u32, f32)> = None;
         for (i, t) in tris.iter().enumerate() {
-            let lt = LeafTri { v0: t[0].into(), e1: (t[1] - t[0]).into(), e2: (t[2] - t[0]).into() };
-            if let Some((tt, _, _)) = intersect(&lt, o.into(), d.into(), 0.0, f32::INFINITY) {
-                if best.is_none_or(|b| tt < b.1) {
-                    best = Some((i as u32, tt));
+            if let Some(tt) = reference_hit(t, o, d) {
+                if best.is_none_or(|b| (tt as f32) < b.1) {
+                    best = Some((i as u32, tt as f32));
                 }
             }
         }
@@ -290,6 +424,10 @@ mod tests {
                     if a.prim != b.0 {
                         assert!((a.t - b.1).abs() < 1e-5);
                     }
+                    // the barycentrics name the hit point on that triangle
+                    let v = &tris[a.prim as usize];
+                    let p = v[0] * (1.0 - a.b1 - a.b2) + v[1] * a.b1 + v[2] * a.b2;
+                    assert!((p - (o + d * a.t)).length() < 1e-4, "barycentrics {a:?}");
                     assert!(accel.occluded(o, d, 0.0, b.1 * 1.001));
                     assert!(!accel.occluded(o, d, 0.0, b.1 * 0.999));
                 }
@@ -298,5 +436,28 @@ mod tests {
             }
         }
         assert!(hits > 300, "too few hits to be a test: {hits}");
+    }
+
+    /// Every triangle lands in a block lane: a ray at each triangle's centroid, along its
+    /// normal, finds it (a small mesh with many triangles per leaf, and a large one).
+    #[test]
+    fn every_triangle_is_found_at_its_centroid() {
+        let mut s = IndependentSampler::new(5, 1);
+        let mut r = |k: f32| (s.next_1d() - 0.5) * k;
+        for n in [1, 7, 9, 30, 5000] {
+            let tris = triangle_soup(&mut r, n);
+            let accel = Accel::build(&tris);
+            assert_eq!(accel.slot_prim.len() % LANES, 0);
+            for (i, t) in tris.iter().enumerate() {
+                let c = (t[0] + t[1] + t[2]) / 3.0;
+                let nrm = (t[1] - t[0]).cross(t[2] - t[0]).normalize();
+                let o = c + nrm * 1e-3;
+                let h = accel.closest(o, -nrm, 0.0, 2e-3);
+                let h = h.unwrap_or_else(|| panic!("triangle {i} of {n} not found"));
+                // another triangle may lie in front at this spot only in the soup; then it is nearer
+                assert!(h.prim == i as u32 || h.t < 1e-3, "triangle {i}: hit {h:?}");
+                assert!(accel.occluded(o, -nrm, 0.0, 2e-3));
+            }
+        }
     }
 }
