@@ -35,6 +35,19 @@ struct TriBlock {
     e2: [[f32; LANES]; 3],
 }
 
+/// The ray segment a block is tested against: origin, direction and the open interval
+/// (tmin, tmax) of distances.
+#[derive(Clone, Copy)]
+struct Segment {
+    o: Vec3A,
+    d: Vec3A,
+    tmin: f32,
+    tmax: f32,
+}
+
+/// A block test's answer: per lane (det, U, V, T), and the mask of the lanes hit.
+type BlockHits = ([[f32; LANES]; 4], u32);
+
 /// Möller–Trumbore (1997) on the eight triangles of a block, without its division: with
 /// det = e1·(d × e2), the scaled barycentrics U = s·(d × e2), V = d·(s × e1) and distance
 /// T = e2·(s × e1) are compared against det-scaled bounds (b1 = U/det, b2 = V/det, t = T/det),
@@ -44,14 +57,8 @@ struct TriBlock {
 /// one).
 #[cfg_attr(all(target_arch = "x86_64", target_feature = "avx2", target_feature = "fma"), allow(dead_code))]
 #[inline(always)]
-fn intersect_block_lanes(
-    b: &TriBlock,
-    lanes: u32,
-    o: Vec3A,
-    d: Vec3A,
-    tmin: f32,
-    tmax: f32,
-) -> ([[f32; LANES]; 4], u32) {
+fn intersect_block_lanes(b: &TriBlock, lanes: u32, seg: &Segment) -> BlockHits {
+    let Segment { o, d, tmin, tmax } = *seg;
     let mut out = [[0.0f32; LANES]; 4];
     let mut ok = [false; LANES];
     for i in 0..LANES {
@@ -90,14 +97,8 @@ fn intersect_block_lanes(
 /// Products are fused, so results may differ from the portable test in the last bits.
 #[cfg(all(target_arch = "x86_64", target_feature = "avx2", target_feature = "fma"))]
 #[inline(always)]
-fn intersect_block_avx2(
-    b: &TriBlock,
-    lanes: u32,
-    o: Vec3A,
-    d: Vec3A,
-    tmin: f32,
-    tmax: f32,
-) -> ([[f32; LANES]; 4], u32) {
+fn intersect_block_avx2(b: &TriBlock, lanes: u32, seg: &Segment) -> BlockHits {
+    let Segment { o, d, tmin, tmax } = *seg;
     use std::arch::x86_64::*;
     // SAFETY: compiled only for targets with AVX2 and FMA (the v3 module, loaded only on CPUs
     // that report them); TriBlock is 32-byte aligned, so each row is an aligned load.
@@ -146,28 +147,22 @@ fn intersect_block_avx2(
 /// The block test of this build: AVX2 + FMA intrinsics where the target has them, else the
 /// portable lane loop.
 #[inline(always)]
-fn intersect_block(b: &TriBlock, lanes: u32, o: Vec3A, d: Vec3A, tmin: f32, tmax: f32) -> ([[f32; LANES]; 4], u32) {
+fn intersect_block(b: &TriBlock, lanes: u32, seg: &Segment) -> BlockHits {
     #[cfg(all(target_arch = "x86_64", target_feature = "avx2", target_feature = "fma"))]
     {
-        intersect_block_avx2(b, lanes, o, d, tmin, tmax)
+        intersect_block_avx2(b, lanes, seg)
     }
     #[cfg(not(all(target_arch = "x86_64", target_feature = "avx2", target_feature = "fma")))]
     {
-        intersect_block_lanes(b, lanes, o, d, tmin, tmax)
+        intersect_block_lanes(b, lanes, seg)
     }
 }
 
 /// The nearest hit among the `lanes` of a block: (lane, t, b1, b2).
 #[inline(always)]
-fn closest_in_block(
-    b: &TriBlock,
-    lanes: u32,
-    o: Vec3A,
-    d: Vec3A,
-    tmin: f32,
-    tmax: f32,
-) -> Option<(u32, f32, f32, f32)> {
-    let ([det, u, v, t], mut mask) = intersect_block(b, lanes, o, d, tmin, tmax);
+fn closest_in_block(b: &TriBlock, lanes: u32, seg: &Segment) -> Option<(u32, f32, f32, f32)> {
+    let ([det, u, v, t], mut mask) = intersect_block(b, lanes, seg);
+    let (tmin, tmax) = (seg.tmin, seg.tmax);
     let mut best: Option<(u32, f32, f32, f32)> = None;
     while mask != 0 {
         let i = mask.trailing_zeros();
@@ -321,8 +316,9 @@ impl Accel {
             }
         }
         bvh.primitive_indices = Vec::new(); // replaced by slot_prim
-        let bytes = bvh.nodes.len() * std::mem::size_of::<CwBvhNode>() + blocks.len() * std::mem::size_of::<TriBlock>();
-        Accel { bvh, blocks, slot_prim, prefetch: bytes > PREFETCH_ABOVE_BYTES }
+        let mut accel = Accel { bvh, blocks, slot_prim, prefetch: false };
+        accel.prefetch = accel.bytes() > PREFETCH_ABOVE_BYTES;
+        accel
     }
 
     /// Bytes held by the BVH nodes and the triangle blocks.
@@ -378,7 +374,8 @@ impl Accel {
             {
                 let hits = self.visit(node, &ray, state.oct_inv4);
                 self.for_each_block(node, hits, |s, b, lanes| {
-                    if let Some((lane, t, u, v)) = closest_in_block(b, lanes, oa, da, tmin, ray.tmax) {
+                    let seg = Segment { o: oa, d: da, tmin, tmax: ray.tmax };
+                    if let Some((lane, t, u, v)) = closest_in_block(b, lanes, &seg) {
                         ray.tmax = t;
                         (slot, b1, b2) = (s + lane as usize, u, v);
                     }
@@ -396,6 +393,7 @@ impl Accel {
     pub fn occluded(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> bool {
         let (oa, da) = (Vec3A::from(o), Vec3A::from(d));
         let ray = Ray::new(oa, da, tmin, tmax);
+        let seg = Segment { o: oa, d: da, tmin, tmax };
         let mut state = self.bvh.new_traversal(da);
         let mut node;
         // (a plain `break` would only leave the macro's inner loop)
@@ -406,9 +404,7 @@ impl Accel {
                 state,
                 {
                     let hits = self.visit(node, &ray, state.oct_inv4);
-                    if self
-                        .for_each_block(node, hits, |_, b, lanes| intersect_block(b, lanes, oa, da, tmin, tmax).1 != 0)
-                    {
+                    if self.for_each_block(node, hits, |_, b, lanes| intersect_block(b, lanes, &seg).1 != 0) {
                         break 'traversal true;
                     }
                     hits & 0xff00_0000
@@ -573,8 +569,9 @@ mod tests {
             let at = (aim[0] + aim[1] + aim[2]) / 3.0 + Vec3::new(r(0.6), r(0.6), r(0.6));
             let d = (Vec3A::from(at) - o).normalize();
             let tmax = if r(1.0) < 0.0 { f32::INFINITY } else { r(30.0).abs() };
-            let (a, ma) = intersect_block_avx2(&b, 0xff, o, d, 0.0, tmax);
-            let (p, mp) = intersect_block_lanes(&b, 0xff, o, d, 0.0, tmax);
+            let seg = Segment { o, d, tmin: 0.0, tmax };
+            let (a, ma) = intersect_block_avx2(&b, 0xff, &seg);
+            let (p, mp) = intersect_block_lanes(&b, 0xff, &seg);
             differ += (ma ^ mp).count_ones();
             for k in 0..LANES {
                 if ma & mp & (1 << k) != 0 {
