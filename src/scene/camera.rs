@@ -166,8 +166,16 @@ impl Camera {
                     let len = dir.length();
                     (o, dir / len, -dir.z / len)
                 } else {
+                    // a pinhole: the direction is normalised once, in world space below
+                    // (the view-axis component of d is 1, so clip distances scale by |d|)
                     let len = d.length();
-                    (Vec3::ZERO, d / len, 1.0 / len)
+                    let dir = self.to_world.transform_vector3(d).normalize();
+                    return CameraRay {
+                        origin: self.to_world.w_axis.truncate(),
+                        dir,
+                        tmin: self.clip_start * len,
+                        tmax: self.clip_end * len,
+                    };
                 }
             }
             Projection::Orthographic => (Vec3::new(q.x, q.y, 0.0), Vec3::NEG_Z, 1.0),
