@@ -269,6 +269,9 @@ pub fn trace_path<S: Sampler>(
             break;
         }
         let wo = si.frame.to_local(wo_world);
+        // The continuation is sampled first: it does not depend on the light sample, so the
+        // processor overlaps the two computations before the shadow ray's traversal.
+        let sampled = bsdf.sample(wo, u_lobe, u_bsdf);
 
         // Next-event estimation.
         if use_nee && !bsdf.is_delta() {
@@ -304,7 +307,7 @@ pub fn trace_path<S: Sampler>(
         }
 
         // BSDF sampling.
-        let Some(bs) = bsdf.sample(wo, u_lobe, u_bsdf) else {
+        let Some(bs) = sampled else {
             break;
         };
         let wi_world = si.frame.to_world(bs.wi);
