@@ -166,7 +166,7 @@ impl Camera {
                     let len = dir.length();
                     (o, dir / len, -dir.z / len)
                 } else {
-                    // a pinhole: the direction is normalised once, in world space below
+                    // a pinhole: the direction is normalised once, in world space
                     // (the view-axis component of d is 1, so clip distances scale by |d|)
                     let len = d.length();
                     let dir = self.to_world.transform_vector3(d).normalize();
