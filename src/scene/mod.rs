@@ -539,17 +539,19 @@ impl Scene {
                 let dist = d2.sqrt();
                 let wi = to / dist;
                 let n = self.geo_normals[prim as usize];
-                let cos_l = wi.dot(n).abs(); // two-sided emission
-                if cos_l <= 1e-7 {
+                // |cos| at the light (two-sided emission) = |to·n|/dist; the pdf d²/(|cos|·A)
+                // is formed from to·n, not from wi, so that it waits for one division, not two
+                let to_n = to.dot(n);
+                if to_n.abs() <= 1e-7 * dist {
                     return None;
                 }
                 LightSample {
                     p: lp,
-                    n: if wi.dot(n) < 0.0 { n } else { -n },
+                    n: if to_n < 0.0 { n } else { -n },
                     wi,
                     dist,
                     radiance,
-                    pdf: d2 / (cos_l * self.areas[prim as usize]),
+                    pdf: d2 * dist / (to_n.abs() * self.areas[prim as usize]),
                     is_delta: false,
                 }
             }
