@@ -289,8 +289,10 @@ impl Accel {
         drop(obvhs_tris);
         // Lay each node's leaf triangles out as whole blocks of eight starting at a block
         // boundary, in the order of its hit-mask bits.
-        let mut blocks: Vec<TriBlock> = Vec::new();
-        let mut slot_prim: Vec<u32> = Vec::new();
+        // (sized exactly first: growing by doubling would hold up to twice the blocks at once)
+        let count: usize = bvh.nodes.iter().map(|n| node_leaf_triangles(n).div_ceil(LANES)).sum();
+        let mut blocks: Vec<TriBlock> = Vec::with_capacity(count);
+        let mut slot_prim: Vec<u32> = Vec::with_capacity(count * LANES);
         for node in bvh.nodes.iter_mut() {
             let n = node_leaf_triangles(node);
             if n == 0 {
