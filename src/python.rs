@@ -721,6 +721,9 @@ fn init_module(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(reconstruct, m)?)?;
     m.add_function(wrap_pyfunction!(cpu_supports_x86_64_v3, m)?)?;
     m.add("METHODS", vec!["pt", "gdpt", "pssmlt", "gdpssmlt"])?;
+    // The path builder's Russian roulette starts after this many bounces (benchmarks set
+    // their peers' roulette to it, so that every renderer traces paths of the same length).
+    m.add("RR_START_DEPTH", crate::path::RR_START_DEPTH)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add("BUILD_TARGET", if cfg!(target_feature = "avx2") { "x86-64-v3" } else { "portable" })?;
     m.add("SOURCE_HASH", env!("GDMLT_SOURCE_HASH"))?;

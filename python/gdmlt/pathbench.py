@@ -1,10 +1,17 @@
 """`gdmlt pathbench`: path-tracing throughput (camera samples per second) of GDMLT's `pt`
-against Mitsuba 3 (`path` with emitter sampling, `prb_basic` without; `llvm_ad_rgb`) and
-LuxCore PATHCPU (Sobol, light sampling on or off), on the same scene arrays, same resolution,
-same bounce limit, same thread count, in one run. Scenes: the built-in Cornell box and the
-Cornell box with a ~1M-triangle bumpy sphere inside. Each renderer's image mean is printed as
-a ratio to GDMLT's to show that all three render the same scene. It measures; it does not
-pass or fail.
+against Mitsuba 3 (`path` with emitter sampling; without it, BSDF sampling as `prb_basic`;
+`llvm_ad_rgb`) and LuxCore PATHCPU (Sobol, light sampling on or off), on the same scene arrays,
+same resolution, same bounce limit, same thread count, in one run. Scenes: the built-in Cornell
+box and the Cornell box with a ~1M-triangle bumpy sphere inside. Each renderer's image mean is
+printed as a ratio to GDMLT's to show that all three render the same scene. It measures; it does
+not pass or fail.
+
+Same path length: samples/s only compare when every renderer ends its paths alike, so Mitsuba
+runs with GDMLT's Russian roulette (from bounce `gdmlt.RR_START_DEPTH`, q = min(max
+throughput, 1); see `peers.mitsuba_integrator`). Mitsuba's defaults (roulette from depth 5 with
+`path`, none with `prb_basic`) trace longer paths per sample; the column `mi default` gives
+that rate for reference. LuxCore keeps its own roulette (from depth 3 on the local BSDF weight,
+survival at least 0.5), so its paths run longer than GDMLT's.
 
 Timing: GDMLT and Mitsuba are timed around one render call after a warm-up render (Mitsuba's
 first call compiles its kernels); scene loading/BVH building is not counted for anyone.
@@ -71,7 +78,7 @@ def run(size=128, triangles=1_000_000, bounces=8, seconds=8.0, thread_counts=Non
         f"(Mitsuba max_depth {bounces + 2}, LuxCore pathdepth {bounces + 1}), ~{seconds:g} s per cell, "
         f"{all_threads} hardware threads")
     out(f"{'scene':16} {'nee':5} {'threads':>7} {'gdmlt Ms/s':>11} {'mitsuba Ms/s':>13} {'luxcore Ms/s':>13} "
-        f"{'gdmlt/mi':>9} {'gdmlt/lux':>9} {'mean mi/g':>9} {'mean lux/g':>10}")
+        f"{'gdmlt/mi':>9} {'gdmlt/lux':>9} {'mean mi/g':>9} {'mean lux/g':>10} {'mi default':>10}")
     try:
         mi, dr = peers.import_mitsuba()
     except Exception as e:  # noqa: BLE001 — a missing peer is reported, not fatal
@@ -82,17 +89,19 @@ def run(size=128, triangles=1_000_000, bounces=8, seconds=8.0, thread_counts=Non
         simple = peers.simple_scene(desc)
         sc = gdmlt.Scene(desc)
         for nee in (True, False):
-            msc = None
+            msc = msc_default = None
             if mi is not None:
-                msc = peers.mitsuba_scene(mi, simple, bounces, nee)
+                msc = peers.mitsuba_scene(mi, simple, bounces, nee, rr_depth=gdmlt.RR_START_DEPTH)
+                msc_default = peers.mitsuba_scene(mi, simple, bounces, nee)
             for th in thread_counts:
                 rg, img, _ = rate_gdmlt(sc, size, size, nee, bounces, th, seconds)
                 ref_mean = float(img.mean())
-                rm = mm = float("nan")
+                rm = mm = rmd = float("nan")
                 if msc is not None:
                     dr.set_thread_count(th)
                     rm, mimg = _rate_mitsuba(mi, msc, size, size, seconds, rg)
                     mm = float(mimg.mean()) / ref_mean
+                    rmd, _ = _rate_mitsuba(mi, msc_default, size, size, seconds / 2, rg)
                 try:
                     imgs, times, samples = peers.luxcore_render(simple, [1.0, seconds / 2 + 1.0], bounces, nee, threads=th)
                     rl = (samples[1] - samples[0]) / (times[1] - times[0])
@@ -102,6 +111,8 @@ def run(size=128, triangles=1_000_000, bounces=8, seconds=8.0, thread_counts=Non
                     rl = ml = float("nan")
                 rows.append((label, nee, th, rg, rm, rl))
                 out(f"{label:16} {str(nee):5} {th:>7} {rg / 1e6:11.3f} {rm / 1e6:13.3f} {rl / 1e6:13.3f} "
-                    f"{rg / rm:9.2f} {rg / rl:9.2f} {mm:9.3f} {ml:10.3f}")
-    out("# Ms/s = million camera samples (paths) per second; mean x/g = that renderer's image mean / GDMLT's")
+                    f"{rg / rm:9.2f} {rg / rl:9.2f} {mm:9.3f} {ml:10.3f} {rmd / 1e6:10.3f}")
+    out("# Ms/s = million camera samples (paths) per second; mean x/g = that renderer's image mean / GDMLT's;")
+    out(f"# mitsuba with GDMLT's Russian roulette (from bounce {gdmlt.RR_START_DEPTH}); "
+        "mi default = Mitsuba's own (path: from depth 5; prb_basic: none), Ms/s")
     return rows

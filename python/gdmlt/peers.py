@@ -133,12 +133,77 @@ def import_mitsuba(threads: int = 0):
     return mi, dr
 
 
-def mitsuba_scene(mi, simple: dict, max_bounces: int, nee: bool, seed_spp: int = 1):
+_BSDF_RR = "gdmlt_bsdf_sampling_rr"
+
+
+def _register_bsdf_sampling_rr(mi, dr):
+    """Registers a Mitsuba integrator that finds light by BSDF sampling only (as `prb_basic`)
+    but with GDMLT's Russian roulette: after `rr_depth` bounces a path goes on with probability
+    q = min(max throughput, 1) and its throughput is divided by q (`src/path.rs`). Mitsuba's
+    `prb_basic` has no roulette at all, so its paths run to `max_depth` and cost more each."""
+    if _BSDF_RR in getattr(_register_bsdf_sampling_rr, "done", set()):
+        return
+
+    class BsdfSamplingRR(mi.SamplingIntegrator):
+        def __init__(self, props):
+            super().__init__(props)
+            self.max_depth = props.get("max_depth", 10)
+            self.rr_depth = props.get("rr_depth", 3)
+
+        @dr.syntax
+        def sample(self, scene, sampler, ray, medium=None, active=True):
+            # (dr.syntax recompiles this body without its closure: the modules come by import)
+            import drjit as dr
+            import mitsuba as mi
+
+            ctx = mi.BSDFContext()
+            ray = mi.Ray3f(ray)
+            radiance = mi.Spectrum(0.0)
+            beta = mi.Spectrum(1.0)
+            depth = mi.UInt32(0)
+            active = mi.Bool(active)
+            while active:
+                si = scene.ray_intersect(ray, active)
+                radiance += beta * si.emitter(scene).eval(si, active)
+                active &= si.is_valid() & (depth + 1 < self.max_depth)
+                bs, weight = si.bsdf(ray).sample(ctx, si, sampler.next_1d(), sampler.next_2d(), active)
+                beta *= weight
+                ray = si.spawn_ray(si.to_world(bs.wo))
+                depth += 1
+                beta_max = dr.max(mi.unpolarized_spectrum(beta))
+                q = dr.minimum(beta_max, 1.0)
+                roulette = depth >= self.rr_depth
+                survive = sampler.next_1d() < q
+                beta[roulette] *= dr.rcp(q)
+                active &= (~roulette | survive) & (beta_max > 0)
+            return radiance, mi.Bool(True), []
+
+    mi.register_integrator(_BSDF_RR, lambda props: BsdfSamplingRR(props))
+    _register_bsdf_sampling_rr.done = {_BSDF_RR}
+
+
+def mitsuba_integrator(mi, max_bounces: int, nee: bool, rr_depth: int | None = None) -> dict:
+    """Mitsuba's `path` (emitter sampling + MIS) or BSDF sampling only. rr_depth None: Mitsuba's
+    own defaults (`path`: roulette from depth 5, q capped at 0.95; `prb_basic`: no roulette).
+    rr_depth k: roulette from bounce k as GDMLT's (`path` keeps its 0.95 cap, which ends a
+    path only where its throughput is still above 0.95 after k bounces)."""
+    depth = max_bounces + 2
+    if nee:
+        return {"type": "path", "max_depth": depth, **({} if rr_depth is None else {"rr_depth": rr_depth})}
+    if rr_depth is None:
+        return {"type": "prb_basic", "max_depth": depth}
+    import drjit as dr
+
+    _register_bsdf_sampling_rr(mi, dr)
+    return {"type": _BSDF_RR, "max_depth": depth, "rr_depth": rr_depth}
+
+
+def mitsuba_scene(mi, simple: dict, max_bounces: int, nee: bool, seed_spp: int = 1, rr_depth: int | None = None):
     # Blender's camera looks down −Z with +Y up; Mitsuba's down +Z with +Y up and +X to the left.
     to_world = simple["matrix"] @ np.diag([-1.0, 1.0, -1.0, 1.0])
     scene = {
         "type": "scene",
-        "integrator": {"type": "path" if nee else "prb_basic", "max_depth": max_bounces + 2},
+        "integrator": mitsuba_integrator(mi, max_bounces, nee, rr_depth),
         "sensor": {
             "type": "perspective", "fov": simple["fov_x"], "fov_axis": "x",
             "near_clip": simple["clip_start"], "far_clip": simple["clip_end"],
