@@ -561,7 +561,7 @@ mod tests {
             let eta_x = if refraction { eta } else { 1.0 };
             let Some((wi_y, j)) = half_vector_copy(wo_x, wi_x, eta_x, wo_y, eta_x) else { continue };
             let f = crate::math::Frame::from_normal(wi_x);
-            let h = 2e-3f32;
+            let h = 5e-4f32;
             let corners = [Vec2::new(-1.0, -1.0), Vec2::new(1.0, -1.0), Vec2::new(1.0, 1.0), Vec2::new(-1.0, 1.0)];
             let xs: Vec<Vec3> = corners.iter().map(|c| (wi_x + (f.s * c.x + f.t * c.y) * h).normalize()).collect();
             let ys: Option<Vec<Vec3>> =
