@@ -42,12 +42,13 @@ demo: build
 
 test: build test-rust test-python
 
-# Every Rust test on the portable build; on x86-64 the BVH tests again on the x86-64-v3 build
-# (its AVX2 node test must return exactly obvhs' hit masks).
+# Every Rust test on the portable build; on x86-64 the BVH and packet tests again on the
+# x86-64-v3 build (its AVX2 node test must return exactly obvhs' hit masks, its packet
+# traversal exactly what single rays find).
 test-rust:
 	cargo test --release
 	@if [ "$$(uname -m)" = x86_64 ]; then \
-		RUSTFLAGS="-C target-cpu=x86-64-v3" cargo test --release --lib --target-dir target/x86-64-v3 accel; \
+		RUSTFLAGS="-C target-cpu=x86-64-v3" cargo test --release --lib --target-dir target/x86-64-v3 -- accel packet; \
 	fi
 
 test-python: build

@@ -10,8 +10,10 @@
 //! Bounce limit as in Cycles' "Max Bounces" B: a path scatters at most B+1 times, so B = 0
 //! is direct lighting (light sampled at, or hit after, the first surface).
 
+use crate::accel::TriHit;
 use crate::math::{is_finite_spectrum, power_heuristic, Frame, Spectrum};
 use crate::sampler::Sampler;
+use crate::scene::camera::CameraRay;
 use crate::scene::{Scene, SurfaceInteraction};
 use glam::{Vec2, Vec3};
 
@@ -130,24 +132,46 @@ pub struct PathContribution {
     pub normal: Vec3,
 }
 
+/// A path's camera ray and what it hits first: the start of `trace_path_from` (a caller may
+/// trace the camera rays of several paths together, as one packet).
+#[derive(Clone, Copy, Debug)]
+pub struct Primary {
+    /// The lens sample (the path's first two primary samples).
+    pub lens: Vec2,
+    pub ray: CameraRay,
+    pub hit: Option<TriHit>,
+}
+
 /// Builds one path through `raster` (pixels, y from the top) and returns its contribution.
 pub fn trace_path<S: Sampler>(
     scene: &Scene,
     cfg: &PathSettings,
     raster: Vec2,
     sampler: &mut S,
+    record: Option<&mut Path>,
+) -> PathContribution {
+    let lens = sampler.next_2d();
+    let ray = scene.camera.generate_ray(raster, lens);
+    let hit = scene.intersect(ray.origin, ray.dir, ray.tmin, ray.tmax);
+    trace_path_from(scene, cfg, Primary { lens, ray, hit }, sampler, record)
+}
+
+/// The same path from its traced camera ray on (`sampler` then stands after the lens sample).
+pub fn trace_path_from<S: Sampler>(
+    scene: &Scene,
+    cfg: &PathSettings,
+    primary: Primary,
+    sampler: &mut S,
     mut record: Option<&mut Path>,
 ) -> PathContribution {
     if let Some(p) = record.as_deref_mut() {
         p.vertices.clear();
         p.events.clear();
+        p.lens = primary.lens;
     }
     let mut out = PathContribution::default();
-    let lens = sampler.next_2d();
-    if let Some(p) = record.as_deref_mut() {
-        p.lens = lens;
-    }
-    let cam = scene.camera.generate_ray(raster, lens);
+    let cam = primary.ray;
+    let mut first_hit = Some(primary.hit);
     let (mut o, mut d, mut tmin, mut tmax) = (cam.origin, cam.dir, cam.tmin, cam.tmax);
     let mut beta = Spectrum::ONE;
     let mut depth = 0u32; // scattering events so far (bounces; pass-through crossings excluded)
@@ -165,7 +189,10 @@ pub fn trace_path<S: Sampler>(
     let use_nee = cfg.nee && scene.has_lights();
 
     loop {
-        let hit = scene.intersect(o, d, tmin, tmax);
+        let hit = match first_hit.take() {
+            Some(h) => h,
+            None => scene.intersect(o, d, tmin, tmax),
+        };
         let t_surface = hit.map_or(tmax, |h| h.t);
         // the camera ray itself (very-direct light); lamps stay invisible to the camera
         // through transparent surfaces too (depth counts scattering, not crossings)

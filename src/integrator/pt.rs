@@ -4,9 +4,11 @@
 //! so the image is the same for any thread count.
 
 use super::{RenderControl, RenderOutput, RenderSettings, RenderStats};
+use crate::accel::RayPacket;
 use crate::film::{Film, FilmRow};
-use crate::path::trace_path;
+use crate::path::{trace_path_from, Primary};
 use crate::sampler::{IndependentSampler, Sampler};
+use crate::scene::camera::CameraRay;
 use crate::scene::Scene;
 use glam::Vec2;
 use rayon::prelude::*;
@@ -18,7 +20,12 @@ pub fn pixel_sampler(seed: u64, pixel: usize, sample: u32) -> IndependentSampler
     IndependentSampler::new(seed, ((pixel as u64) << 32) | sample as u64)
 }
 
-/// Renders samples [from, to) of every pixel of one row.
+/// Camera rays traced together: consecutive samples of a row (a pixel's samples, or
+/// neighbouring pixels) look through nearly the same point, so their rays share a traversal.
+const PACKET: usize = 8;
+
+/// Renders samples [from, to) of every pixel of one row, in the order (pixel, sample); the
+/// camera rays of each run of `PACKET` such samples are traced as one packet.
 fn render_row(
     scene: &Scene,
     settings: &RenderSettings,
@@ -29,13 +36,32 @@ fn render_row(
     to: u32,
 ) {
     let w = row.count.len();
-    for x in 0..w {
-        for s in from..to {
+    let mut work = (0..w).flat_map(|x| (from..to).map(move |s| (x, s)));
+    let mut packet = RayPacket::default();
+    let mut batch: [(usize, Vec2, Option<IndependentSampler>); PACKET] = Default::default();
+    loop {
+        packet.count = 0;
+        for (slot, (x, s)) in batch.iter_mut().zip(work.by_ref()) {
             let mut sampler = pixel_sampler(settings.seed, y * w + x, s);
             let raster = Vec2::new(x as f32, y as f32) + sampler.next_2d();
+            let lens = sampler.next_2d();
+            let ray = scene.camera.generate_ray(raster, lens);
+            let k = packet.count;
+            (packet.o[k], packet.d[k], packet.tmin[k], packet.tmax[k]) = (ray.origin, ray.dir, ray.tmin, ray.tmax);
+            packet.count += 1;
+            *slot = (x, lens, Some(sampler));
+        }
+        if packet.count == 0 {
+            break;
+        }
+        let hits = scene.intersect_packet(&packet);
+        for (k, (x, lens, sampler)) in batch.iter_mut().enumerate().take(packet.count) {
+            let Some(sampler) = sampler.as_mut() else { continue };
+            let ray = CameraRay { origin: packet.o[k], dir: packet.d[k], tmin: packet.tmin[k], tmax: packet.tmax[k] };
+            let primary = Primary { lens: *lens, ray, hit: hits[k] };
             // PT needs no recorded vertices or events: nothing is recorded on its hot path.
-            let c = trace_path(scene, &settings.path, raster, &mut sampler, None);
-            row.add(x, c.radiance, c.very_direct, c.albedo, c.normal);
+            let c = trace_path_from(scene, &settings.path, primary, sampler, None);
+            row.add(*x, c.radiance, c.very_direct, c.albedo, c.normal);
         }
     }
     control.work_done.fetch_add(w as u64 * (to - from) as u64, Ordering::Relaxed);
@@ -80,5 +106,44 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl)
             invalid_samples: film.invalid_samples(),
             ..Default::default()
         },
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::film::FilmRow;
+    use crate::path::trace_path;
+    use crate::scene::builtin::cornell_spheres;
+
+    /// Tracing the camera rays in packets changes nothing but speed: every pixel gets the
+    /// samples that `trace_path`, one sample at a time, gives it (3 samples per pixel, so
+    /// packets straddle pixels; the last packet of a row is partial).
+    #[test]
+    fn packet_camera_rays_give_the_samples_of_single_paths() {
+        let scene = Scene::build(&cornell_spheres(13, 5)).unwrap();
+        let settings = RenderSettings { spp: 3, seed: 5, ..Default::default() };
+        let control = RenderControl::new(0.0);
+        let w = 13;
+        for y in 0..5 {
+            let mut packets = FilmRow::new(w);
+            render_row(&scene, &settings, &control, y, &mut packets, 0, 3);
+            let mut single = FilmRow::new(w);
+            for x in 0..w {
+                for s in 0..3 {
+                    let mut sampler = pixel_sampler(settings.seed, y * w + x, s);
+                    let raster = Vec2::new(x as f32, y as f32) + sampler.next_2d();
+                    let c = trace_path(&scene, &settings.path, raster, &mut sampler, None);
+                    single.add(x, c.radiance, c.very_direct, c.albedo, c.normal);
+                }
+            }
+            assert_eq!(packets.count, single.count);
+            for x in 0..w {
+                for c in 0..3 {
+                    let (a, b) = (packets.color[x][c], single.color[x][c]);
+                    assert!((a - b).abs() <= 1e-6 * b.abs().max(1e-3), "pixel ({x}, {y}): {a} vs {b}");
+                }
+            }
+        }
     }
 }

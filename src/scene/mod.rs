@@ -15,7 +15,7 @@ pub use light::{Light, LightSample, LightShape};
 pub use material::Material;
 pub use texture::Texture;
 
-use crate::accel::{Accel, TriHit};
+use crate::accel::{Accel, RayPacket, TriHit};
 use crate::bsdf::Bsdf;
 use crate::distribution::Distribution1D;
 use crate::error::SceneError;
@@ -304,6 +304,12 @@ impl Scene {
     #[inline]
     pub fn intersect(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> Option<TriHit> {
         self.accel.as_ref()?.closest(o, d, tmin, tmax)
+    }
+
+    /// The closest surface hit of each ray of a packet (coherent rays: see `RayPacket`).
+    #[inline]
+    pub fn intersect_packet(&self, rays: &RayPacket) -> [Option<TriHit>; 8] {
+        self.accel.as_ref().map_or([None; 8], |a| a.closest_packet(rays))
     }
 
     /// True when any surface lies along the ray in (tmin, tmax). Lights never occlude.
