@@ -313,8 +313,11 @@ impl Scene {
     }
     /// Closest hits of a batch of rays (origins and directions float32 N×3) with the core's
     /// BVH: (t, triangle) as float32 and int64 arrays, t = inf and triangle = −1 for a miss.
-    /// For benchmarks (gdmlt raybench) and tests; `threads` 0 = all cores.
-    #[pyo3(signature = (origins, directions, threads=0, occlusion=false))]
+    /// For benchmarks (gdmlt raybench) and tests; `threads` 0 = all cores. `packets`: closest
+    /// hits of each run of eight consecutive rays traced as one packet (as the path tracer's
+    /// camera rays; for coherent rays).
+    #[pyo3(signature = (origins, directions, threads=0, occlusion=false, packets=false))]
+    #[allow(clippy::too_many_arguments)]
     fn trace_rays<'py>(
         &self,
         py: Python<'py>,
@@ -322,6 +325,7 @@ impl Scene {
         directions: &Bound<'py, PyAny>,
         threads: usize,
         occlusion: bool,
+        packets: bool,
     ) -> PyResult<(Bound<'py, PyArray1<f32>>, Bound<'py, PyArray1<i64>>)> {
         let o = floats(origins, 3, "origins")?;
         let d = floats(directions, 3, "directions")?;
@@ -330,8 +334,26 @@ impl Scene {
         }
         let n = o.len() / 3;
         let scene = &self.inner;
+        let miss = (f32::INFINITY, -1i64);
         let run = || -> Vec<(f32, i64)> {
             use rayon::prelude::*;
+            if packets && !occlusion {
+                return (0..n.div_ceil(8))
+                    .into_par_iter()
+                    .with_min_len(128)
+                    .flat_map_iter(|c| {
+                        let mut p = crate::accel::RayPacket { count: (n - 8 * c).min(8), ..Default::default() };
+                        for k in 0..p.count {
+                            let i = 8 * c + k;
+                            p.o[k] = glam::Vec3::new(o[3 * i], o[3 * i + 1], o[3 * i + 2]);
+                            p.d[k] = glam::Vec3::new(d[3 * i], d[3 * i + 1], d[3 * i + 2]);
+                            (p.tmin[k], p.tmax[k]) = (0.0, f32::INFINITY);
+                        }
+                        let hits = scene.intersect_packet(&p);
+                        (0..p.count).map(move |k| hits[k].map_or(miss, |h| (h.t, h.prim as i64)))
+                    })
+                    .collect();
+            }
             (0..n)
                 .into_par_iter()
                 .with_min_len(1024)

@@ -194,6 +194,9 @@ def test_trace_rays_batch_api():
     assert (prim >= 0).mean() > 0.7 and np.all(t[prim >= 0] > 0) and np.all(np.isinf(t[prim < 0]))
     _, occ = scene.trace_rays(o, d, occlusion=True)
     assert np.array_equal(occ >= 0, prim >= 0)
+    # packets of eight (4999 rays: the last packet is partial) find what single rays find
+    tp, primp = scene.trace_rays(o[:4999], d[:4999], packets=True)
+    assert np.array_equal(tp, t[:4999]) and np.array_equal(primp, prim[:4999])
     far = np.full((3, 3), 100.0, np.float32)
     _, miss = scene.trace_rays(far, np.tile(np.array([[0.0, 0.0, 1.0]], np.float32), (3, 1)))
     assert np.all(miss == -1)
