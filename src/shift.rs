@@ -29,9 +29,11 @@
 //! (miss, occlusion, class mismatch, total internal reflection on one side) are symmetric in
 //! base and offset, which is what makes that rule unbiased.
 
+use crate::accel::TriHit;
 use crate::bsdf::{refraction_half_vector, Bsdf, SPECULAR_ROUGHNESS_THRESHOLD};
 use crate::math::Spectrum;
 use crate::path::{Event, Path, Vertex, CAMERA_VERTEX};
+use crate::scene::camera::CameraRay;
 use crate::scene::{Scene, SurfaceInteraction};
 use glam::{Vec2, Vec3};
 
@@ -187,11 +189,19 @@ struct Offset<'a> {
 
 impl<'a> Offset<'a> {
     fn new(scene: &'a Scene, base: &'a Path, offset_raster: Option<Vec2>) -> Offset<'a> {
+        let primary = offset_raster.filter(|_| !base.vertices.is_empty()).map(|raster| {
+            let ray = scene.camera.generate_ray(raster, base.lens);
+            (ray, scene.intersect(ray.origin, ray.dir, ray.tmin, ray.tmax))
+        });
+        Offset::from_primary(scene, base, primary)
+    }
+
+    /// The offset path from its traced camera ray (with the base's lens sample) and what it hit.
+    fn from_primary(scene: &'a Scene, base: &'a Path, primary: Option<(CameraRay, Option<TriHit>)>) -> Offset<'a> {
         let state = (|| {
             let x0 = base.vertices.first()?;
-            let ray = scene.camera.generate_ray(offset_raster?, base.lens);
-            let hit = scene.intersect(ray.origin, ray.dir, ray.tmin, ray.tmax)?;
-            let y = scene.interaction(&hit, ray.dir);
+            let (ray, hit) = primary?;
+            let y = scene.interaction(&hit?, ray.dir);
             let diffuse = is_diffuse(scene, x0.material, x0.front, x0.uv);
             (diffuse == is_diffuse(scene, y.material, y.front, y.uv)).then_some(State::Free(Free {
                 y,
@@ -390,8 +400,19 @@ fn reconnect_event(scene: &Scene, e: &Event, xk: Vec3, f: &Free) -> Option<(Spec
 /// The contributions of a base path and its offset through `offset_raster` (None when the
 /// neighbour pixel is outside the image: the base then takes full weight).
 pub fn shift(scene: &Scene, base: &Path, offset_raster: Option<Vec2>) -> PairContribution {
+    pair_contribution(Offset::new(scene, base, offset_raster))
+}
+
+/// The same with the offset's camera ray (through the neighbour pixel, with the base's lens
+/// sample) already traced: `primary` = that ray and its hit, None outside the image. (GDPT
+/// traces a base path's camera ray and its four offsets' as one packet.)
+pub fn shift_from(scene: &Scene, base: &Path, primary: Option<(CameraRay, Option<TriHit>)>) -> PairContribution {
+    pair_contribution(Offset::from_primary(scene, base, primary))
+}
+
+fn pair_contribution(mut offset: Offset<'_>) -> PairContribution {
     let mut out = PairContribution::default();
-    let mut offset = Offset::new(scene, base, offset_raster);
+    let base = offset.base;
     // events come in vertex order (camera events, never differenced, are skipped)
     for e in base.events.iter().filter(|e| e.vertex != CAMERA_VERTEX) {
         let pdf_x = e.pdf_b + e.pdf_l;
@@ -615,6 +636,41 @@ mod tests {
     /// Shift followed by the inverse shift gives back the base path, vertex for vertex, on a
     /// scene with a mirror sphere, a glass sphere and diffuse walls (reconnection and
     /// half-vector copies through reflection and refraction).
+    /// `shift_from` with the offsets' camera rays traced as one packet (as GDPT does) gives
+    /// exactly the pair contributions of `shift`, which traces each offset's ray alone.
+    #[test]
+    fn shift_from_packet_traced_camera_rays_matches_shift() {
+        use crate::accel::RayPacket;
+        use crate::path::{trace_path, PathSettings};
+        use crate::sampler::{IndependentSampler, Sampler};
+        let scene = Scene::build(&crate::scene::builtin::cornell_spheres(24, 24)).unwrap();
+        let cfg = PathSettings { max_bounces: 5, nee: true };
+        let mut base = Path::default();
+        let mut nonzero = 0;
+        for i in 0..3000u64 {
+            let mut smp = IndependentSampler::new(4, i);
+            let raster = Vec2::new((i % 24) as f32, ((i / 24) % 24) as f32) + smp.next_2d();
+            trace_path(&scene, &cfg, raster, &mut smp, Some(&mut base));
+            let shifts = [Vec2::X, -Vec2::X, Vec2::Y, -Vec2::Y];
+            let mut packet = RayPacket { count: 4, ..Default::default() };
+            let rays: Vec<CameraRay> =
+                shifts.iter().map(|s| scene.camera.generate_ray(raster + *s, base.lens)).collect();
+            for (k, r) in rays.iter().enumerate() {
+                (packet.o[k], packet.d[k], packet.tmin[k], packet.tmax[k]) = (r.origin, r.dir, r.tmin, r.tmax);
+            }
+            let hits = scene.intersect_packet(&packet);
+            for k in 0..4 {
+                let a = shift(&scene, &base, Some(raster + shifts[k]));
+                let b = shift_from(&scene, &base, Some((rays[k], hits[k])));
+                assert_eq!((a.base, a.offset), (b.base, b.offset), "path {i}, shift {k}");
+                nonzero += (a.offset.max_element() > 0.0) as usize;
+            }
+            let none = (shift(&scene, &base, None), shift_from(&scene, &base, None));
+            assert_eq!((none.0.base, none.0.offset), (none.1.base, none.1.offset));
+        }
+        assert!(nonzero > 1000, "too few offsets carrying light: {nonzero}");
+    }
+
     #[test]
     fn shift_then_inverse_shift_is_the_identity() {
         use crate::path::{trace_path, PathSettings};
