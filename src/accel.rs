@@ -92,21 +92,25 @@ fn intersect_block_lanes(b: &TriBlock, lanes: u32, seg: &Segment) -> BlockHits {
     (out, mask & lanes)
 }
 
-/// The same test in AVX2 + FMA intrinsics (the x86-64-v3 core): half the instructions of
-/// the compiler's vectorisation of the lane loop (fused multiply-adds, one movemask).
-/// Products are fused, so results may differ from the portable test in the last bits.
+/// Möller–Trumbore (as `intersect_block_lanes`) in eight AVX2 + FMA lanes, on whatever the
+/// lanes hold: eight triangles against one ray (the ray broadcast: the block test) or one
+/// triangle against eight rays (the triangle broadcast: the packet test). Returns per lane
+/// (det, U, V, T) and the mask of lanes hit inside (tmin, tmax), as all-ones lanes.
 #[cfg(all(target_arch = "x86_64", target_feature = "avx2", target_feature = "fma"))]
 #[inline(always)]
-fn intersect_block_avx2(b: &TriBlock, lanes: u32, seg: &Segment) -> BlockHits {
-    let Segment { o, d, tmin, tmax } = *seg;
+fn moller_trumbore_avx2(
+    [ox, oy, oz]: [std::arch::x86_64::__m256; 3],
+    [dx, dy, dz]: [std::arch::x86_64::__m256; 3],
+    [v0x, v0y, v0z]: [std::arch::x86_64::__m256; 3],
+    [e1x, e1y, e1z]: [std::arch::x86_64::__m256; 3],
+    [e2x, e2y, e2z]: [std::arch::x86_64::__m256; 3],
+    tmin: std::arch::x86_64::__m256,
+    tmax: std::arch::x86_64::__m256,
+) -> ([std::arch::x86_64::__m256; 4], std::arch::x86_64::__m256) {
     use std::arch::x86_64::*;
     // SAFETY: compiled only for targets with AVX2 and FMA (the v3 module, loaded only on CPUs
-    // that report them); TriBlock is 32-byte aligned, so each row is an aligned load.
+    // that report them); register arithmetic only.
     unsafe {
-        let ld = |r: &[f32; LANES]| _mm256_load_ps(r.as_ptr());
-        let (e1x, e1y, e1z) = (ld(&b.e1[0]), ld(&b.e1[1]), ld(&b.e1[2]));
-        let (e2x, e2y, e2z) = (ld(&b.e2[0]), ld(&b.e2[1]), ld(&b.e2[2]));
-        let (dx, dy, dz) = (_mm256_set1_ps(d.x), _mm256_set1_ps(d.y), _mm256_set1_ps(d.z));
         // a·b − c·e
         let cross = |a: __m256, b: __m256, c: __m256, e: __m256| _mm256_fmsub_ps(a, b, _mm256_mul_ps(c, e));
         let dot = |ax: __m256, ay: __m256, az: __m256, bx: __m256, by: __m256, bz: __m256| {
@@ -114,9 +118,7 @@ fn intersect_block_avx2(b: &TriBlock, lanes: u32, seg: &Segment) -> BlockHits {
         };
         let (px, py, pz) = (cross(dy, e2z, dz, e2y), cross(dz, e2x, dx, e2z), cross(dx, e2y, dy, e2x));
         let det = dot(e1x, e1y, e1z, px, py, pz);
-        let sx = _mm256_sub_ps(_mm256_set1_ps(o.x), ld(&b.v0[0]));
-        let sy = _mm256_sub_ps(_mm256_set1_ps(o.y), ld(&b.v0[1]));
-        let sz = _mm256_sub_ps(_mm256_set1_ps(o.z), ld(&b.v0[2]));
+        let (sx, sy, sz) = (_mm256_sub_ps(ox, v0x), _mm256_sub_ps(oy, v0y), _mm256_sub_ps(oz, v0z));
         let u = dot(sx, sy, sz, px, py, pz);
         let (qx, qy, qz) = (cross(sy, e1z, sz, e1y), cross(sz, e1x, sx, e1z), cross(sx, e1y, sy, e1x));
         let v = dot(dx, dy, dz, qx, qy, qz);
@@ -134,10 +136,36 @@ fn intersect_block_avx2(b: &TriBlock, lanes: u32, seg: &Segment) -> BlockHits {
         ok = _mm256_and_ps(ok, _mm256_cmp_ps::<_CMP_GE_OQ>(us, zero));
         ok = _mm256_and_ps(ok, _mm256_cmp_ps::<_CMP_GE_OQ>(vs, zero));
         ok = _mm256_and_ps(ok, _mm256_cmp_ps::<_CMP_LE_OQ>(_mm256_add_ps(us, vs), adet));
-        ok = _mm256_and_ps(ok, _mm256_cmp_ps::<_CMP_GT_OQ>(ts, _mm256_mul_ps(_mm256_set1_ps(tmin), adet)));
-        ok = _mm256_and_ps(ok, _mm256_cmp_ps::<_CMP_LT_OQ>(ts, _mm256_mul_ps(_mm256_set1_ps(tmax), adet)));
+        ok = _mm256_and_ps(ok, _mm256_cmp_ps::<_CMP_GT_OQ>(ts, _mm256_mul_ps(tmin, adet)));
+        ok = _mm256_and_ps(ok, _mm256_cmp_ps::<_CMP_LT_OQ>(ts, _mm256_mul_ps(tmax, adet)));
+        ([det, u, v, t], ok)
+    }
+}
+
+/// The block test in AVX2 + FMA intrinsics (the x86-64-v3 core): half the instructions of
+/// the compiler's vectorisation of the lane loop (fused multiply-adds, one movemask).
+/// Products are fused, so results may differ from the portable test in the last bits.
+#[cfg(all(target_arch = "x86_64", target_feature = "avx2", target_feature = "fma"))]
+#[inline(always)]
+fn intersect_block_avx2(b: &TriBlock, lanes: u32, seg: &Segment) -> BlockHits {
+    let Segment { o, d, tmin, tmax } = *seg;
+    use std::arch::x86_64::*;
+    // SAFETY: compiled only for targets with AVX2 and FMA (the v3 module, loaded only on CPUs
+    // that report them); TriBlock is 32-byte aligned, so each row is an aligned load.
+    unsafe {
+        let rows = |r: &[[f32; LANES]; 3]| r.each_ref().map(|x| _mm256_load_ps(x.as_ptr()));
+        let splat = |v: Vec3A| [_mm256_set1_ps(v.x), _mm256_set1_ps(v.y), _mm256_set1_ps(v.z)];
+        let (res, ok) = moller_trumbore_avx2(
+            splat(o),
+            splat(d),
+            rows(&b.v0),
+            rows(&b.e1),
+            rows(&b.e2),
+            _mm256_set1_ps(tmin),
+            _mm256_set1_ps(tmax),
+        );
         let mut out = [[0.0f32; LANES]; 4];
-        for (row, x) in out.iter_mut().zip([det, u, v, t]) {
+        for (row, x) in out.iter_mut().zip(res) {
             _mm256_storeu_ps(row.as_mut_ptr(), x);
         }
         (out, _mm256_movemask_ps(ok) as u32 & lanes)
@@ -482,10 +510,6 @@ impl Accel {
             let mut tmax = ld(&tmax_a);
             let mut best_slot = _mm256_set1_epi32(-1);
             let (mut bu, mut bv) = (_mm256_setzero_ps(), _mm256_setzero_ps());
-            let cross = |a: __m256, b: __m256, c: __m256, e: __m256| _mm256_fmsub_ps(a, b, _mm256_mul_ps(c, e));
-            let dot = |ax: __m256, ay: __m256, az: __m256, bx: __m256, by: __m256, bz: __m256| {
-                _mm256_fmadd_ps(ax, bx, _mm256_fmadd_ps(ay, by, _mm256_mul_ps(az, bz)))
-            };
             // stack of (node, lanes that entered it); a node pushes at most 8 children, so this
             // holds a nearest-first descent 70 levels deep (far beyond any BVH built here; were
             // it full, the rays are traced one by one instead)
@@ -559,34 +583,16 @@ impl Accel {
                     for slot in first..first + (meta >> 5).count_ones() as usize {
                         let Some(b) = self.blocks.get(slot / LANES) else { continue };
                         let k = slot % LANES;
-                        let bc = |r: &[[f32; LANES]; 3], a: usize| _mm256_set1_ps(r[a][k]);
-                        let (e1x, e1y, e1z) = (bc(&b.e1, 0), bc(&b.e1, 1), bc(&b.e1, 2));
-                        let (e2x, e2y, e2z) = (bc(&b.e2, 0), bc(&b.e2, 1), bc(&b.e2, 2));
-                        let (qpx, qpy, qpz) =
-                            (cross(dy, e2z, dz, e2y), cross(dz, e2x, dx, e2z), cross(dx, e2y, dy, e2x));
-                        let det = dot(e1x, e1y, e1z, qpx, qpy, qpz);
-                        let ssx = _mm256_sub_ps(ox, bc(&b.v0, 0));
-                        let ssy = _mm256_sub_ps(oy, bc(&b.v0, 1));
-                        let ssz = _mm256_sub_ps(oz, bc(&b.v0, 2));
-                        let u = dot(ssx, ssy, ssz, qpx, qpy, qpz);
-                        let (qx, qy, qz) =
-                            (cross(ssy, e1z, ssz, e1y), cross(ssz, e1x, ssx, e1z), cross(ssx, e1y, ssy, e1x));
-                        let v = dot(dx, dy, dz, qx, qy, qz);
-                        let t = dot(e2x, e2y, e2z, qx, qy, qz);
-                        let sign_bit = _mm256_set1_ps(-0.0);
-                        let sign = _mm256_and_ps(det, sign_bit);
-                        let adet = _mm256_andnot_ps(sign_bit, det);
-                        let (us, vs, ts) = (_mm256_xor_ps(u, sign), _mm256_xor_ps(v, sign), _mm256_xor_ps(t, sign));
-                        let zero = _mm256_setzero_ps();
-                        let mut ok = _mm256_and_ps(
-                            _mm256_cmp_ps::<_CMP_GT_OQ>(adet, zero),
-                            _mm256_cmp_ps::<_CMP_LT_OQ>(adet, _mm256_set1_ps(f32::INFINITY)),
+                        let splat = |r: &[[f32; LANES]; 3]| r.each_ref().map(|x| _mm256_set1_ps(x[k]));
+                        let ([det, u, v, t], mut ok) = moller_trumbore_avx2(
+                            [ox, oy, oz],
+                            [dx, dy, dz],
+                            splat(&b.v0),
+                            splat(&b.e1),
+                            splat(&b.e2),
+                            tmin,
+                            tmax,
                         );
-                        ok = _mm256_and_ps(ok, _mm256_cmp_ps::<_CMP_GE_OQ>(us, zero));
-                        ok = _mm256_and_ps(ok, _mm256_cmp_ps::<_CMP_GE_OQ>(vs, zero));
-                        ok = _mm256_and_ps(ok, _mm256_cmp_ps::<_CMP_LE_OQ>(_mm256_add_ps(us, vs), adet));
-                        ok = _mm256_and_ps(ok, _mm256_cmp_ps::<_CMP_GT_OQ>(ts, _mm256_mul_ps(tmin, adet)));
-                        ok = _mm256_and_ps(ok, _mm256_cmp_ps::<_CMP_LT_OQ>(ts, _mm256_mul_ps(tmax, adet)));
                         ok = _mm256_and_ps(ok, lanes_m);
                         if _mm256_movemask_ps(ok) == 0 {
                             continue;
