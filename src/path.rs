@@ -13,8 +13,7 @@
 use crate::accel::TriHit;
 use crate::math::{is_finite_spectrum, power_heuristic, Frame, Spectrum};
 use crate::sampler::Sampler;
-use crate::scene::camera::CameraRay;
-use crate::scene::{Scene, SurfaceInteraction};
+use crate::scene::{CameraRay, Scene, SurfaceInteraction};
 use glam::{Vec2, Vec3};
 
 /// Russian roulette starts after this many scattering events.

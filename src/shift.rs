@@ -33,8 +33,7 @@ use crate::accel::TriHit;
 use crate::bsdf::{refraction_half_vector, Bsdf, SPECULAR_ROUGHNESS_THRESHOLD};
 use crate::math::Spectrum;
 use crate::path::{Event, Path, Vertex, CAMERA_VERTEX};
-use crate::scene::camera::CameraRay;
-use crate::scene::{Scene, SurfaceInteraction};
+use crate::scene::{CameraRay, Scene, SurfaceInteraction};
 use glam::{Vec2, Vec3};
 
 /// MIS-weighted contributions of one base/offset pair, summed over the base's events.
@@ -640,7 +639,6 @@ mod tests {
     /// exactly the pair contributions of `shift`, which traces each offset's ray alone.
     #[test]
     fn shift_from_packet_traced_camera_rays_matches_shift() {
-        use crate::accel::RayPacket;
         use crate::path::{trace_path, PathSettings};
         use crate::sampler::{IndependentSampler, Sampler};
         let scene = Scene::build(&crate::scene::builtin::cornell_spheres(24, 24)).unwrap();
@@ -652,13 +650,9 @@ mod tests {
             let raster = Vec2::new((i % 24) as f32, ((i / 24) % 24) as f32) + smp.next_2d();
             trace_path(&scene, &cfg, raster, &mut smp, Some(&mut base));
             let shifts = [Vec2::X, -Vec2::X, Vec2::Y, -Vec2::Y];
-            let mut packet = RayPacket { count: 4, ..Default::default() };
             let rays: Vec<CameraRay> =
                 shifts.iter().map(|s| scene.camera.generate_ray(raster + *s, base.lens)).collect();
-            for (k, r) in rays.iter().enumerate() {
-                (packet.o[k], packet.d[k], packet.tmin[k], packet.tmax[k]) = (r.origin, r.dir, r.tmin, r.tmax);
-            }
-            let hits = scene.intersect_packet(&packet);
+            let hits = scene.intersect_camera_rays(&rays);
             for k in 0..4 {
                 let a = shift(&scene, &base, Some(raster + shifts[k]));
                 let b = shift_from(&scene, &base, Some((rays[k], hits[k])));

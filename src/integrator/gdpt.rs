@@ -8,14 +8,12 @@
 //! the image identical for any thread count.
 
 use super::{RenderControl, RenderOutput, RenderSettings, RenderStats};
-use crate::accel::RayPacket;
 use crate::film::Image;
 use crate::math::{is_finite_spectrum, Spectrum};
 use crate::path::{trace_path_from, Path, Primary};
 use crate::reconstruct::gradient_domain_image;
 use crate::sampler::Sampler;
-use crate::scene::camera::CameraRay;
-use crate::scene::Scene;
+use crate::scene::{CameraRay, Scene};
 use crate::shift::shift_from;
 use glam::Vec2;
 use rayon::prelude::*;
@@ -63,26 +61,19 @@ pub const SHIFTS: [(i32, i32); 4] = [(1, 0), (-1, 0), (0, 1), (0, -1)];
 fn render_row(scene: &Scene, settings: &RenderSettings, y: usize, lo: usize, win: &mut [GdRow], from: u32, to: u32) {
     let (w, h) = (scene.camera.width as i32, scene.camera.height as i32);
     let mut path = Path::default();
-    let mut packet = RayPacket::default();
     for x in 0..w as usize {
         for s in from..to {
             let mut sampler = super::pt::pixel_sampler(settings.seed, y * w as usize + x, s);
             let raster = Vec2::new(x as f32, y as f32) + sampler.next_2d();
             // the base's camera ray and its four offsets' (neighbour pixels, same lens sample)
-            // traced as one packet: lane 0 the base, lane 1 + i the offset of SHIFTS[i]
+            // traced as one packet: ray 0 the base, ray 1 + i the offset of SHIFTS[i]
             let lens = sampler.next_2d();
-            packet.count = 1 + SHIFTS.len();
-            for (k, (dx, dy)) in std::iter::once((0, 0)).chain(SHIFTS).enumerate() {
-                let ray = scene.camera.generate_ray(raster + Vec2::new(dx as f32, dy as f32), lens);
-                (packet.o[k], packet.d[k], packet.tmin[k], packet.tmax[k]) = (ray.origin, ray.dir, ray.tmin, ray.tmax);
+            let mut rays = [CameraRay::default(); 1 + SHIFTS.len()];
+            for (ray, (dx, dy)) in rays.iter_mut().zip(std::iter::once((0, 0)).chain(SHIFTS)) {
+                *ray = scene.camera.generate_ray(raster + Vec2::new(dx as f32, dy as f32), lens);
             }
-            let hits = scene.intersect_packet(&packet);
-            let lane = |k: usize| {
-                let ray =
-                    CameraRay { origin: packet.o[k], dir: packet.d[k], tmin: packet.tmin[k], tmax: packet.tmax[k] };
-                (ray, hits[k])
-            };
-            let (ray, hit) = lane(0);
+            let hits = scene.intersect_camera_rays(&rays);
+            let (ray, hit) = (rays[0], hits[0]);
             let c = trace_path_from(scene, &settings.path, Primary { lens, ray, hit }, &mut sampler, Some(&mut path));
             let me = &mut win[y - lo];
             if !is_finite_spectrum(c.radiance) {
@@ -95,7 +86,7 @@ fn render_row(scene: &Scene, settings: &RenderSettings, y: usize, lo: usize, win
             for (i, (dx, dy)) in SHIFTS.into_iter().enumerate() {
                 let (nx, ny) = (x as i32 + dx, y as i32 + dy);
                 let inside = nx >= 0 && ny >= 0 && nx < w && ny < h;
-                let pc = shift_from(scene, &path, inside.then(|| lane(1 + i)));
+                let pc = shift_from(scene, &path, inside.then(|| (rays[1 + i], hits[1 + i])));
                 if !is_finite_spectrum(pc.base) || !is_finite_spectrum(pc.offset) {
                     win[y - lo].invalid += 1;
                     continue;

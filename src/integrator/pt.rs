@@ -4,12 +4,10 @@
 //! so the image is the same for any thread count.
 
 use super::{RenderControl, RenderOutput, RenderSettings, RenderStats};
-use crate::accel::RayPacket;
 use crate::film::{Film, FilmRow};
 use crate::path::{trace_path_from, Primary};
 use crate::sampler::{IndependentSampler, Sampler};
-use crate::scene::camera::CameraRay;
-use crate::scene::Scene;
+use crate::scene::{CameraRay, Scene};
 use glam::Vec2;
 use rayon::prelude::*;
 use std::sync::atomic::Ordering;
@@ -37,28 +35,25 @@ fn render_row(
 ) {
     let w = row.count.len();
     let mut work = (0..w).flat_map(|x| (from..to).map(move |s| (x, s)));
-    let mut packet = RayPacket::default();
+    let mut rays = [CameraRay::default(); PACKET];
     let mut batch: [(usize, Vec2, Option<IndependentSampler>); PACKET] = Default::default();
     loop {
-        packet.count = 0;
-        for (slot, (x, s)) in batch.iter_mut().zip(work.by_ref()) {
+        let mut n = 0;
+        for ((slot, ray), (x, s)) in batch.iter_mut().zip(rays.iter_mut()).zip(work.by_ref()) {
             let mut sampler = pixel_sampler(settings.seed, y * w + x, s);
             let raster = Vec2::new(x as f32, y as f32) + sampler.next_2d();
             let lens = sampler.next_2d();
-            let ray = scene.camera.generate_ray(raster, lens);
-            let k = packet.count;
-            (packet.o[k], packet.d[k], packet.tmin[k], packet.tmax[k]) = (ray.origin, ray.dir, ray.tmin, ray.tmax);
-            packet.count += 1;
+            *ray = scene.camera.generate_ray(raster, lens);
             *slot = (x, lens, Some(sampler));
+            n += 1;
         }
-        if packet.count == 0 {
+        if n == 0 {
             break;
         }
-        let hits = scene.intersect_packet(&packet);
-        for (k, (x, lens, sampler)) in batch.iter_mut().enumerate().take(packet.count) {
+        let hits = scene.intersect_camera_rays(&rays[..n]);
+        for (k, (x, lens, sampler)) in batch.iter_mut().enumerate().take(n) {
             let Some(sampler) = sampler.as_mut() else { continue };
-            let ray = CameraRay { origin: packet.o[k], dir: packet.d[k], tmin: packet.tmin[k], tmax: packet.tmax[k] };
-            let primary = Primary { lens: *lens, ray, hit: hits[k] };
+            let primary = Primary { lens: *lens, ray: rays[k], hit: hits[k] };
             // PT needs no recorded vertices or events: nothing is recorded on its hot path.
             let c = trace_path_from(scene, &settings.path, primary, sampler, None);
             row.add(*x, c.radiance, c.very_direct, c.albedo, c.normal);

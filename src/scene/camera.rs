@@ -7,7 +7,7 @@ use crate::error::SceneError;
 use crate::math::square_to_disk_concentric;
 use glam::{Mat4, Vec2, Vec3, Vec4};
 
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, Default)]
 pub struct CameraRay {
     pub origin: Vec3,
     /// Unit direction.

@@ -9,7 +9,7 @@ pub mod light;
 pub mod material;
 pub mod texture;
 
-pub use camera::Camera;
+pub use camera::{Camera, CameraRay};
 pub use desc::*;
 pub use light::{Light, LightSample, LightShape};
 pub use material::Material;
@@ -310,6 +310,15 @@ impl Scene {
     #[inline]
     pub fn intersect_packet(&self, rays: &RayPacket) -> [Option<TriHit>; 8] {
         self.accel.as_ref().map_or([None; 8], |a| a.closest_packet(rays))
+    }
+
+    /// The first hits of up to eight camera rays (of neighbouring samples), traced together.
+    pub fn intersect_camera_rays(&self, rays: &[CameraRay]) -> [Option<TriHit>; 8] {
+        let mut p = RayPacket { count: rays.len().min(8), ..Default::default() };
+        for (k, r) in rays.iter().take(8).enumerate() {
+            (p.o[k], p.d[k], p.tmin[k], p.tmax[k]) = (r.origin, r.dir, r.tmin, r.tmax);
+        }
+        self.intersect_packet(&p)
     }
 
     /// True when any surface lies along the ray in (tmin, tmax). Lights never occlude.
