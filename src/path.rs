@@ -170,7 +170,7 @@ pub fn trace_path_from<S: Sampler>(
     }
     let mut out = PathContribution::default();
     let cam = primary.ray;
-    let mut first_hit = Some(primary.hit);
+    let mut pending_hit = Some(primary.hit); // the camera ray's, traced by the caller
     let (mut o, mut d, mut tmin, mut tmax) = (cam.origin, cam.dir, cam.tmin, cam.tmax);
     let mut beta = Spectrum::ONE;
     let mut depth = 0u32; // scattering events so far (bounces; pass-through crossings excluded)
@@ -188,7 +188,7 @@ pub fn trace_path_from<S: Sampler>(
     let use_nee = cfg.nee && scene.has_lights();
 
     loop {
-        let hit = match first_hit.take() {
+        let hit = match pending_hit.take() {
             Some(h) => h,
             None => scene.intersect(o, d, tmin, tmax),
         };
@@ -387,7 +387,7 @@ pub fn trace_path_from<S: Sampler>(
     out
 }
 
-/// What the camera ray through `raster` sees first.
+/// What a camera ray sees first.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct FirstHit {
     /// Emission seen directly (the very-direct image of the gradient-domain methods,
@@ -398,9 +398,9 @@ pub struct FirstHit {
     pub normal: Vec3,
 }
 
-pub fn first_hit(scene: &Scene, raster: Vec2, lens: Vec2) -> FirstHit {
-    let cam = scene.camera.generate_ray(raster, lens);
-    let hit = scene.intersect(cam.origin, cam.dir, cam.tmin, cam.tmax);
+/// What camera ray `cam` sees, given `hit`, what it hit (traced by the caller: Metropolis
+/// renders trace a pixel's camera rays in packets).
+pub fn first_hit(scene: &Scene, cam: &CameraRay, hit: Option<TriHit>) -> FirstHit {
     let mut out = FirstHit::default();
     let l = &mut out.very_direct;
     scene.for_each_light_crossed(cam.origin, cam.dir, hit.map_or(cam.tmax, |h| h.t), true, |_, _, le, _| *l += le);
