@@ -489,25 +489,22 @@ impl Accel {
         if n == 0 || self.bvh.nodes.is_empty() {
             return out;
         }
-        // unused lanes repeat ray 0 (finite numbers) and stay out of every mask
-        let lane = |i: usize| if i < n { i } else { 0 };
-        let arr = |f: &dyn Fn(usize) -> f32| -> [f32; LANES] { std::array::from_fn(|i| f(lane(i))) };
-        let (o, d) = (&rays.o, &rays.d);
-        let inv = |c: usize| arr(&|i| obvhs::ray::safe_inverse(d[i][c]));
-        let (ix, iy, iz) = (inv(0), inv(1), inv(2));
-        let (ox, oy, oz) = (arr(&|i| o[i].x), arr(&|i| o[i].y), arr(&|i| o[i].z));
-        let (dxa, dya, dza) = (arr(&|i| d[i].x), arr(&|i| d[i].y), arr(&|i| d[i].z));
-        let (tmin_a, tmax_a) = (arr(&|i| rays.tmin[i]), arr(&|i| rays.tmax[i]));
+        // the rays as rows of lanes: origin x y z, direction x y z, inverse direction x y z,
+        // tmin, tmax; unused lanes repeat ray 0 (finite numbers) and stay out of every mask
+        let mut soa = [[0.0f32; LANES]; 11];
+        for i in 0..LANES {
+            let j = if i < n { i } else { 0 };
+            let (o, d) = (rays.o[j], rays.d[j]);
+            for c in 0..3 {
+                (soa[c][i], soa[3 + c][i], soa[6 + c][i]) = (o[c], d[c], obvhs::ray::safe_inverse(d[c]));
+            }
+            (soa[9][i], soa[10][i]) = (rays.tmin[j], rays.tmax[j]);
+        }
         let all: u32 = (1u32 << n) - 1;
         // SAFETY: compiled only for targets with AVX2 and FMA (the v3 module, loaded only on
         // CPUs that report them); every load and store is of a local array of eight floats.
         unsafe {
-            let ld = |a: &[f32; LANES]| _mm256_loadu_ps(a.as_ptr());
-            let (ix, iy, iz) = (ld(&ix), ld(&iy), ld(&iz));
-            let (ox, oy, oz) = (ld(&ox), ld(&oy), ld(&oz));
-            let (dx, dy, dz) = (ld(&dxa), ld(&dya), ld(&dza));
-            let tmin = ld(&tmin_a);
-            let mut tmax = ld(&tmax_a);
+            let [ox, oy, oz, dx, dy, dz, ix, iy, iz, tmin, mut tmax] = soa.map(|r| _mm256_loadu_ps(r.as_ptr()));
             let mut best_slot = _mm256_set1_epi32(-1);
             let (mut bu, mut bv) = (_mm256_setzero_ps(), _mm256_setzero_ps());
             // stack of (node, lanes that entered it); a node pushes at most 8 children, so this

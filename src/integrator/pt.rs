@@ -36,7 +36,8 @@ fn render_row(
     let w = row.count.len();
     let mut work = (0..w).flat_map(|x| (from..to).map(move |s| (x, s)));
     let mut rays = [CameraRay::default(); PACKET];
-    let mut batch: [(usize, Vec2, Option<IndependentSampler>); PACKET] = Default::default();
+    let mut batch: [(usize, Vec2, IndependentSampler); PACKET] =
+        std::array::from_fn(|_| (0, Vec2::ZERO, IndependentSampler::new(0, 0)));
     loop {
         let mut n = 0;
         for ((slot, ray), (x, s)) in batch.iter_mut().zip(rays.iter_mut()).zip(work.by_ref()) {
@@ -44,7 +45,7 @@ fn render_row(
             let raster = Vec2::new(x as f32, y as f32) + sampler.next_2d();
             let lens = sampler.next_2d();
             *ray = scene.camera.generate_ray(raster, lens);
-            *slot = (x, lens, Some(sampler));
+            *slot = (x, lens, sampler);
             n += 1;
         }
         if n == 0 {
@@ -52,7 +53,6 @@ fn render_row(
         }
         let hits = scene.intersect_camera_rays(&rays[..n]);
         for (k, (x, lens, sampler)) in batch.iter_mut().enumerate().take(n) {
-            let Some(sampler) = sampler.as_mut() else { continue };
             let primary = Primary { lens: *lens, ray: rays[k], hit: hits[k] };
             // PT needs no recorded vertices or events: nothing is recorded on its hot path.
             let c = trace_path_from(scene, &settings.path, primary, sampler, None);
