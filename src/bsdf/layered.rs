@@ -52,10 +52,13 @@ impl Layered {
         self.roughness <= SPECULAR_ROUGHNESS_THRESHOLD
     }
 
-    /// s·E(θo): the share of light the layer reflects (and takes from the base).
+    /// s·E(θo): the share of light the layer reflects (and takes from the base). Zero when
+    /// wo lies below the shading hemisphere (a smooth-shaded coarse mesh): the specular layer
+    /// reflects nothing there and the base scatters alone, as Cycles' closures do (its
+    /// microfacet lobe is black for such wo, its diffuse lobe ignores wo's side).
     #[inline]
     fn layer_albedo(&self, cos_o: f32) -> f32 {
-        if !self.has_layer() {
+        if !self.has_layer() || cos_o <= 0.0 {
             return 0.0;
         }
         let e = if self.is_smooth() {
@@ -90,7 +93,7 @@ impl Layered {
     /// table is read and the microfacet terms evaluated once for both.
     #[inline]
     fn eval_pdf(&self, wo: Vec3, wi: Vec3, e: f32) -> (Spectrum, f32) {
-        if wo.z <= 0.0 || wi.z <= 0.0 {
+        if wi.z <= 0.0 {
             return (Spectrum::ZERO, 0.0);
         }
         let ps = self.layer_probability(e);
@@ -113,9 +116,6 @@ impl Layered {
     }
 
     pub fn sample(&self, wo: Vec3, u_lobe: f32, u: Vec2) -> Option<BsdfSample> {
-        if wo.z <= 0.0 {
-            return None;
-        }
         let e = self.layer_albedo(wo.z);
         let ps = self.layer_probability(e);
         if u_lobe < ps && self.is_smooth() {
@@ -198,5 +198,21 @@ mod tests {
         assert_eq!(bs.lobe, LobeKind::Specular);
         assert!((bs.wi - wi).length() < 1e-6 && (bs.weight.x - f.x / p).abs() < 1e-5 && bs.pdf == p);
         assert!(b.sample(wo, p + 0.5 * (1.0 - p), Vec2::new(0.3, 0.3)).unwrap().lobe == LobeKind::Diffuse);
+    }
+
+    /// With wo below the shading hemisphere the layer reflects nothing and the base scatters
+    /// as a plain Lambertian (Cycles' closures); black before.
+    #[test]
+    fn below_the_shading_hemisphere_only_the_base_scatters() {
+        let b = layered(0.5, 1.5, 0.3);
+        let plain = Bsdf::Lambert(Lambert { albedo: Spectrum::splat(0.5) });
+        let wo = Vec3::new(0.7, 0.1, -0.2).normalize();
+        for wi in [Vec3::Z, Vec3::new(-0.6, 0.0, 0.8), Vec3::new(0.3, 0.5, 0.81).normalize()] {
+            assert!((b.eval(wo, wi) - plain.eval(wo, wi)).abs().max_element() < 1e-7);
+            assert!((b.pdf(wo, wi) - plain.pdf(wo, wi)).abs() < 1e-7 && b.pdf(wo, wi) > 0.0);
+        }
+        let (albedo, _) = white_furnace(&layered(1.0, 1.5, 0.3), wo, 100_000, 6);
+        assert!((albedo - 1.0).abs() < 0.01, "{albedo}");
+        chi2_test(&b, wo, 10);
     }
 }
