@@ -8,8 +8,11 @@
 //!   splats: primal C_x (base pixel) and C_y (neighbour), gradient ±4·G_d; then screened
 //!   Poisson reconstruction and the very-direct image (plain Monte Carlo) on top.
 //!
-//! Bootstrap: independent states estimate b = E[F] and give chain starts ∝ F. Expected-value
-//! splatting: proposed × a/F_p, current × (1−a)/F_c; image × b/mpp. Chains are split into a
+//! Bootstrap: independent states estimate b = E[F] and give chain starts ∝ F; every large
+//! step of every chain is one more independent state, so b is refined with them as the
+//! render goes (Kelemen et al. 2002): its error shrinks with the mutations, not only with
+//! the bootstrap's size. Expected-value splatting: proposed × a/F_p, current × (1−a)/F_c;
+//! image × b/mpp. Chains are split into a
 //! fixed number of groups with their own buffers, summed in order: the image depends only on
 //! the seed (not on the thread count) unless a time limit stops chains early.
 
@@ -26,15 +29,24 @@ use glam::Vec2;
 use rayon::prelude::*;
 use std::sync::atomic::Ordering;
 
-/// Independent states drawn to estimate the normalisation and choose chain starts.
-pub const BOOTSTRAP_SAMPLES: usize = 100_000;
+/// Independent states drawn to estimate the normalisation and choose chain starts: 16 per
+/// pixel, within these bounds (the large steps refine b afterwards, so a small image with
+/// few mutations does not pay for a large bootstrap, and a large one gets enough starts).
+pub const BOOTSTRAP_SAMPLES: (usize, usize) = (16_384, 1 << 20);
+
+fn bootstrap_samples(w: usize, h: usize) -> usize {
+    (16 * w * h).clamp(BOOTSTRAP_SAMPLES.0, BOOTSTRAP_SAMPLES.1)
+}
 /// Probability that a small step also redraws the shift direction d (its own symmetric
 /// mutation: a Gaussian step of the other coordinates never changes d).
 pub const DIRECTION_MUTATION_PROBABILITY: f32 = 0.1;
 /// Fixed number of accumulation groups (independent of the thread count).
 const GROUPS: usize = 8;
-/// Spp of the very-direct image of gdpssmlt.
-const VERY_DIRECT_SPP: u32 = 16;
+/// Samples per pixel of the very-direct image of gdpssmlt (and of the denoising passes of
+/// both Metropolis methods): 16 before the chains run, then topped up between rounds to a
+/// quarter of the mutations per pixel done (whenever that doubles it), up to the maximum, so
+/// that it converges with the budget like the rest of the image.
+const VERY_DIRECT_SPP: (u32, u32) = (16, 4096);
 
 const SHIFTS: [(i32, i32); 4] = [(1, 0), (-1, 0), (0, 1), (0, -1)];
 const PRIMAL: usize = 0;
@@ -149,6 +161,11 @@ fn mutate(target: &Target, c: &mut Chain, path: &mut Path, group: &mut Group, gr
     if fp > 0.0 {
         splat(group, &prop.splats[d_new], a as f64 / fp as f64);
     }
+    if c.s.is_large_step() {
+        // an independent uniform state (u, d): one more sample of b = E[F]
+        group.large_f += fp as f64;
+        group.large_steps += 1;
+    }
     if fc > 0.0 {
         splat(group, &c.cur.splats[c.d], (1.0 - a) as f64 / fc as f64);
     }
@@ -169,6 +186,9 @@ struct Group {
     density: Vec<f64>,
     mutations: u64,
     accepted: u64,
+    /// Sum of F over the group's large-step proposals, and their number.
+    large_f: f64,
+    large_steps: u64,
     /// The group's path storage, kept across rounds (no allocation per round).
     path: Path,
 }
@@ -192,7 +212,8 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl,
     let boot_seed = mix64(settings.seed ^ 0xB007);
 
     // Bootstrap (parallel, deterministic): F averaged over the four directions.
-    let boot: Vec<(f32, [f32; 4])> = (0..BOOTSTRAP_SAMPLES)
+    let n_boot = bootstrap_samples(w, h);
+    let boot: Vec<(f32, [f32; 4])> = (0..n_boot)
         .into_par_iter()
         .map_init(
             || (Path::default(), PssSampler::new(boot_seed, 0, p_large)),
@@ -207,7 +228,7 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl,
             },
         )
         .collect();
-    let b: f64 = boot.iter().map(|(f, _)| *f as f64).sum::<f64>() / BOOTSTRAP_SAMPLES as f64;
+    let boot_sum: f64 = boot.iter().map(|(f, _)| *f as f64).sum::<f64>();
     let starts = Distribution1D::new(&boot.iter().map(|(f, _)| *f).collect::<Vec<_>>());
 
     let total = settings.spp as u64 * (w * h) as u64;
@@ -220,12 +241,12 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl,
     control.work_total.store(total, Ordering::Relaxed);
     let chain_seed = mix64(settings.seed ^ 0xC4A1);
 
-    // Very-direct light of gdpssmlt by plain Monte Carlo (first, so previews include it),
-    // and the denoising albedo and normal of every Metropolis render.
-    let [mut direct, albedo, normal] = first_hit_images(scene, settings, w, h);
-    if !gradient {
-        direct.iter_mut().for_each(|v| *v = 0.0); // pssmlt's chains carry that light themselves
-    }
+    // Very-direct light of gdpssmlt by plain Monte Carlo (first, so previews include it; then
+    // topped up as the chains advance), and the denoising albedo and normal of every
+    // Metropolis render.
+    let mut first = FirstHits::new(w, h);
+    first.add(scene, settings.seed, VERY_DIRECT_SPP.0, control);
+    let mut direct = first.very_direct(gradient);
 
     // Every group starts its chains (bootstrap replay, direction ∝ F) ...
     let mut states: Vec<(Group, Vec<Chain>)> = (0..GROUPS)
@@ -236,6 +257,8 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl,
                 density: vec![0.0; w * h],
                 mutations: 0,
                 accepted: 0,
+                large_f: 0.0,
+                large_steps: 0,
                 path: Path::default(),
             };
             let mut path = Path::default();
@@ -285,8 +308,15 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl,
             }
             group.path = path;
         });
+        let done: u64 = states.iter().map(|(g, _)| g.mutations).sum();
+        let target = very_direct_target(done, w * h);
+        if target >= 2 * first.spp {
+            first.add(scene, settings.seed, target, control);
+            direct = first.very_direct(gradient);
+        }
         control.offer_preview(|| {
             let groups: Vec<&Group> = states.iter().map(|(g, _)| g).collect();
+            let b = normalisation(boot_sum, n_boot, &groups);
             resolve(&groups, b, w, h, gradient, &direct, settings.alpha_rec, Norm::L2, &|| false).remove(0).1
         });
     }
@@ -301,11 +331,15 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl,
         ..Default::default()
     };
     stats.acceptance = accepted as f64 / mutations.max(1) as f64;
+    let b = normalisation(boot_sum, n_boot, &groups);
     stats.normalization = b;
     stats.chains = n_chains;
     if starts.is_empty() {
         stats.warnings.push("no light reaches the camera in the bootstrap: the image is black".into());
     }
+    first.add(scene, settings.seed, very_direct_target(mutations, w * h), control);
+    let direct = first.very_direct(gradient);
+    let [albedo, normal] = [1, 2].map(|k| first.mean(k));
     let norm = control.final_norm(settings.reconstruction);
     let mut layers = resolve(&groups, b, w, h, gradient, &direct, settings.alpha_rec, norm, &|| control.is_cancelled());
     let img = |v: Vec<f64>| Image { width: w, height: h, channels: 3, data: v.into_iter().map(|x| x as f32).collect() };
@@ -315,37 +349,89 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl,
     RenderOutput { layers, stats }
 }
 
-/// Camera-visible emission, first-surface albedo and normal by plain Monte Carlo
-/// (VERY_DIRECT_SPP jittered samples per pixel): [very direct, albedo, normal], each RGB.
-fn first_hit_images(scene: &Scene, settings: &RenderSettings, w: usize, h: usize) -> [Vec<f64>; 3] {
-    let per_pixel: Vec<[Spectrum; 3]> = (0..h)
-        .into_par_iter()
-        .flat_map_iter(|y| {
-            (0..w).map(move |x| {
-                let mut acc = [Spectrum::ZERO; 3];
-                // the pixel's camera rays eight at a time, each eight traced as one packet
-                let mut rays = [CameraRay::default(); 8];
-                for first in (0..VERY_DIRECT_SPP).step_by(8) {
-                    let n = (VERY_DIRECT_SPP - first).min(8) as usize;
-                    for (k, ray) in rays.iter_mut().enumerate().take(n) {
-                        let mut smp = super::pt::pixel_sampler(settings.seed ^ 0xD1, y * w + x, first + k as u32);
-                        let raster = Vec2::new(x as f32, y as f32) + smp.next_2d();
-                        *ray = scene.camera.generate_ray(raster, smp.next_2d());
-                    }
-                    let hits = scene.intersect_camera_rays(&rays[..n]);
-                    for (ray, hit) in rays.iter().zip(hits).take(n) {
-                        let f = first_hit(scene, ray, hit);
-                        acc[0] += f.very_direct;
-                        acc[1] += f.albedo;
-                        acc[2] += f.normal;
-                    }
+/// b = E[F] from the bootstrap's F sum and every group's large steps so far (summed in
+/// group order: the same value whatever the thread count).
+fn normalisation(boot_sum: f64, n_boot: usize, groups: &[&Group]) -> f64 {
+    let (f, n) = groups.iter().fold((boot_sum, n_boot as u64), |(f, n), g| (f + g.large_f, n + g.large_steps));
+    f / n as f64
+}
+
+/// Samples per pixel of the first-hit images after `mutations` mutations over `pixels`.
+fn very_direct_target(mutations: u64, pixels: usize) -> u32 {
+    (mutations / (4 * pixels.max(1) as u64)).clamp(VERY_DIRECT_SPP.0 as u64, VERY_DIRECT_SPP.1 as u64) as u32
+}
+
+/// Camera-visible emission, first-surface albedo and normal by plain Monte Carlo, jittered
+/// samples per pixel accumulated progressively: sums of [very direct, albedo, normal], RGB.
+struct FirstHits {
+    sums: [Vec<f64>; 3],
+    spp: u32,
+    w: usize,
+    h: usize,
+}
+
+impl FirstHits {
+    fn new(w: usize, h: usize) -> FirstHits {
+        FirstHits { sums: std::array::from_fn(|_| vec![0.0; w * h * 3]), spp: 0, w, h }
+    }
+
+    /// Adds samples up to `target` per pixel, eight at a time (each pixel's eight traced as
+    /// one packet); stops early when the render must stop, once it has the minimum.
+    fn add(&mut self, scene: &Scene, seed: u64, target: u32, control: &RenderControl) {
+        let (w, h) = (self.w, self.h);
+        while self.spp < target {
+            if self.spp >= VERY_DIRECT_SPP.0 && control.should_stop() {
+                break;
+            }
+            let (from, n) = (self.spp, (target - self.spp).min(8));
+            let per_pixel: Vec<[Spectrum; 3]> = (0..h)
+                .into_par_iter()
+                .flat_map_iter(|y| {
+                    (0..w).map(move |x| {
+                        let mut acc = [Spectrum::ZERO; 3];
+                        let mut rays = [CameraRay::default(); 8];
+                        for (k, ray) in rays.iter_mut().enumerate().take(n as usize) {
+                            let mut smp = super::pt::pixel_sampler(seed ^ 0xD1, y * w + x, from + k as u32);
+                            let raster = Vec2::new(x as f32, y as f32) + smp.next_2d();
+                            *ray = scene.camera.generate_ray(raster, smp.next_2d());
+                        }
+                        let hits = scene.intersect_camera_rays(&rays[..n as usize]);
+                        for (ray, hit) in rays.iter().zip(hits).take(n as usize) {
+                            let f = first_hit(scene, ray, hit);
+                            acc[0] += f.very_direct;
+                            acc[1] += f.albedo;
+                            acc[2] += f.normal;
+                        }
+                        acc
+                    })
+                })
+                .collect();
+            for (k, sum) in self.sums.iter_mut().enumerate() {
+                for (i, p) in per_pixel.iter().enumerate() {
+                    sum[3 * i] += p[k].x as f64;
+                    sum[3 * i + 1] += p[k].y as f64;
+                    sum[3 * i + 2] += p[k].z as f64;
                 }
-                acc.map(|v| v / VERY_DIRECT_SPP as f32)
-            })
-        })
-        .collect();
-    let channel = |k: usize| per_pixel.iter().flat_map(|p| [p[k].x as f64, p[k].y as f64, p[k].z as f64]).collect();
-    [channel(0), channel(1), channel(2)]
+            }
+            self.spp += n;
+        }
+    }
+
+    /// The mean of image `k` (0 very direct, 1 albedo, 2 normal).
+    fn mean(&self, k: usize) -> Vec<f64> {
+        let n = self.spp.max(1) as f64;
+        self.sums[k].iter().map(|v| v / n).collect()
+    }
+
+    /// The very-direct image gdpssmlt adds after reconstruction; zero for pssmlt, whose
+    /// chains carry that light themselves.
+    fn very_direct(&self, gradient: bool) -> Vec<f64> {
+        if gradient {
+            self.mean(0)
+        } else {
+            vec![0.0; self.w * self.h * 3]
+        }
+    }
 }
 
 /// The output layers from the group buffers so far: splats × b/mpp; for gdpssmlt the
@@ -407,18 +493,23 @@ mod tests {
     use super::*;
     use crate::path::first_hit;
 
-    /// The first-hit pass, tracing each pixel's camera rays in packets of eight, gives every
-    /// pixel the mean of the samples that single rays give it.
+    /// The first-hit pass, tracing each pixel's camera rays in packets of eight and topped up
+    /// in two passes, gives every pixel the mean of the samples that single rays give it.
     #[test]
     fn packet_first_hit_pass_matches_single_rays() {
         let scene = Scene::build(&crate::scene::builtin::cornell_spheres(9, 7)).unwrap();
         let settings = RenderSettings { seed: 3, ..Default::default() };
         let (w, h) = (9, 7);
-        let [direct, albedo, normal] = first_hit_images(&scene, &settings, w, h);
+        let mut first = FirstHits::new(w, h);
+        first.add(&scene, settings.seed, 5, &RenderControl::new(0.0)); // a first pass of 5,
+        first.add(&scene, settings.seed, 21, &RenderControl::new(0.0)); // topped up to 21
+        let spp = first.spp;
+        assert_eq!(spp, 21);
+        let [direct, albedo, normal] = [0, 1, 2].map(|k| first.mean(k));
         for y in 0..h {
             for x in 0..w {
                 let mut acc = [Spectrum::ZERO; 3];
-                for s in 0..VERY_DIRECT_SPP {
+                for s in 0..spp {
                     let mut smp = super::super::pt::pixel_sampler(settings.seed ^ 0xD1, y * w + x, s);
                     let raster = Vec2::new(x as f32, y as f32) + smp.next_2d();
                     let ray = scene.camera.generate_ray(raster, smp.next_2d());
@@ -429,9 +520,10 @@ mod tests {
                 }
                 let i = 3 * (y * w + x);
                 for (img, a) in [&direct, &albedo, &normal].iter().zip(acc) {
-                    let a = a / VERY_DIRECT_SPP as f32;
+                    let a = a / spp as f32;
                     for c in 0..3 {
-                        assert_eq!(img[i + c], a[c] as f64, "pixel ({x}, {y})");
+                        let v = img[i + c];
+                        assert!((v - a[c] as f64).abs() <= 1e-6 * v.abs().max(1.0), "pixel ({x}, {y})");
                     }
                 }
             }

@@ -177,6 +177,30 @@ pub fn cornell_spheres(width: u32, height: u32) -> SceneDesc {
     d
 }
 
+/// The Cornell box lit only by a bulb: an emitting sphere (the filament) inside a solid
+/// sphere of rough glass (roughness 0.35, IOR 1.5) hanging in the middle of the room, the
+/// ceiling light switched off and the blocks removed. Every light path crosses the glass,
+/// and the camera sees the filament through it (the transmission test scene).
+pub fn cornell_bulb(width: u32, height: u32) -> SceneDesc {
+    let mut d = cornell_box(width, height);
+    d.meshes.retain(|m| !m.name.ends_with("Block"));
+    let light = d.materials.iter().position(|m| m.name == "Light").expect("the box has a light");
+    d.materials[light].emission = [0.0; 3];
+    d.materials.push(MaterialDesc {
+        name: "Glass".into(),
+        base_color: [1.0; 3],
+        transmission: 1.0,
+        ior: 1.5,
+        roughness: 0.35,
+        ..Default::default()
+    });
+    d.materials.push(material("Filament", [0.0; 3], [60.0, 45.0, 25.0]));
+    let (glass, filament) = (d.materials.len() as u32 - 2, d.materials.len() as u32 - 1);
+    d.meshes.push(uv_sphere("Bulb", [0.0, 0.0, 0.1], 0.35, 32, 16, glass));
+    d.meshes.push(uv_sphere("Filament", [0.0, 0.0, 0.1], 0.1, 16, 8, filament));
+    d
+}
+
 /// The Cornell box with a plate under the light that has one narrow gap: the room is lit
 /// only through it (a hard case for path tracing, the kind MLT is for).
 pub fn cornell_gap(width: u32, height: u32) -> SceneDesc {
@@ -248,7 +272,7 @@ pub fn furnace_sphere(albedo: f32, emission: f32, width: u32, height: u32) -> Sc
 }
 
 /// Names accepted by `builtin`.
-pub const BUILTIN_SCENES: &[&str] = &["cornell", "spheres", "gap", "veil", "furnace"];
+pub const BUILTIN_SCENES: &[&str] = &["cornell", "spheres", "gap", "veil", "bulb", "furnace"];
 
 pub fn builtin(name: &str, width: u32, height: u32) -> Option<SceneDesc> {
     match name {
@@ -256,6 +280,7 @@ pub fn builtin(name: &str, width: u32, height: u32) -> Option<SceneDesc> {
         "spheres" => Some(cornell_spheres(width, height)),
         "gap" => Some(cornell_gap(width, height)),
         "veil" => Some(cornell_veil(width, height)),
+        "bulb" => Some(cornell_bulb(width, height)),
         "furnace" => Some(furnace_sphere(0.8, 1.0, width, height)),
         _ => None,
     }
