@@ -567,9 +567,14 @@ class _Reader:
             light = UsdLux.DistantLight(prim)
             color = _light_color(light, t, self.warnings, name)
             plus_z = m[:3, 2] / np.linalg.norm(m[:3, 2])
+            # As Blender's own USD importer reads a DistantLight back (checked with bpy 5.0.1:
+            # its exporter writes a sun of strength S and angle θ as intensity S/4, angle θ/2,
+            # and its importer returns S and θ): irradiance = 4·intensity·2^exposure·colour,
+            # angular diameter = 2·angle.
             return {"type": "SUN", "name": name, "direction": tuple(plus_z.tolist()),
-                    "irradiance": tuple((color * _light_scale(light, t)).tolist()),
-                    "angle": math.radians(float(light.GetAngleAttr().Get(t) or 0.0)), "visible_camera": visible}
+                    "irradiance": tuple((color * 4.0 * _light_scale(light, t)).tolist()),
+                    "angle": 2.0 * math.radians(float(light.GetAngleAttr().Get(t) or 0.0)),
+                    "visible_camera": visible}
         self.warn(f"light '{name}': {prim.GetTypeName()} is not supported; skipped")
         return None
 

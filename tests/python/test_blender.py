@@ -474,12 +474,17 @@ def test_animation_renders_every_frame(bpy_mod, tmp_out):
     assert balance[0] > 0.01 and balance[2] < -0.01 and abs(balance[1]) < abs(balance[0]), balance
 
 
-@pytest.mark.parametrize("kind, materialx", [("lights", True), ("hdri", True), ("specular", True),
-                                             ("textures", True), ("specular", False), ("textures", False)])
+LIGHT_KINDS = {"lights": {"Area", "Point"}, "sun": {"Sun"}, "spot": {"Spot"}}
+
+
+@pytest.mark.parametrize("kind, materialx", [("lights", True), ("sun", True), ("spot", True), ("hdri", True),
+                                             ("specular", True), ("textures", True), ("specular", False),
+                                             ("textures", False)])
 def test_blender_usd_export_renders_the_same_outside_blender(bpy_mod, tmp_out, kind, materialx):
     """F12 in Blender and `gdmlt render` of the same scene exported with Blender's USD exporter
-    (read by usd-core, no Blender) agree: area and point lights with Blender's power
-    conventions, cameras, meshes, an HDRI dome; materials from the MaterialX networks Blender
+    (read by usd-core, no Blender) agree: every light type with Blender's power conventions
+    as its own USD importer reads them back (a sun's DistantLight intensity is ¼ of its
+    strength, its angle half the sun's: the sun's stage rendered 4× dark before), cameras, meshes, an HDRI dome; materials from the MaterialX networks Blender
     writes (OpenPBR for Principled — specular layer, IOR level —, diffuse, conductor and
     dielectric BSDFs for Diffuse, Glossy and Glass; image textures through MaterialX image
     nodes, sRGB and Non-Color, and an image's alpha as coverage), and from UsdPreviewSurface
@@ -496,9 +501,9 @@ def test_blender_usd_export_renders_the_same_outside_blender(bpy_mod, tmp_out, k
             # (Blender 5.0's exporter writes the dome's intensity as 1 whatever the strength)
             scene.world.node_tree.nodes["Background"].inputs["Strength"].default_value = 1.0
         else:
-            keep = {"Area", "Point"} if kind == "lights" else None
-            scene = open_scene(bpy, kind, "GDMLT", spp, seed, keep=keep)
-            if kind == "lights":
+            keep = LIGHT_KINDS.get(kind)
+            scene = open_scene(bpy, "lights" if keep else kind, "GDMLT", spp, seed, keep=keep)
+            if keep:
                 scene.render.resolution_x = scene.render.resolution_y = 32
         if kind == "specular":  # their caustics are too noisy here: the next test checks them
             for name in ("MirrorBall", "GlassBall"):

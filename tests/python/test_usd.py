@@ -79,8 +79,9 @@ def _layered_brdf_at_normal_incidence(albedo, ior, roughness):
 @pytest.mark.parametrize("light, ior, expected", [
     # small rectangle: E = L·A/h² (to 0.1% at this size) → radiance ρ/π·E
     ("rect", 1.0, 0.5 / math.pi * 100.0 * 0.04 / 4.0),
-    # distant light tilted 30°: E = intensity·cos 30°
-    ("sun", 1.0, 0.5 / math.pi * 3.0 * math.cos(math.radians(30))),
+    # distant light tilted 30°: E = 4·intensity·cos 30° (a sun of strength 4·intensity, as
+    # Blender's own USD importer reads a DistantLight)
+    ("sun", 1.0, 0.5 / math.pi * 4.0 * 3.0 * math.cos(math.radians(30))),
     # the default IOR 1.5 and roughness 0.5: the specular lobe adds a highlight under the light
     ("rect", None, _layered_brdf_at_normal_incidence(0.5, 1.5, 0.5) * 100.0 * 0.04 / 4.0),
 ])
