@@ -214,7 +214,15 @@ pub fn trace_path_from<S: Sampler>(
         };
         // NEE cannot produce a path whose last bounce was specular: its light pdf is then 0.
         let pdf_l_if_nee = |pdf: f32| if use_nee && !prev_delta { pdf } else { 0.0 };
+        // An event is recorded only when it carries light (its numerator is not zero): the
+        // shift treats an offset event worth nothing as absent (the path tracer could not
+        // have recorded it), so a zero-valued base event — a black texel of a textured
+        // emitter — must be absent too, or a pair would be counted from both sides.
         let push = |rec: &mut Option<&mut Path>, light: u32, z: Vec3, at_infinity: bool, le: Spectrum, pdf_l: f32| {
+            let numerator = beta * le * ev_pdf;
+            if !(numerator.max_element() > 0.0) {
+                return;
+            }
             if let Some(p) = rec.as_deref_mut() {
                 p.events.push(Event {
                     nee: false,
@@ -227,7 +235,7 @@ pub fn trace_path_from<S: Sampler>(
                     f: prev_fcos,
                     pdf_b: ev_pdf,
                     pdf_l: pdf_l_if_nee(pdf_l),
-                    numerator: beta * le * ev_pdf,
+                    numerator,
                     through_transparent: passed,
                 });
             }
@@ -319,7 +327,8 @@ pub fn trace_path_from<S: Sampler>(
                     let pdf_b = if ls.is_delta { 0.0 } else { bsdf.pdf(wo, wi) };
                     let w = if ls.is_delta { 1.0 } else { power_heuristic(ls.pdf, pdf_b) };
                     add(&mut out, beta * f * radiance * (w / ls.pdf), false);
-                    if let Some(p) = record.as_deref_mut() {
+                    let numerator = beta * f * radiance;
+                    if let (Some(p), true) = (record.as_deref_mut(), numerator.max_element() > 0.0) {
                         let at_infinity = !ls.dist.is_finite();
                         p.events.push(Event {
                             nee: true,
@@ -332,7 +341,7 @@ pub fn trace_path_from<S: Sampler>(
                             f,
                             pdf_b,
                             pdf_l: ls.pdf,
-                            numerator: beta * f * radiance,
+                            numerator,
                             through_transparent: crossed_transparent,
                         });
                     }
@@ -467,6 +476,50 @@ mod tests {
             }
             let (a, b) = (a / n as f64, b / n as f64);
             assert!((a - b).abs() < 0.01 * a, "nee={nee}: path tracer {a} vs events {b}");
+        }
+    }
+
+    /// Every recorded event carries light: the shift counts an offset event worth nothing
+    /// as absent, so the base must not record such events either (else a pair is counted
+    /// from both sides). Checked on a light whose emission is a black-and-white checker, hit
+    /// and sampled on its black texels too, with and without NEE (zero-valued events were
+    /// recorded before, and this test failed).
+    #[test]
+    fn recorded_events_carry_light() {
+        use crate::scene::desc::TextureDesc;
+        let mut desc = cornell_box(16, 16);
+        desc.textures.push(TextureDesc {
+            name: "checker".into(),
+            width: 8,
+            height: 8,
+            pixels: (0..64).map(|i| if (i % 8 + i / 8) % 2 == 0 { [1.0; 3] } else { [0.0; 3] }).collect(),
+            closest: true,
+            ..Default::default()
+        });
+        let light = desc.materials.iter().position(|m| m.name == "Light").unwrap();
+        desc.materials[light].emission_texture = Some(0);
+        let uv = [[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]];
+        let quad = desc.meshes.iter_mut().find(|m| m.name == "Light").unwrap();
+        quad.corner_uvs = [0, 1, 2, 0, 2, 3].iter().map(|&k| uv[k]).collect();
+        let scene = Scene::build(&desc).unwrap();
+        for nee in [false, true] {
+            let cfg = PathSettings { max_bounces: 4, nee };
+            let mut path = Path::default();
+            let mut events = 0;
+            for i in 0..40_000u64 {
+                let mut s = IndependentSampler::new(3, i);
+                let raster = Vec2::new((i % 16) as f32, ((i / 16) % 16) as f32) + s.next_2d();
+                trace_path(&scene, &cfg, raster, &mut s, Some(&mut path));
+                for e in &path.events {
+                    assert!(
+                        e.numerator.max_element() > 0.0,
+                        "nee={nee}: path {i} recorded an event worth {:?}",
+                        e.numerator
+                    );
+                    events += 1;
+                }
+            }
+            assert!(events > 200, "nee={nee}: {events} events");
         }
     }
 }
