@@ -35,7 +35,7 @@ class GDMLTRenderSettings(bpy.types.PropertyGroup):
                                  description="Norm of the screened Poisson reconstruction (gradient-domain methods)")
     alpha_reconstruction: FloatProperty(name="Alpha", default=0.2, min=1e-4, soft_max=2.0,
                                         description="Weight of the primal image against the gradients in the reconstruction")
-    alpha_target: FloatProperty(name="Target Alpha", default=1.0, min=0.0, soft_max=4.0,
+    alpha_target: FloatProperty(name="Target Alpha", default=1.0, min=0.01, soft_max=4.0,
                                 description="Gradient-domain Metropolis: weight of the primal image in the target function")
     large_step_probability: FloatProperty(name="Large Step Probability", default=0.3, min=0.0, max=1.0,
                                           description="Metropolis methods: probability of a fresh independent sample per mutation")

@@ -57,7 +57,7 @@ def build_parser():
                    help="light transport method: pt (path tracing), gdpt (gradient-domain path tracing), "
                         "pssmlt (primary-sample-space Metropolis), gdpssmlt (gradient-domain Metropolis); "
                         "default: the file's, else gdpssmlt")
-    r.add_argument("--alpha-target", type=_nonneg_float, dest="alpha_target",
+    r.add_argument("--alpha-target", type=_pos_float, dest="alpha_target",
                    help="gdpssmlt: weight of the primal term in the target function (default 1.0)")
     r.add_argument("--large-step", type=_nonneg_float, dest="large_step_probability",
                    help="Metropolis methods: probability of a large step (default 0.3)")

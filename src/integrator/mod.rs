@@ -116,8 +116,10 @@ impl RenderSettings {
         if !(0.0..=1.0).contains(&self.large_step_probability) {
             return Err(RenderError::Settings("large step probability must be in [0, 1]".into()));
         }
-        if !(self.alpha_target.is_finite() && self.alpha_target >= 0.0) {
-            return Err(RenderError::Settings("target alpha must be a finite number ≥ 0".into()));
+        // α = 0 would leave the primal unsampled wherever the gradients vanish (a flat, evenly
+        // lit wall has F = 0 there: biased), so the target keeps a share of the primal
+        if !(self.alpha_target.is_finite() && self.alpha_target > 0.0) {
+            return Err(RenderError::Settings("target alpha must be a finite number > 0".into()));
         }
         if self.chains > 1_000_000 {
             return Err(RenderError::Settings("chains must be at most 1000000".into()));
@@ -281,5 +283,15 @@ mod tests {
         assert_eq!(esc.final_norm(Norm::L1), Norm::L1);
         esc.cancel();
         assert_eq!(esc.final_norm(Norm::L1), Norm::L2);
+    }
+
+    /// A target without primal share (α = 0) is refused: it leaves evenly lit regions
+    /// unsampled (accepted before); any α > 0 is fine.
+    #[test]
+    fn a_target_alpha_of_zero_is_refused() {
+        let with = |alpha_target| RenderSettings { alpha_target, ..Default::default() }.validate();
+        assert!(matches!(with(0.0), Err(RenderError::Settings(m)) if m.contains("target alpha")));
+        assert!(with(-1.0).is_err() && with(f32::NAN).is_err());
+        assert!(with(0.05).is_ok() && with(1.0).is_ok());
     }
 }
