@@ -1,0 +1,296 @@
+"""Convergence to Cycles: scenes built the way artists build them in Blender, each rendered
+by Cycles (the reference, two seeds) and by every GDMLT method with and without next-event
+estimation (two seeds each, through the scene the add-on exports, as F12 does), compared by
+image mean and by 5×5-pixel block means, with the noise of each figure measured from the
+seed-to-seed spread of both renderers.
+
+    .venv/bin/python tools/convergence.py            # writes docs/convergence.md (≈10 min)
+    .venv/bin/python tools/convergence.py --scale 1  # the test suite's sample counts
+
+tests/python/test_convergence.py runs the same comparison at scale 1 and asserts on it.
+"""
+
+import argparse
+import math
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+METHODS = [(m, nee) for m in ("pt", "gdpt", "pssmlt", "gdpssmlt") for nee in (True, False)]
+W, H, BLOCK, BOUNCES = 40, 30, 5, 6
+
+
+def _diffuse(bpy, name, colour):
+    mat = bpy.data.materials.new(name)
+    mat.use_nodes = True
+    nt = mat.node_tree
+    nt.nodes.clear()
+    out = nt.nodes.new("ShaderNodeOutputMaterial")
+    d = nt.nodes.new("ShaderNodeBsdfDiffuse")
+    d.inputs["Color"].default_value = (*colour, 1.0)
+    nt.links.new(d.outputs["BSDF"], out.inputs["Surface"])
+    return mat
+
+
+def _emission(bpy, name, strength):
+    mat = bpy.data.materials.new(name)
+    mat.use_nodes = True
+    nt = mat.node_tree
+    nt.nodes.clear()
+    out = nt.nodes.new("ShaderNodeOutputMaterial")
+    e = nt.nodes.new("ShaderNodeEmission")
+    e.inputs["Color"].default_value = (1.0, 0.9, 0.7, 1.0)
+    e.inputs["Strength"].default_value = strength
+    nt.links.new(e.outputs["Emission"], out.inputs["Surface"])
+    return mat
+
+
+def _glass(bpy, name, roughness):
+    mat = bpy.data.materials.new(name)
+    mat.use_nodes = True
+    nt = mat.node_tree
+    nt.nodes.clear()
+    out = nt.nodes.new("ShaderNodeOutputMaterial")
+    g = nt.nodes.new("ShaderNodeBsdfGlass")
+    g.inputs["Color"].default_value = (1.0, 1.0, 1.0, 1.0)
+    g.inputs["Roughness"].default_value = roughness
+    g.inputs["IOR"].default_value = 1.5
+    nt.links.new(g.outputs["BSDF"], out.inputs["Surface"])
+    return mat
+
+
+def _mesh(bpy, scene, name, verts, faces, mat, smooth):
+    me = bpy.data.meshes.new(name)
+    me.from_pydata(verts, [], faces)
+    me.materials.append(mat)
+    for p in me.polygons:
+        p.use_smooth = smooth
+    me.update()
+    ob = bpy.data.objects.new(name, me)
+    scene.collection.objects.link(ob)
+    return ob
+
+
+def _uv_sphere(bpy, scene, name, centre, radius, segments, rings, mat, smooth):
+    verts = [(centre[0], centre[1], centre[2] + radius)]
+    for j in range(1, rings):
+        t = math.pi * j / rings
+        for i in range(segments):
+            p = 2 * math.pi * i / segments
+            verts.append((centre[0] + radius * math.sin(t) * math.cos(p),
+                          centre[1] + radius * math.sin(t) * math.sin(p), centre[2] + radius * math.cos(t)))
+    verts.append((centre[0], centre[1], centre[2] - radius))
+    bottom = len(verts) - 1
+    ring = lambda j, i: 1 + (j - 1) * segments + i % segments  # noqa: E731
+    faces = [(0, ring(1, i), ring(1, i + 1)) for i in range(segments)]
+    for j in range(1, rings - 1):
+        faces += [(ring(j, i), ring(j + 1, i), ring(j + 1, i + 1), ring(j, i + 1)) for i in range(segments)]
+    faces += [(ring(rings - 1, i + 1), ring(rings - 1, i), bottom) for i in range(segments)]
+    return _mesh(bpy, scene, name, verts, faces, mat, smooth)
+
+
+def _room(bpy, scene, mat, smooth, ceiling=True):
+    """A 2 × 2 × 1.5 m room open towards the camera (−Y): floor, three walls and the
+    ceiling as ONE mesh whose faces share the corner vertices, so with smooth shading each
+    corner normal is the average of the floor's and the walls' (tilted by up to 55°)."""
+    v = [(x, y, z) for z in (0.0, 1.5) for y in (-1.0, 1.0) for x in (-1.0, 1.0)]
+    # 0..3 at z=0: (-1,-1) (1,-1) (-1,1) (1,1); 4..7 the same at z=1.5
+    faces = [(0, 1, 3, 2), (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3)]
+    if ceiling:
+        faces.append((4, 6, 7, 5))
+    return _mesh(bpy, scene, "Room", v, faces, mat, smooth)
+
+
+def _camera_and_world(bpy, scene):
+    import mathutils
+
+    cam = bpy.data.cameras.new("Camera")
+    cam.lens = 24.0
+    ob = bpy.data.objects.new("Camera", cam)
+    scene.collection.objects.link(ob)
+    ob.location = (0.0, -2.6, 0.9)
+    ob.rotation_euler = mathutils.Euler((math.radians(84.0), 0.0, 0.0))
+    scene.camera = ob
+    world = bpy.data.worlds.new("World")
+    world.use_nodes = True
+    world.node_tree.nodes["Background"].inputs["Color"].default_value = (0.0, 0.0, 0.0, 1.0)
+    scene.world = world
+    r = scene.render
+    r.resolution_x, r.resolution_y, r.resolution_percentage = W, H, 100
+    scene.gdmlt.max_bounces = BOUNCES
+
+
+def smooth_room(bpy):
+    """Issue 14 §1: a low-poly smooth-shaded room and sphere lit by an area light. Shading
+    normals there disagree with the geometric ones: rays arrive below the shading
+    hemisphere while above the surface."""
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    scene = bpy.context.scene
+    grey = _diffuse(bpy, "Grey", (0.7, 0.7, 0.7))
+    _room(bpy, scene, grey, smooth=True)
+    _uv_sphere(bpy, scene, "Ball", (0.3, 0.2, 0.35), 0.35, 6, 4, grey, smooth=True)
+    light = bpy.data.lights.new("Area", "AREA")
+    light.energy, light.size = 60.0, 0.6
+    ob = bpy.data.objects.new("Area", light)
+    ob.location = (-0.3, 0.3, 1.45)
+    scene.collection.objects.link(ob)
+    _camera_and_world(bpy, scene)
+    return scene
+
+
+def bulb(bpy, roughness):
+    """Issue 14 §2–3: an emitting sphere inside a glass sphere (smooth or rough), the only
+    light of the room; the camera sees the filament through the glass."""
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    scene = bpy.context.scene
+    _room(bpy, scene, _diffuse(bpy, "Grey", (0.7, 0.7, 0.7)), smooth=False)
+    _uv_sphere(bpy, scene, "Glass", (0.0, 0.2, 0.75), 0.3, 24, 12, _glass(bpy, "Glass", roughness), smooth=True)
+    _uv_sphere(bpy, scene, "Filament", (0.0, 0.2, 0.75), 0.1, 12, 6, _emission(bpy, "Filament", 30.0), smooth=True)
+    _camera_and_world(bpy, scene)
+    return scene
+
+
+
+
+def checked_in(name, keep=None):
+    """One of tests/scenes/*.blend (tools/make_test_scenes.py) at this module's size and
+    bounce limit; `keep` names the lights left on."""
+    def build(bpy):
+        sys.path.insert(0, str(ROOT / "tools"))
+        from make_test_scenes import keep_lights
+
+        bpy.ops.wm.open_mainfile(filepath=str(ROOT / "tests" / "scenes" / f"{name}.blend"))
+        scene = bpy.context.scene
+        if keep is not None:
+            keep_lights(bpy, scene, keep)
+        r = scene.render
+        r.resolution_x, r.resolution_y, r.resolution_percentage = W, H, 100
+        scene.gdmlt.max_bounces = BOUNCES
+        return scene
+    return build
+
+
+# name: (builder, Cycles samples per seed, GDMLT pt samples per seed; the other methods
+# get the multiples in `samples`)
+SCENES = {
+    "smooth_room": (smooth_room, 512, 16),
+    "bulb_smooth": (lambda bpy: bulb(bpy, 0.0), 1024, 32),
+    "bulb_rough": (lambda bpy: bulb(bpy, 0.35), 1024, 32),
+    "all_lights": (checked_in("lights", {"Area", "Point", "Spot", "Sun", "World"}), 512, 16),
+    "specular": (checked_in("specular"), 1024, 32),
+}
+
+
+def samples(method, spp):
+    """Samples (mutations) per pixel of `method` for a scene whose pt budget is `spp`: about
+    equal time for the path tracers, more mutations for the Metropolis methods (cheaper
+    each, and their normalisation needs them)."""
+    return spp * {"pt": 8, "gdpt": 4, "pssmlt": 16, "gdpssmlt": 16}[method]
+
+
+def _cycles(bpy, scene, spp, seed, path):
+    from gdmlt.peers import cycles_unbiased
+    sys.path.insert(0, str(ROOT / "tests" / "python"))
+    from conftest import read_exr
+
+    cycles_unbiased(scene, spp, seed, BOUNCES)
+    img = scene.render.image_settings
+    img.file_format, img.color_depth, img.color_mode = "OPEN_EXR", "32", "RGB"
+    scene.render.filepath = str(path)
+    scene.render.use_file_extension = False
+    bpy.ops.render.render(write_still=True)
+    return read_exr(path)
+
+
+def block_means(img, b=BLOCK):
+    h, w = img.shape[0] // b * b, img.shape[1] // b * b
+    return img[:h, :w].astype(np.float64).reshape(h // b, b, w // b, b, -1).mean(axis=(1, 3))
+
+
+def compare(bpy, name, tmp, scale=1, methods=METHODS):
+    """Renders scene `name` with Cycles and every (method, nee); returns one row per pair:
+    dict(method, nee, mean, cycles_mean, rms (block difference), noise (its expected rms),
+    mean_noise (σ of the mean difference))."""
+    import gdmlt
+    import gdmlt_blender.export as export
+
+    build, cycles_spp, spp = SCENES[name]
+    scene = build(bpy)
+    desc, warnings = export.export_scene(bpy.context.evaluated_depsgraph_get())
+    if warnings:
+        raise RuntimeError(f"{name}: export warnings {warnings}")
+    core = gdmlt.Scene(desc)
+    cyc = [block_means(_cycles(bpy, scene, cycles_spp * scale, s, Path(tmp) / f"{name}{s}.exr")) for s in (1, 2)]
+    ref = (cyc[0] + cyc[1]) / 2
+    var_c = np.mean((cyc[0] - cyc[1]) ** 2) / 4
+    rows = []
+    for method, nee in methods:
+        runs = []
+        for seed in (1, 2):
+            out = gdmlt.render(core, method=method, spp=samples(method, spp) * scale, nee=nee, seed=seed,
+                               max_bounces=BOUNCES)
+            img = out["layers"]["Combined"]  # top row first, as read_exr gives Blender's EXR
+            if not np.isfinite(img).all():
+                raise RuntimeError(f"{name} {method} nee={nee}: non-finite pixels")
+            runs.append(block_means(img))
+        g = (runs[0] + runs[1]) / 2
+        var = var_c + np.mean((runs[0] - runs[1]) ** 2) / 4
+        rows.append(dict(method=method, nee=nee, mean=g.mean(), cycles_mean=ref.mean(),
+                         rms=np.sqrt(np.mean((g - ref) ** 2)), noise=np.sqrt(var),
+                         mean_noise=np.sqrt(var / ref.size)))
+    return rows
+
+
+def agrees(row, rms_factor=2.5, mean_sigmas=4.0, slack=0.015):
+    """The test's criterion: block differences within `rms_factor`× the noise (plus 1% of the
+    mean), image mean within `mean_sigmas` σ plus `slack` (relative)."""
+    c = row["cycles_mean"]
+    return (row["rms"] <= rms_factor * row["noise"] + 0.01 * c
+            and abs(row["mean"] - c) <= mean_sigmas * row["mean_noise"] + slack * c)
+
+
+def line(name, r):
+    c = r["cycles_mean"]
+    return (f"| {name} | {r['method']} | {'NEE' if r['nee'] else 'naive'} | {100 * (r['mean'] / c - 1):+.2f}% "
+            f"± {100 * r['mean_noise'] / c:.2f}% | {100 * r['rms'] / c:.2f}% | {100 * r['noise'] / c:.2f}% | "
+            f"{'yes' if agrees(r) else '**no**'} |")
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--scale", type=int, default=4, help="sample counts × this (the test uses 1)")
+    ap.add_argument("--out", default=str(ROOT / "docs" / "convergence.md"))
+    ap.add_argument("--scenes", default=",".join(SCENES))
+    args = ap.parse_args()
+    from gdmlt.blend import import_bpy
+    import gdmlt
+
+    bpy = import_bpy()
+    gdmlt.enable_addon()
+    lines = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for name in args.scenes.split(","):
+            for r in compare(bpy, name, tmp, args.scale):
+                lines.append(line(name, r))
+                print(lines[-1], flush=True)
+    import datetime
+
+    text = (f"# Convergence to Cycles\n\nGenerated by `.venv/bin/python tools/convergence.py --scale {args.scale}` "
+            f"on {datetime.date.today()} ({W}×{H} pixels, {BOUNCES} bounces; Cycles {SCENES['smooth_room'][1]}–"
+            f"{SCENES['bulb_rough'][1]}×{args.scale} samples per seed, two seeds per renderer). "
+            "Mean: GDMLT's image mean against Cycles', ± its noise (σ, from the seed spread of both). "
+            "Block: rms difference of 5×5-pixel block means, relative to the image mean, next to the rms "
+            "that noise alone gives. Agrees: the test suite's criterion (block ≤ 2.5× noise + 1%, mean "
+            "within 4σ + 1.5%). Scenes: see `tools/convergence.py`.\n\n"
+            "| scene | method | light sampling | mean vs Cycles | block rms | noise rms | agrees |\n"
+            "|---|---|---|---|---|---|---|\n" + "\n".join(lines) + "\n")
+    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+    Path(args.out).write_text(text)
+    print(f"wrote {args.out}")
+
+
+if __name__ == "__main__":
+    main()
