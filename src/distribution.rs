@@ -61,6 +61,14 @@ impl Distribution1D {
         self.pmf.get(i).copied().unwrap_or(0.0)
     }
 
+    /// Like `sample`, also returning u rescaled to [0, 1) within the chosen bin, for reuse.
+    #[inline]
+    pub fn sample_reuse(&self, u: f32) -> Option<(usize, f32, f32)> {
+        let (i, p) = self.sample(u)?;
+        let lo = if i == 0 { 0.0 } else { self.cdf[i - 1] };
+        Some((i, p, ((u - lo) / p).clamp(0.0, 1.0 - f32::EPSILON)))
+    }
+
     /// Samples the piecewise-constant density on [0, 1) with one bin per weight (pbrt's
     /// Distribution1D::SampleContinuous): (x, density at x, bin).
     #[inline]

@@ -244,7 +244,7 @@ pub fn trace_path_from<S: Sampler>(
         // Analytic lights crossed before the surface (lights are transparent). After
         // pass-throughs the light pdf is NEE's from the vertex the segment started at.
         let mut crossed = Spectrum::ZERO;
-        scene.for_each_light_crossed(o, d, t_surface, camera_visibility, |li, t, le, pdf_light| {
+        scene.for_each_light_crossed(prev_p, o, d, t_surface, camera_visibility, |li, t, le, pdf_light| {
             let inf = !t.is_finite();
             let z = if inf { d } else { o + d * t };
             let pdf_light = if passed { scene.light_eval(li, prev_p, z).map_or(0.0, |x| x.1) } else { pdf_light };
@@ -254,7 +254,7 @@ pub fn trace_path_from<S: Sampler>(
         add(&mut out, beta * crossed, camera_ray);
 
         let Some(hit) = hit else {
-            let (le, pdf_light) = scene.world_eval(d);
+            let (le, pdf_light) = scene.world_eval(prev_p, d);
             if le.max_element() > 0.0 {
                 add(&mut out, beta * le * mis(pdf_light), camera_ray);
                 push(&mut record, scene.env_light(), d, true, le, pdf_light);
@@ -420,9 +420,10 @@ pub struct FirstHit {
 pub fn first_hit(scene: &Scene, cam: &CameraRay, hit: Option<TriHit>) -> FirstHit {
     let mut out = FirstHit::default();
     let l = &mut out.very_direct;
-    scene.for_each_light_crossed(cam.origin, cam.dir, hit.map_or(cam.tmax, |h| h.t), true, |_, _, le, _| *l += le);
+    let tmax = hit.map_or(cam.tmax, |h| h.t);
+    scene.for_each_light_crossed(cam.origin, cam.origin, cam.dir, tmax, true, |_, _, le, _| *l += le);
     match hit {
-        None => out.very_direct += scene.world_eval(cam.dir).0,
+        None => out.very_direct += scene.world_eval(cam.origin, cam.dir).0,
         Some(h) => {
             let si = scene.interaction(&h, cam.dir);
             if let Some((le, _)) = scene.surface_emission(&si, cam.origin, cam.dir) {

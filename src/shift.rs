@@ -326,7 +326,7 @@ impl<'a> Offset<'a> {
                     if s.hit.is_some() {
                         return None;
                     }
-                    scene.world_eval(s.dir)
+                    scene.world_eval(f.y.p, s.dir)
                 } else if scene.is_triangle_light(e.light) {
                     // the base hit an emitting surface: so must the offset's ray (if it hits a
                     // surface that does not emit, the offset has no such event: the base would
@@ -334,7 +334,7 @@ impl<'a> Offset<'a> {
                     scene.surface_emission(&s.hit?, f.y.p, s.dir)?
                 } else {
                     let tmax = s.hit.map_or(f32::INFINITY, |h| h.t);
-                    let (_, le, pdf) = scene.light_crossed(e.light, s.origin, s.dir, tmax)?;
+                    let (_, le, pdf) = scene.light_crossed(e.light, f.y.p, s.origin, s.dir, tmax)?;
                     (le, pdf)
                 };
                 let pdf_l = if e.pdf_l > 0.0 { pdf_l } else { 0.0 }; // same strategies as the base

@@ -100,6 +100,9 @@ fn nee_and_naive_path_tracing_agree_on_cornell_box_gap_veil_and_bulb() {
         gdmlt::scene::builtin::cornell_veil(32, 32),
         gdmlt::scene::builtin::cornell_gap(32, 32),
         gdmlt::scene::builtin::cornell_bulb(32, 32),
+        // every kind of light at once: the per-point light selection's pmf must be the one
+        // MIS sees on BSDF hits of each light and the world
+        gdmlt::scene::builtin::cornell_mixed_lights(32, 32),
     ] {
         nee_and_naive_agree(&desc);
     }

@@ -201,6 +201,57 @@ pub fn cornell_bulb(width: u32, height: u32) -> SceneDesc {
     d
 }
 
+/// The Cornell box lit by every kind of light at once, as artists mix them: the ceiling
+/// quad (an emissive mesh), a rectangular area light under the ceiling, a sphere lamp and a
+/// spot near the floor, a sun with a 5° disc through the open front, and a grey-blue world
+/// (the light-selection test scene).
+pub fn cornell_mixed_lights(width: u32, height: u32) -> SceneDesc {
+    let mut d = cornell_box(width, height);
+    let light = d.materials.iter().position(|m| m.name == "Light").expect("the box has a light");
+    d.materials[light].emission = [4.0, 3.0, 1.0];
+    let down = [[1.0, 0.0, 0.0, -0.5], [0.0, 1.0, 0.0, 0.4], [0.0, 0.0, 1.0, 0.9], [0.0, 0.0, 0.0, 1.0]];
+    d.lights = vec![
+        LightDesc::Area {
+            name: "Area".into(),
+            to_world: down, // emits along local −Z: down
+            shape: AreaShape::Rectangle,
+            size_x: 0.4,
+            size_y: 0.2,
+            power: [20.0, 20.0, 25.0],
+            normalize: true,
+            visible_camera: false,
+        },
+        LightDesc::Point {
+            name: "Lamp".into(),
+            position: [-0.6, 0.6, -0.7],
+            radius: 0.05,
+            power: [15.0, 10.0, 5.0],
+            soft_falloff: true,
+            visible_camera: false,
+        },
+        LightDesc::Spot {
+            name: "Spot".into(),
+            position: [0.6, 0.0, 0.6],
+            direction: [0.0, 0.0, -1.0],
+            radius: 0.02,
+            power: [30.0, 30.0, 30.0],
+            spot_size: 0.8,
+            spot_blend: 0.2,
+            soft_falloff: true,
+            visible_camera: false,
+        },
+        LightDesc::Sun {
+            name: "Sun".into(),
+            direction: [0.2, -0.8, 0.4],
+            irradiance: [2.0, 1.8, 1.5],
+            angle: 5f32.to_radians(),
+            visible_camera: false,
+        },
+    ];
+    d.world = [0.1, 0.12, 0.15];
+    d
+}
+
 /// The Cornell box with a plate under the light that has one narrow gap: the room is lit
 /// only through it (a hard case for path tracing, the kind MLT is for).
 pub fn cornell_gap(width: u32, height: u32) -> SceneDesc {
@@ -272,7 +323,7 @@ pub fn furnace_sphere(albedo: f32, emission: f32, width: u32, height: u32) -> Sc
 }
 
 /// Names accepted by `builtin`.
-pub const BUILTIN_SCENES: &[&str] = &["cornell", "spheres", "gap", "veil", "bulb", "furnace"];
+pub const BUILTIN_SCENES: &[&str] = &["cornell", "spheres", "gap", "veil", "bulb", "lights", "furnace"];
 
 pub fn builtin(name: &str, width: u32, height: u32) -> Option<SceneDesc> {
     match name {
@@ -281,6 +332,7 @@ pub fn builtin(name: &str, width: u32, height: u32) -> Option<SceneDesc> {
         "gap" => Some(cornell_gap(width, height)),
         "veil" => Some(cornell_veil(width, height)),
         "bulb" => Some(cornell_bulb(width, height)),
+        "lights" => Some(cornell_mixed_lights(width, height)),
         "furnace" => Some(furnace_sphere(0.8, 1.0, width, height)),
         _ => None,
     }

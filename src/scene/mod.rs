@@ -6,6 +6,7 @@ pub mod camera;
 pub mod desc;
 pub mod environment;
 pub mod light;
+pub mod light_select;
 pub mod material;
 pub mod texture;
 
@@ -17,7 +18,6 @@ pub use texture::Texture;
 
 use crate::accel::{Accel, RayPacket, TriHit};
 use crate::bsdf::Bsdf;
-use crate::distribution::Distribution1D;
 use crate::error::SceneError;
 use crate::math::{ray_epsilon, square_to_triangle, Frame, Spectrum};
 use environment::Environment;
@@ -74,7 +74,8 @@ pub struct Scene {
     pub materials: Vec<Material>,
     pub textures: Vec<Texture>,
     pub lights: Vec<Light>,
-    light_distribution: Distribution1D,
+    /// Which light a shading point samples (light_select.rs).
+    selector: light_select::LightSelector,
     /// Light index of each emissive triangle (u32::MAX if not emissive).
     tri_light: Vec<u32>,
     /// Non-triangle lights that a ray can hit (spheres, planes, suns with an angle).
@@ -234,28 +235,24 @@ impl Scene {
             .iter()
             .map(|m| m.emission_texture.map_or(1.0, |t| crate::math::luminance(textures[t as usize].mean()).max(1e-6)))
             .collect();
-        let mut weights: Vec<f32> = lights
-            .iter()
-            .map(|l| {
-                let LightShape::Triangle { prim } = l.shape else { return l.power_estimate(bounds_radius, 0.0) };
-                let scale = emission_scale[tri_material[prim as usize] as usize];
-                l.power_estimate(bounds_radius, areas[prim as usize]) * scale
-            })
-            .collect();
-        // the world, last: power through the scene's bounding sphere, π·L·4πR²
-        weights.push(if env.is_black() {
-            0.0
-        } else {
-            env.mean_radiance() * 4.0 * std::f32::consts::PI.powi(2) * bounds_radius * bounds_radius
-        });
-        let light_distribution = Distribution1D::new(&weights);
+        // the world: π × its mean radiance, the irradiance it gives an open surface
+        let world = if env.is_black() { 0.0 } else { std::f32::consts::PI * env.mean_radiance() };
+        let selector = light_select::LightSelector::new(
+            &lights,
+            &tri_material,
+            &positions,
+            &areas,
+            &emission_scale,
+            world,
+            bounds_center,
+        );
         let hittable_lights = lights
             .iter()
             .enumerate()
             .filter(|(_, l)| !l.is_delta() && !matches!(l.shape, LightShape::Triangle { .. }))
             .map(|(i, _)| i as u32)
             .collect();
-        if light_distribution.is_empty() {
+        if selector.is_empty() {
             report.warnings.push(
                 "the scene has no light: no emitting material, no light object and a black world; the image is black"
                     .into(),
@@ -282,7 +279,7 @@ impl Scene {
             materials,
             textures,
             lights,
-            light_distribution,
+            selector,
             tri_light,
             hittable_lights,
             camera,
@@ -526,13 +523,13 @@ impl Scene {
     }
 
     pub fn has_lights(&self) -> bool {
-        !self.light_distribution.is_empty()
+        !self.selector.is_empty()
     }
 
-    /// Chooses a light ∝ power and samples a point on it (NEE). `pdf` of the result
-    /// includes the selection probability.
+    /// Chooses a light for shading point `p` (light_select.rs) and samples a point on it
+    /// (NEE). `pdf` of the result includes the selection probability.
     pub fn sample_light(&self, p: Vec3, u_select: f32, u: Vec2) -> Option<(u32, LightSample)> {
-        let (li, pmf) = self.light_distribution.sample(u_select)?;
+        let (li, pmf) = self.selector.sample(p, u_select)?;
         if li == self.lights.len() {
             let (wi, radiance, pdf) = self.env.sample(&self.textures, u)?;
             let pdf = pdf * pmf;
@@ -590,18 +587,21 @@ impl Scene {
         let cos_l = dir.dot(si.ng).abs();
         let d2 = (si.p - from).length_squared();
         let pdf = if cos_l > 0.0 {
-            self.light_distribution.pmf(li as usize) * d2 / (cos_l * self.areas[si.prim as usize])
+            self.selector.pmf(li as usize, from) * d2 / (cos_l * self.areas[si.prim as usize])
         } else {
             0.0
         };
         Some((le, pdf))
     }
 
-    /// Calls `f(radiance, nee_pdf)` for every analytic light the ray crosses before `tmax`
-    /// (lights are transparent). `camera_ray` skips lights not visible to the camera.
+    /// Calls `f(radiance, nee_pdf)` for every analytic light the ray (o, d) crosses before
+    /// `tmax` (lights are transparent); the pdf is NEE's from shading point `from` (the
+    /// vertex the ray left). `camera_ray` skips lights not visible to the camera.
     #[inline]
+    #[allow(clippy::too_many_arguments)]
     pub fn for_each_light_crossed(
         &self,
+        from: Vec3,
         o: Vec3,
         d: Vec3,
         tmax: f32,
@@ -612,19 +612,20 @@ impl Scene {
             if camera_ray && !self.lights[li as usize].visible_camera {
                 continue;
             }
-            if let Some((t, le, pdf)) = self.light_crossed(li, o, d, tmax) {
+            if let Some((t, le, pdf)) = self.light_crossed(li, from, o, d, tmax) {
                 f(li, t, le, pdf);
             }
         }
     }
 
-    /// Where the ray crosses analytic light `li` before `tmax`: (t, radiance, NEE pdf with
-    /// selection). None for emissive triangles (they are surfaces) and for a miss.
+    /// Where the ray (o, d) crosses analytic light `li` before `tmax`: (t, radiance, NEE pdf
+    /// from shading point `from`, selection included). None for emissive triangles (they are
+    /// surfaces) and for a miss.
     #[inline]
-    pub fn light_crossed(&self, li: u32, o: Vec3, d: Vec3, tmax: f32) -> Option<(f32, Spectrum, f32)> {
+    pub fn light_crossed(&self, li: u32, from: Vec3, o: Vec3, d: Vec3, tmax: f32) -> Option<(f32, Spectrum, f32)> {
         let light = self.lights.get(li as usize)?;
         let (t, le, pdf) = light.intersect(o, d, tmax)?;
-        Some((t, le, pdf * self.light_distribution.pmf(li as usize)))
+        Some((t, le, pdf * self.selector.pmf(li as usize, from)))
     }
 
     /// The light index of the world background (one past the light objects).
@@ -633,14 +634,14 @@ impl Scene {
         self.lights.len() as u32
     }
 
-    /// Background radiance arriving from direction `d` and the NEE pdf (solid angle,
-    /// selection included; 0 when the world is not sampled) of that direction.
+    /// Background radiance arriving from direction `d` and the NEE pdf from shading point
+    /// `from` (solid angle, selection included; 0 when the world is not sampled).
     #[inline]
-    pub fn world_eval(&self, d: Vec3) -> (Spectrum, f32) {
+    pub fn world_eval(&self, from: Vec3, d: Vec3) -> (Spectrum, f32) {
         if self.env.is_black() {
             return (Spectrum::ZERO, 0.0);
         }
-        let pmf = self.light_distribution.pmf(self.lights.len());
+        let pmf = self.selector.pmf(self.lights.len(), from);
         (self.env.eval(&self.textures, d), pmf * self.env.pdf(d))
     }
 
@@ -656,10 +657,10 @@ impl Scene {
     /// face `from`. Used by the shift mapping to re-evaluate a light point from an offset path.
     pub fn light_eval(&self, li: u32, from: Vec3, z: Vec3) -> Option<(Spectrum, f32)> {
         if li == self.env_light() {
-            return Some(self.world_eval(z));
+            return Some(self.world_eval(from, z));
         }
         let light = self.lights.get(li as usize)?;
-        let pmf = self.light_distribution.pmf(li as usize);
+        let pmf = self.selector.pmf(li as usize, from);
         match &light.shape {
             LightShape::Triangle { prim } => {
                 let n = self.geo_normals[*prim as usize];
