@@ -23,43 +23,30 @@ METHODS = [(m, nee) for m in ("pt", "gdpt", "pssmlt", "gdpssmlt") for nee in (Tr
 W, H, BLOCK, BOUNCES = 40, 30, 5, 6
 
 
-def _diffuse(bpy, name, colour):
+def _material(bpy, name, node_type, **inputs):
+    """A material whose surface is one shader node of `node_type` with these input values."""
     mat = bpy.data.materials.new(name)
     mat.use_nodes = True
     nt = mat.node_tree
     nt.nodes.clear()
     out = nt.nodes.new("ShaderNodeOutputMaterial")
-    d = nt.nodes.new("ShaderNodeBsdfDiffuse")
-    d.inputs["Color"].default_value = (*colour, 1.0)
-    nt.links.new(d.outputs["BSDF"], out.inputs["Surface"])
+    node = nt.nodes.new(node_type)
+    for key, value in inputs.items():
+        node.inputs[key].default_value = value
+    nt.links.new(node.outputs[0], out.inputs["Surface"])
     return mat
+
+
+def _diffuse(bpy, name, colour):
+    return _material(bpy, name, "ShaderNodeBsdfDiffuse", Color=(*colour, 1.0))
 
 
 def _emission(bpy, name, strength):
-    mat = bpy.data.materials.new(name)
-    mat.use_nodes = True
-    nt = mat.node_tree
-    nt.nodes.clear()
-    out = nt.nodes.new("ShaderNodeOutputMaterial")
-    e = nt.nodes.new("ShaderNodeEmission")
-    e.inputs["Color"].default_value = (1.0, 0.9, 0.7, 1.0)
-    e.inputs["Strength"].default_value = strength
-    nt.links.new(e.outputs["Emission"], out.inputs["Surface"])
-    return mat
+    return _material(bpy, name, "ShaderNodeEmission", Color=(1.0, 0.9, 0.7, 1.0), Strength=strength)
 
 
 def _glass(bpy, name, roughness):
-    mat = bpy.data.materials.new(name)
-    mat.use_nodes = True
-    nt = mat.node_tree
-    nt.nodes.clear()
-    out = nt.nodes.new("ShaderNodeOutputMaterial")
-    g = nt.nodes.new("ShaderNodeBsdfGlass")
-    g.inputs["Color"].default_value = (1.0, 1.0, 1.0, 1.0)
-    g.inputs["Roughness"].default_value = roughness
-    g.inputs["IOR"].default_value = 1.5
-    nt.links.new(g.outputs["BSDF"], out.inputs["Surface"])
-    return mat
+    return _material(bpy, name, "ShaderNodeBsdfGlass", Color=(1.0, 1.0, 1.0, 1.0), Roughness=roughness, IOR=1.5)
 
 
 def _mesh(bpy, scene, name, verts, faces, mat, smooth):

@@ -70,24 +70,31 @@ struct Entry {
 }
 
 impl Entry {
+    /// The importance at p; `oriented` false leaves out the factors of direction (spot cone,
+    /// the facing of an area light) — the global choice's weights, evaluated at one point
+    /// for the whole scene, must not drop a light that merely faces away from that point.
     #[inline]
-    fn importance(&self, p: Vec3) -> f32 {
+    fn importance(&self, p: Vec3, oriented: bool) -> f32 {
         match &self.kind {
             Kind::Constant => self.power,
             Kind::Sphere { center, r2, spot } => {
                 let to = p - *center;
                 let d2 = to.length_squared();
-                let att = spot.map_or(1.0, |s| s.attenuation(to.normalize_or_zero()));
+                let att = if oriented { spot.map_or(1.0, |s| s.attenuation(to.normalize_or_zero())) } else { 1.0 };
                 self.power * att / (4.0 * PI * d2.max(*r2).max(1e-12))
             }
             Kind::Planar { center, normal, half_diagonal, area } => {
                 let to = p - *center;
-                let h = to.dot(*normal);
-                if h <= 0.0 {
-                    return 0.0; // behind (or in) the plane of a one-sided emitter
-                }
                 let d2 = to.length_squared();
-                let cos_bound = ((h + half_diagonal) / d2.sqrt().max(1e-12)).min(1.0);
+                let cos_bound = if oriented {
+                    let h = to.dot(*normal);
+                    if h <= 0.0 {
+                        return 0.0; // behind (or in) the plane of a one-sided emitter
+                    }
+                    ((h + half_diagonal) / d2.sqrt().max(1e-12)).min(1.0)
+                } else {
+                    1.0
+                };
                 self.power * cos_bound / (PI * d2.max(*area).max(1e-12))
             }
             Kind::Triangles { lo, hi, area, .. } => {
@@ -182,7 +189,8 @@ impl LightSelector {
             of_light[lights.len()] = (entries.len() as u32, 1.0);
             entries.push(Entry { kind: Kind::Constant, light: lights.len() as u32, power: world });
         }
-        let global = Distribution1D::new(&entries.iter().map(|e| e.importance(bounds_center)).collect::<Vec<_>>());
+        let global =
+            Distribution1D::new(&entries.iter().map(|e| e.importance(bounds_center, false)).collect::<Vec<_>>());
         // a light that is never chosen (zero power) is dropped from the spatial choice too
         for e in entries.iter_mut() {
             if !(e.power > 0.0) || !e.power.is_finite() {
@@ -198,7 +206,7 @@ impl LightSelector {
 
     /// True when there is nothing to sample (no light carries power).
     pub fn is_empty(&self) -> bool {
-        self.entries.iter().all(|e| e.power <= 0.0)
+        self.global.is_empty()
     }
 
     /// Importances at p (spatial choice), into `w`; their sum.
@@ -206,7 +214,7 @@ impl LightSelector {
     fn importances(&self, p: Vec3, w: &mut [f32; SPATIAL_MAX]) -> f32 {
         let mut sum = 0.0;
         for (wi, e) in w.iter_mut().zip(&self.entries) {
-            let v = e.importance(p);
+            let v = e.importance(p, true);
             *wi = if v.is_finite() { v } else { 0.0 };
             sum += *wi;
         }
@@ -339,5 +347,26 @@ mod tests {
         assert_eq!(scene.selector.pmf(area, Vec3::new(0.0, 0.0, 0.99)), 0.0); // above its plane
         assert!(scene.selector.pmf(spot, Vec3::new(0.6, 0.0, -0.99)) > 0.0);
         assert_eq!(scene.selector.pmf(spot, Vec3::new(0.6, 0.0, 0.95)), 0.0); // behind the spot
+    }
+
+    /// A single area light that faces away from the scene's centre (an uplight under the
+    /// ceiling) is still the one light chosen where it shines: the global choice, used for one
+    /// light, must not weigh it by its facing at the centre (it did, and NEE never sampled
+    /// it: a USD test of a RectLight failed).
+    #[test]
+    fn a_single_light_facing_away_from_the_centre_is_still_sampled() {
+        let mut desc = cornell_mixed_lights(8, 8);
+        desc.lights.truncate(1); // the area light
+        desc.world = [0.0; 3];
+        desc.materials.iter_mut().for_each(|m| m.emission = [0.0; 3]);
+        let crate::scene::desc::LightDesc::Area { to_world, .. } = &mut desc.lights[0] else { unreachable!() };
+        // emitting up (local −Z turned to +Z) from z = 0.5: the bounds' centre lies behind it
+        *to_world = [[1.0, 0.0, 0.0, 0.0], [0.0, -1.0, 0.0, 0.0], [0.0, 0.0, -1.0, 0.5], [0.0, 0.0, 0.0, 1.0]];
+        let scene = Scene::build(&desc).unwrap();
+        assert!(scene.has_lights());
+        let p = Vec3::new(0.1, 0.0, 0.95);
+        assert_eq!(scene.selector.pmf(0, p), 1.0);
+        let mut s = IndependentSampler::new(1, 1);
+        assert!(scene.sample_light(p, s.next_1d(), s.next_2d()).is_some());
     }
 }
