@@ -318,30 +318,55 @@ impl<'a> Offset<'a> {
             // a segment through transparent surfaces is not re-created from a free offset
             // vertex (neither is the offset's, in reconnect_event: shadow tests stop at them)
             State::Free(_) if e.through_transparent => None,
-            State::Free(f) if e.nee || f.diffuse => reconnect_event(scene, e, base.vertices[k].p, &f),
-            State::Free(f) => {
-                let s = self.step(&f)?;
-                let (le, pdf_l) = if e.light == scene.env_light() {
-                    // the base escaped: so must the offset
-                    if s.hit.is_some() {
-                        return None;
-                    }
-                    scene.world_eval(f.y.p, s.dir)
-                } else if scene.is_triangle_light(e.light) {
-                    // the base hit an emitting surface: so must the offset's ray (if it hits a
-                    // surface that does not emit, the offset has no such event: the base would
-                    // have no event to shift back from, so the pair fails symmetrically)
-                    scene.surface_emission(&s.hit?, f.y.p, s.dir)?
-                } else {
-                    let tmax = s.hit.map_or(f32::INFINITY, |h| h.t);
-                    let (_, le, pdf) = scene.light_crossed(e.light, f.y.p, s.origin, s.dir, tmax)?;
-                    (le, pdf)
-                };
-                let pdf_l = if e.pdf_l > 0.0 { pdf_l } else { 0.0 }; // same strategies as the base
-                Some((f.beta * s.f * le * s.j, f.r * s.j * (s.pdf + pdf_l)))
-            }
+            // a light sampled or hit from a free diffuse vertex, and a delta light (no ray
+            // can hit it), reconnect to the same light point
+            State::Free(f) if f.diffuse || e.delta => reconnect_event(scene, e, base.vertices[k].p, &f),
+            // at a free non-diffuse vertex a light sample is shifted as a BSDF sample of the
+            // same direction is (half-vector copy, then whatever light the offset's ray
+            // finds): one base path has one offset whichever strategy found it, so the pair's
+            // MIS weights over both strategies on both sides sum to one (a light sample used
+            // to reconnect while a BSDF hit of the same path copied the half-vector)
+            State::Free(f) if e.nee => light_along(scene, e, &f, &nee_step(scene, &base.vertices[k], &f, e)?),
+            State::Free(f) => light_along(scene, e, &f, &self.step(&f)?),
         }
     }
+}
+
+/// The offset's version of light event `e` found along its traced half-vector step `s`
+/// from free vertex `f`: (numerator, pdf sum) in the base's measure, None if the offset's
+/// ray does not find that light.
+fn light_along(scene: &Scene, e: &Event, f: &Free, s: &Step) -> Option<(Spectrum, f32)> {
+    let (le, pdf_l) = if e.light == scene.env_light() {
+        // the base escaped: so must the offset
+        if s.hit.is_some() {
+            return None;
+        }
+        scene.world_eval(f.y.p, s.dir)
+    } else if scene.is_triangle_light(e.light) {
+        // the base hit an emitting surface: so must the offset's ray (if it hits a surface
+        // that does not emit, the offset has no such event: the base would have no event to
+        // shift back from, so the pair fails symmetrically)
+        scene.surface_emission(&s.hit?, f.y.p, s.dir)?
+    } else {
+        let tmax = s.hit.map_or(f32::INFINITY, |h| h.t);
+        let (_, le, pdf) = scene.light_crossed(e.light, f.y.p, s.origin, s.dir, tmax)?;
+        (le, pdf)
+    };
+    let pdf_l = if e.pdf_l > 0.0 { pdf_l } else { 0.0 }; // same strategies as the base
+    Some((f.beta * s.f * le * s.j, f.r * s.j * (s.pdf + pdf_l)))
+}
+
+/// The half-vector step of a light sample taken at base vertex `x`: the bounce the BSDF
+/// would have sampled towards the light (its non-delta lobes, reflection or transmission).
+fn nee_step(scene: &Scene, x: &Vertex, f: &Free, e: &Event) -> Option<Step> {
+    if !(e.pdf_b > 0.0) {
+        return None; // no lobe samples that direction: nothing to copy
+    }
+    let wi = if e.at_infinity { e.z } else { (e.z - x.p).normalize() };
+    let through = wi.dot(x.ng) < 0.0;
+    let eta = if through { bsdf_at(scene, x.material, x.front, x.uv).eta() } else { 1.0 };
+    let as_sampled = Vertex { wi, f_out: e.f, pdf_out: e.pdf_b, delta_out: false, eta_out: eta, ..*x };
+    half_vector_step(scene, &as_sampled, f)
 }
 
 /// The offset's half-vector bounce at free vertex `f` against base vertex `x`, traced.
@@ -736,6 +761,52 @@ mod tests {
                 assert!((sum_o - sum_b).abs() <= 2e-3 * sum_b, "nee={nee}: offsets {sum_o} vs bases {sum_b}");
             }
         }
+    }
+
+    /// One base path has one offset whichever strategy found its light: at a free
+    /// non-diffuse vertex (the lacquered floor: a smooth coat over a diffuse base), the
+    /// offset's version of a BSDF-sampled light hit and of the same light point taken as a
+    /// light sample are the same (before, the light sample reconnected while the hit copied
+    /// the half-vector, so the pair's MIS weights over both strategies did not sum to one;
+    /// this test failed).
+    #[test]
+    fn light_samples_and_light_hits_of_one_path_shift_alike() {
+        use crate::path::{trace_path, PathSettings};
+        use crate::sampler::{IndependentSampler, Sampler};
+        let scene = Scene::build(&crate::scene::builtin::cornell_spheres(16, 16)).unwrap();
+        let cfg = PathSettings { max_bounces: 4, nee: true };
+        let mut base = Path::default();
+        let mut compared = 0;
+        for i in 0..200_000u64 {
+            let mut smp = IndependentSampler::new(31, i);
+            let raster = Vec2::new((i % 16) as f32, 12.0 + ((i / 16) % 4) as f32) + smp.next_2d();
+            trace_path(&scene, &cfg, raster, &mut smp, Some(&mut base));
+            for e in base.events.iter().filter(|e| !e.nee && e.vertex != CAMERA_VERTEX && !e.delta) {
+                let x = &base.vertices[e.vertex as usize];
+                if x.delta_out || is_diffuse(&scene, x.material, x.front, x.uv) || !scene.is_triangle_light(e.light) {
+                    continue;
+                }
+                let as_light_sample = Event { nee: true, ..*e };
+                let at_k = || {
+                    let mut o = Offset::new(&scene, &base, Some(raster + Vec2::X));
+                    while o.k < e.vertex as usize {
+                        o.advance();
+                    }
+                    o
+                };
+                let (hit, sampled) = (at_k().own_event(e), at_k().own_event(&as_light_sample));
+                match (hit, sampled) {
+                    (Some((a, pa)), Some((b, pb))) => {
+                        let close = |p: f32, q: f32| (p - q).abs() <= 1e-3 * p.abs().max(q.abs()).max(1e-6);
+                        assert!(close(pa, pb) && (0..3).all(|c| close(a[c], b[c])), "path {i}: {a} / {pa} vs {b} / {pb}");
+                        compared += 1;
+                    }
+                    (None, None) => {}
+                    other => panic!("path {i}: one strategy's offset exists, the other's not: {other:?}"),
+                }
+            }
+        }
+        assert!(compared > 50, "only {compared} light hits from free non-diffuse vertices");
     }
 
     #[test]
