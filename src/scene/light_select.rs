@@ -10,7 +10,8 @@
 //! * area light (one-sided, power Φ = π·L·A): Φ/(π·max(d², A)) × a bound of the cosine at
 //!   the light (0 behind its plane);
 //! * triangle group (two-sided, Φ = 2π·L·A): Φ/(2π·max(dist(p, bounds)², A)) ;
-//! * sun: its irradiance; the world: π × its mean radiance.
+//! * sun: its irradiance; the world (an HDRI): π × its mean radiance. A world of one
+//!   colour is not an entry: BSDF sampling alone finds it with less variance (scene/mod.rs).
 //!
 //! The distance-free terms (sun, world) no longer grow with the scene's size, as the former
 //! power-proportional choice did (it gave a sun or a dim world most of the samples on a large
@@ -298,7 +299,7 @@ mod tests {
         for p in [Vec3::new(0.0, 0.0, -0.99), Vec3::new(-0.9, 0.5, 0.3), Vec3::new(0.5, -0.5, 0.9), Vec3::ZERO] {
             let pmf: Vec<f64> = (0..n_lights).map(|li| scene.selector.pmf(li, p) as f64).collect();
             assert!((pmf.iter().sum::<f64>() - 1.0).abs() < 1e-4, "pmf sums to {}", pmf.iter().sum::<f64>());
-            assert!(pmf.iter().filter(|&&q| q > 0.0).count() >= 5, "{pmf:?}");
+            assert!(pmf.iter().filter(|&&q| q > 0.0).count() >= 3, "{pmf:?}");
             let n = 200_000;
             let mut counts = vec![0usize; n_lights];
             let mut silhouette = 0;

@@ -235,8 +235,12 @@ impl Scene {
             .iter()
             .map(|m| m.emission_texture.map_or(1.0, |t| crate::math::luminance(textures[t as usize].mean()).max(1e-6)))
             .collect();
-        // the world: π × its mean radiance, the irradiance it gives an open surface
-        let world = if env.is_black() { 0.0 } else { std::f32::consts::PI * env.mean_radiance() };
+        // the world: π × its mean radiance, the irradiance it gives an open surface. A world
+        // of one colour is not light-sampled at all: BSDF sampling alone finds it with less
+        // variance than any mix with uniform light samples (measured, pt at 1 s, 48²: world
+        // alone relMSE 1.2e-5 → 8.6e-6, world + a lamp 1.8e-5 → 6.7e-6); an HDRI is.
+        let world =
+            if env.is_black() || env.texture.is_none() { 0.0 } else { std::f32::consts::PI * env.mean_radiance() };
         let selector = light_select::LightSelector::new(
             &lights,
             &tri_material,
@@ -252,7 +256,7 @@ impl Scene {
             .filter(|(_, l)| !l.is_delta() && !matches!(l.shape, LightShape::Triangle { .. }))
             .map(|(i, _)| i as u32)
             .collect();
-        if selector.is_empty() {
+        if selector.is_empty() && env.is_black() {
             report.warnings.push(
                 "the scene has no light: no emitting material, no light object and a black world; the image is black"
                     .into(),
