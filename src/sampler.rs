@@ -58,6 +58,70 @@ impl Sampler for IndependentSampler {
     }
 }
 
+/// Dimensions a pixel sample draws before its path: the position in the pixel (2), then the
+/// path's lens sample (2). The path builder then draws `path::SAMPLES_PER_VERTEX` per vertex.
+pub const PIXEL_DIMENSIONS: u32 = 4;
+
+/// Owen-scrambled Sobol points (Burley 2020, the `sobol_burley` crate; Cycles' pattern
+/// family), "padded": the stream is cut into 4-D sets, each its own independently shuffled
+/// and scrambled 4-D Sobol sequence over the pixel's samples, so each set is stratified
+/// whatever the others do. The sets follow what the path builder draws: {pixel position,
+/// lens}, then per vertex {light choice, light point (2), lobe} and {BSDF direction (2),
+/// roulette, unused}, so every 2-D pair it uses lies inside one set. Sample indices past
+/// 2^16 (the crate's limit) draw independent numbers instead.
+#[derive(Clone, Debug)]
+pub struct SobolSampler {
+    index: u32,
+    seed: u32,
+    dim: u32,
+    set: u32,
+    cache: [f32; 4],
+    fallback: Option<IndependentSampler>,
+}
+
+impl SobolSampler {
+    /// Sample `index` of the pixel whose stream is `stream` (seed and pixel mixed in).
+    pub fn new(seed: u64, stream: u64, index: u32) -> Self {
+        let fallback = (index >= 1 << 16).then(|| IndependentSampler::new(seed, stream ^ ((index as u64) << 40)));
+        SobolSampler {
+            index,
+            seed: mix64(seed ^ mix64(stream)) as u32,
+            dim: 0,
+            set: u32::MAX,
+            cache: [0.0; 4],
+            fallback,
+        }
+    }
+
+    /// The 4-D set and its component that dimension `d` of the stream falls in.
+    #[inline]
+    fn layout(d: u32) -> (u32, usize) {
+        if d < PIXEL_DIMENSIONS {
+            return (0, d as usize);
+        }
+        let per_vertex = crate::path::SAMPLES_PER_VERTEX as u32;
+        let (v, r) = ((d - PIXEL_DIMENSIONS) / per_vertex, (d - PIXEL_DIMENSIONS) % per_vertex);
+        (1 + 2 * v + u32::from(r >= 4), (r % 4) as usize)
+    }
+}
+
+impl Sampler for SobolSampler {
+    #[inline]
+    fn next_1d(&mut self) -> f32 {
+        if let Some(f) = &mut self.fallback {
+            return f.next_1d();
+        }
+        let (set, k) = Self::layout(self.dim);
+        self.dim += 1;
+        if set != self.set {
+            let set_seed = mix64(((self.seed as u64) << 32) | set as u64) as u32;
+            self.cache = sobol_burley::sample_4d(self.index, 0, set_seed);
+            self.set = set;
+        }
+        self.cache[k].min(1.0 - f32::EPSILON / 2.0)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -285,5 +349,51 @@ mod pss_tests {
             let p = h as f64 / n as f64;
             assert!((p - 0.1).abs() < 0.01, "{hist:?}");
         }
+    }
+
+    /// The Sobol sampler's first 2-D pairs are stratified over a pixel's samples: with 2^k
+    /// samples every one of the 2^k elementary intervals of each pair's 1-D projections holds
+    /// exactly one point, and the 2-D pair (pixel position) fills a 16×16 grid of 256 points
+    /// one per cell in each row and column (a (0,2)-net's projections); the stream's numbers
+    /// lie in [0,1) and a pair split across sets never happens for the layout's pairs.
+    #[test]
+    fn sobol_points_are_stratified_in_every_pair_the_path_builder_uses() {
+        let n = 256u32;
+        let per_vertex = crate::path::SAMPLES_PER_VERTEX as u32;
+        // the pairs: pixel position, lens, and per vertex light point and BSDF direction
+        let mut pairs = vec![(0u32, 1u32), (2, 3)];
+        for v in 0..4 {
+            let base = PIXEL_DIMENSIONS + v * per_vertex;
+            pairs.push((base + 1, base + 2));
+            pairs.push((base + 4, base + 5));
+        }
+        for &(a, b) in &pairs {
+            assert_eq!(SobolSampler::layout(a).0, SobolSampler::layout(b).0, "pair ({a}, {b}) split across sets");
+        }
+        let dims = PIXEL_DIMENSIONS + 4 * per_vertex;
+        let points: Vec<Vec<f32>> = (0..n)
+            .map(|i| {
+                let mut s = SobolSampler::new(7, 42, i);
+                (0..dims).map(|_| s.next_1d()).collect()
+            })
+            .collect();
+        for &(a, b) in &pairs {
+            let (mut rows, mut cols) = (vec![0; 16], vec![0; 16]);
+            let mut strata_a = vec![0; n as usize];
+            for p in &points {
+                let (x, y) = (p[a as usize], p[b as usize]);
+                assert!((0.0..1.0).contains(&x) && (0.0..1.0).contains(&y));
+                strata_a[(x * n as f32) as usize] += 1;
+                rows[(x * 16.0) as usize] += 1;
+                cols[(y * 16.0) as usize] += 1;
+            }
+            assert!(strata_a.iter().all(|&c| c == 1), "dimension {a}: not one point per 1/{n} interval");
+            assert!(rows.iter().chain(&cols).all(|&c| c == 16), "pair ({a}, {b}): rows {rows:?} cols {cols:?}");
+        }
+        // different pixels are scrambled differently
+        assert_ne!(SobolSampler::new(7, 1, 0).next_1d(), SobolSampler::new(7, 2, 0).next_1d());
+        // past the crate's limit: independent numbers, still in [0,1)
+        let mut far = SobolSampler::new(7, 1, 1 << 16);
+        assert!((0..100).map(|_| far.next_1d()).all(|x| (0.0..1.0).contains(&x)));
     }
 }

@@ -6,7 +6,7 @@
 use super::{RenderControl, RenderOutput, RenderSettings, RenderStats};
 use crate::film::{Film, FilmRow};
 use crate::path::{trace_path_from, Primary};
-use crate::sampler::{IndependentSampler, Sampler};
+use crate::sampler::{Sampler, SobolSampler};
 use crate::scene::{CameraRay, Scene};
 use glam::Vec2;
 use rayon::prelude::*;
@@ -14,8 +14,8 @@ use std::sync::atomic::Ordering;
 
 /// The sample stream of one (pixel, sample) pair.
 #[inline]
-pub fn pixel_sampler(seed: u64, pixel: usize, sample: u32) -> IndependentSampler {
-    IndependentSampler::new(seed, ((pixel as u64) << 32) | sample as u64)
+pub fn pixel_sampler(seed: u64, pixel: usize, sample: u32) -> SobolSampler {
+    SobolSampler::new(seed, pixel as u64, sample)
 }
 
 /// Camera rays traced together: consecutive samples of a row (a pixel's samples, or
@@ -36,8 +36,8 @@ fn render_row(
     let w = row.count.len();
     let mut work = (0..w).flat_map(|x| (from..to).map(move |s| (x, s)));
     let mut rays = [CameraRay::default(); PACKET];
-    let mut batch: [(usize, Vec2, IndependentSampler); PACKET] =
-        std::array::from_fn(|_| (0, Vec2::ZERO, IndependentSampler::new(0, 0)));
+    let mut batch: [(usize, Vec2, SobolSampler); PACKET] =
+        std::array::from_fn(|_| (0, Vec2::ZERO, SobolSampler::new(0, 0, 0)));
     loop {
         let mut n = 0;
         for ((slot, ray), (x, s)) in batch.iter_mut().zip(rays.iter_mut()).zip(work.by_ref()) {

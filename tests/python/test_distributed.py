@@ -42,7 +42,8 @@ def test_one_partial_merged_alone_is_the_plain_render(cornell, method, tmp_path)
 def test_merged_partials_converge_like_one_render_of_the_summed_budget(cornell, reference, method, spp):
     """4 partials merged: the error of the merged image against a PT reference (4×4 blocks)
     is what averaging 4 independent renders gives — within 2.5× the noise measured from the
-    partials' own spread (÷√4, plus the reference's noise) — and its mean within 4σ. A
+    partials' own spread (÷√4, plus the reference's noise) — and its mean within the 1e-3
+    Student-t bound of the partials' spread. A
     merge that dropped or double-counted a partial, or mixed seeds, fails this."""
     settings = {"method": method, "spp": spp, "max_bounces": 4, "seed": 11}
     partials = [dist.render_partial(cornell, k, 4, settings) for k in range(4)]
@@ -53,7 +54,10 @@ def test_merged_partials_converge_like_one_render_of_the_summed_budget(cornell, 
     err = np.sqrt(np.mean((merged - reference) ** 2))
     assert err < 2.5 * expected + 1e-4, (err, expected)
     sd_mean = each.mean(axis=(1, 2, 3)).std(ddof=1) / 2
-    assert abs(merged.mean() - reference.mean()) < 4 * sd_mean + 1e-3 * reference.mean()
+    # σ from 4 partials has 3 degrees of freedom: the two-sided 1e-3 Student-t quantile is
+    # 12.92, not 4 (a normal quantile made this fail by chance: gdpssmlt's mean is spread
+    # mostly by each partial's own normalisation estimate)
+    assert abs(merged.mean() - reference.mean()) < 12.92 * sd_mean + 1e-3 * reference.mean()
 
 
 def test_partials_have_distinct_seeds_and_refuse_mismatched_merges(cornell):
