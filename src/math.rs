@@ -6,7 +6,7 @@ use std::f32::consts::PI;
 /// RGB radiance / throughput. Linear Rec.709 primaries, as Blender's scene-linear space.
 pub type Spectrum = Vec3;
 
-/// Rec.709 luminance (the target-function norm of ALGORITHM.md §3).
+/// Rec.709 luminance (the target-function norm of docs/algorithm.md §3).
 #[inline]
 pub fn luminance(c: Spectrum) -> f32 {
     0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z

@@ -80,7 +80,7 @@ pub const CAMERA_VERTEX: u32 = u32::MAX;
 
 /// One way the path picked up light: an emitter hit after a BSDF sample from vertex
 /// `vertex` (or an escape to the world), or a next-event estimate at `vertex`. The shift
-/// mapping re-evaluates these for offset paths (ALGORITHM.md §4).
+/// mapping re-evaluates these for offset paths (docs/algorithm.md §4).
 #[derive(Clone, Copy, Debug)]
 pub struct Event {
     pub nee: bool,
@@ -101,7 +101,7 @@ pub struct Event {
     pub pdf_b: f32,
     pub pdf_l: f32,
     /// Throughput-weighted numerator: the balance-heuristic contribution is
-    /// numerator / (pdf_b + pdf_l) (ALGORITHM.md §4, "MIS between base and offset").
+    /// numerator / (pdf_b + pdf_l) (docs/algorithm.md §4, "MIS between base and offset").
     pub numerator: Spectrum,
     /// The last segment crossed transparent surfaces (a shadow ray through them, or
     /// pass-through vertices after `vertex`); `le` then includes their transmittance. The
@@ -124,7 +124,7 @@ pub struct Path {
 pub struct PathContribution {
     /// Total radiance (including `very_direct`).
     pub radiance: Spectrum,
-    /// Emission seen directly by the camera ray (ALGORITHM.md §4: never differenced).
+    /// Emission seen directly by the camera ray (docs/algorithm.md §4: never differenced).
     pub very_direct: Spectrum,
     /// Albedo and normal of the first surface, for denoising passes.
     pub albedo: Spectrum,

@@ -1,5 +1,5 @@
 //! The only file that knows about Python: `gdmlt._core`. Scenes arrive as dicts of numpy
-//! arrays (see python/gdmlt/scene.py for the layout), renders release the GIL, report
+//! arrays (their layout: `scene/desc.rs`, whose types this file fills), renders release the GIL, report
 //! progress to a callback that can cancel, and Rust panics become Python exceptions.
 
 use crate::film::Image;
@@ -550,7 +550,7 @@ fn mat_to_numpy<'py>(py: Python<'py>, m: &[[f32; 4]; 4]) -> PyResult<Bound<'py, 
     Ok(PyArray1::from_vec(py, flat).reshape([4, 4])?.into_any())
 }
 
-/// The scene dict of a built-in scene ("cornell", "furnace").
+/// The scene dict of a built-in scene (the names in `scene::builtin::BUILTIN_SCENES`).
 #[pyfunction]
 #[pyo3(signature = (name, width=256, height=256))]
 fn builtin_scene<'py>(py: Python<'py>, name: &str, width: u32, height: u32) -> PyResult<Bound<'py, PyDict>> {

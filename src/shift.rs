@@ -1,4 +1,4 @@
-//! THE shift mapping (Kettunen et al. 2015; ALGORITHM.md §4): given a recorded base path
+//! THE shift mapping (Kettunen et al. 2015; docs/algorithm.md §4): given a recorded base path
 //! through one pixel, the offset path through a neighbouring pixel and the MIS-weighted
 //! contributions of both, event by event. `gdpt` and `gdpssmlt` both call [`shift`].
 //!
@@ -12,13 +12,13 @@
 //!   y_{k+1} to be of the same class (diffuse or not) as x_{k+1}, which keeps the map
 //!   invertible (the inverse shift makes the same decisions from the offset's side).
 //!
-//! Light events (ALGORITHM.md §4, "next-event estimation"): a light sample taken at x_k is
+//! Light events (docs/algorithm.md §4, "next-event estimation"): a light sample taken at x_k is
 //! reconnected from y_k to the same light point; a light found by the BSDF ray leaving x_k
 //! is reconnected to the same point when x_k is diffuse, and otherwise is whatever light
 //! the offset's own half-vector ray finds (the same analytic light, the world, or the
 //! emission of the surface it hits).
 //!
-//! Jacobians (ALGORITHM.md's table; each checked against finite differences below):
+//! Jacobians (docs/algorithm.md §4; each checked against finite differences below):
 //! reconnection |cos θ'_z|·‖x−z‖² / (|cos θ_z|·‖y−z‖²); half-vector reflection
 //! |ω'_o·h| / |ω_o·h|; refraction (‖h'_u‖²/η'²|ω'_i·h|) / (‖h_u‖²/η²|ω_i·h|); 1 for delta lobes
 //! (point evaluations) and after the paths join.
@@ -798,7 +798,10 @@ mod tests {
                 match (hit, sampled) {
                     (Some((a, pa)), Some((b, pb))) => {
                         let close = |p: f32, q: f32| (p - q).abs() <= 1e-3 * p.abs().max(q.abs()).max(1e-6);
-                        assert!(close(pa, pb) && (0..3).all(|c| close(a[c], b[c])), "path {i}: {a} / {pa} vs {b} / {pb}");
+                        assert!(
+                            close(pa, pb) && (0..3).all(|c| close(a[c], b[c])),
+                            "path {i}: {a} / {pa} vs {b} / {pb}"
+                        );
                         compared += 1;
                     }
                     (None, None) => {}

@@ -1,6 +1,6 @@
 """`gdmlt bench`: error against a converged reference at equal wall-clock budgets, per
 method and light mode, on a built-in scene or a .blend file. Prints a table (relMSE and
-SMAPE as defined in ALGORITHM.md §5b) — also, with --peers, for Cycles, LuxCore (path and
+SMAPE as defined in docs/algorithm.md §5b) — also, with --peers, for Cycles, LuxCore (path and
 Metropolis samplers) and Mitsuba 3 at the same budgets against the same reference — and, with --plot, draws error against time (PNG,
 needs matplotlib). With --denoise, every render is also passed through Intel Open Image
 Denoise (pyoidn, with the albedo and normal passes) and reported as its own row — the

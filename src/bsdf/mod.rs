@@ -21,7 +21,7 @@ use crate::math::Spectrum;
 use glam::{Vec2, Vec3};
 
 /// Roughness at or below which a lobe is treated as specular by the shift mapping
-/// (the public GDPT code uses 0.001; ALGORITHM.md §4).
+/// (the public GDPT code uses 0.001; docs/algorithm.md §4).
 pub const SPECULAR_ROUGHNESS_THRESHOLD: f32 = 1e-3;
 
 /// What kind of lobe a sample came from.

@@ -4,7 +4,7 @@
 //!
 //! * `pssmlt`: state u; target F = luminance of the path's radiance; splat L at its pixel.
 //! * `gdpssmlt`: state (u, d), d ∈ {+x, −x, +y, −y}; target
-//!   F = ℓ(|G_d|) + (α/4)·ℓ(|L|) (ALGORITHM.md §3, ℓ of per-channel absolute values);
+//!   F = ℓ(|G_d|) + (α/4)·ℓ(|L|) (docs/algorithm.md §3, ℓ of per-channel absolute values);
 //!   splats: primal C_x (base pixel) and C_y (neighbour), gradient ±4·G_d; then screened
 //!   Poisson reconstruction and the very-direct image (plain Monte Carlo) on top.
 //!
@@ -122,7 +122,7 @@ impl Target<'_> {
             if inside {
                 let n = ny as usize * self.w + nx as usize;
                 s.push(PRIMAL, n, pc.offset);
-                // each direction has measure 1/4: gradients × 4 (ALGORITHM.md §4b)
+                // each direction has measure 1/4: gradients × 4 (docs/algorithm.md §4b)
                 match (dx, dy) {
                     (1, 0) => s.push(DX, pixel, g * 4.0),
                     (-1, 0) => s.push(DX, n, g * -4.0),
@@ -145,7 +145,7 @@ struct Chain {
     remaining: u64,
 }
 
-/// One Metropolis–Hastings step with expected-value splatting (ALGORITHM.md §2).
+/// One Metropolis–Hastings step with expected-value splatting (docs/algorithm.md §2).
 fn mutate(target: &Target, c: &mut Chain, path: &mut Path, group: &mut Group, gradient: bool) {
     c.s.start_iteration();
     let d_new = if !gradient {

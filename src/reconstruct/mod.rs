@@ -1,5 +1,5 @@
 //! Screened Poisson reconstruction of an image from a noisy primal I^g and its noisy
-//! finite-difference gradients (ALGORITHM.md §5):
+//! finite-difference gradients (docs/algorithm.md §5):
 //!
 //!   minimize  α²‖I − I^g‖² + ‖D_x I − I^dx‖² + ‖D_y I − I^dy‖²      (per channel)
 //!
