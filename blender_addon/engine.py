@@ -54,6 +54,10 @@ class GDMLTRenderEngine(bpy.types.RenderEngine):
     bl_label = "GDMLT"
     bl_use_preview = False
     bl_use_postprocess = True
+    # Blender's own shader nodes (the Shader Editor, the Material tab's slot list and Surface
+    # panel, the World's Surface panel) show only for engines without custom nodes: GDMLT
+    # reads the Cycles/EEVEE node trees, so it has none of its own.
+    bl_use_shading_nodes_custom = False
 
     def update_render_passes(self, scene=None, renderlayer=None):
         self.register_pass(scene, renderlayer, "Combined", 4, "RGBA", "COLOR")

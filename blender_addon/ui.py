@@ -64,12 +64,16 @@ class GDMLT_PT_performance(GDMLTRenderPanel, bpy.types.Panel):
 
 CLASSES = (GDMLT_PT_sampling, GDMLT_PT_light_paths, GDMLT_PT_performance)
 
-# Blender's own panels (dimensions, output, colour management, camera, light, world data)
-# show for an engine only when it is in their COMPAT_ENGINES.
+# Blender's own panels (dimensions, output, colour management, camera, light, world data,
+# material slots and surface, world surface, spot shape, depth of field, object visibility)
+# show for an engine only when it is in their COMPAT_ENGINES: those for settings GDMLT
+# renders.
 _SHARED_PANELS = (
     "RENDER_PT_color_management", "RENDER_PT_format", "RENDER_PT_frame_range", "RENDER_PT_output",
-    "DATA_PT_camera", "DATA_PT_lens", "DATA_PT_camera_dof", "DATA_PT_light", "DATA_PT_EEVEE_light",
-    "DATA_PT_context_light", "WORLD_PT_context_world",
+    "DATA_PT_camera", "DATA_PT_lens", "DATA_PT_camera_dof", "DATA_PT_camera_dof_aperture", "DATA_PT_light",
+    "DATA_PT_EEVEE_light", "DATA_PT_spot", "DATA_PT_context_light", "WORLD_PT_context_world",
+    "EEVEE_WORLD_PT_surface", "EEVEE_MATERIAL_PT_context_material", "EEVEE_MATERIAL_PT_surface",
+    "OBJECT_PT_visibility",
 )
 
 

@@ -707,3 +707,30 @@ def test_command_line_render_of_a_checked_in_scene_is_the_f12_render(bpy_mod, tm
     cli = read_exr(out)
     assert cli.shape == f12.shape and f12.mean() > 0.01
     assert np.allclose(cli, f12, rtol=1e-4, atol=1e-5), np.abs(cli - f12).max()
+
+
+def test_material_world_light_camera_and_object_panels_show_for_gdmlt(bpy_mod):
+    """With GDMLT as the engine the panels an artist works in are there: the material slot
+    list and Surface panel, the World's Surface panel, the spot shape, depth of field and
+    object visibility (each panel's own poll, headless, in the context it needs); and the
+    engine declares no custom shading nodes, so Blender shows its Shader Editor (it did not
+    show any of these before: the polls returned False)."""
+    import gdmlt_blender.engine as engine
+
+    bpy = bpy_mod
+    bpy.ops.wm.open_mainfile(filepath=str(SCENES / "lights.blend"))
+    scene = bpy.context.scene
+    scene.render.engine = "GDMLT"
+    assert engine.GDMLTRenderEngine.bl_use_shading_nodes_custom is False
+    ob = next(o for o in scene.objects if o.type == "MESH")
+    spot = bpy.data.objects["Spot"]
+    for name, obj in [("EEVEE_MATERIAL_PT_context_material", ob), ("EEVEE_MATERIAL_PT_surface", ob),
+                      ("EEVEE_WORLD_PT_surface", ob), ("DATA_PT_spot", spot), ("OBJECT_PT_visibility", ob),
+                      ("DATA_PT_camera_dof", ob), ("DATA_PT_camera_dof_aperture", ob)]:
+        panel = getattr(bpy.types, name)
+        with bpy.context.temp_override(object=obj, material=ob.active_material, world=scene.world,
+                                       light=spot.data, camera=scene.camera.data):
+            assert panel.poll(bpy.context), f"{name} is hidden for GDMLT"
+    scene.render.engine = "BLENDER_WORKBENCH"  # and they follow the engine, not always on
+    with bpy.context.temp_override(object=ob, material=ob.active_material, world=scene.world):
+        assert not bpy.types.EEVEE_MATERIAL_PT_surface.poll(bpy.context)
