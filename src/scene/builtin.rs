@@ -46,6 +46,18 @@ fn material(name: &str, base_color: [f32; 3], emission: [f32; 3]) -> MaterialDes
     MaterialDesc { name: name.into(), base_color, emission, roughness: 1.0, ..Default::default() }
 }
 
+/// White glass of IOR 1.5 ("Glass"), smooth at roughness 0.
+fn clear_glass(roughness: f32) -> MaterialDesc {
+    MaterialDesc {
+        name: "Glass".into(),
+        base_color: [1.0; 3],
+        transmission: 1.0,
+        ior: 1.5,
+        roughness,
+        ..Default::default()
+    }
+}
+
 /// Camera at `position` looking along +Y with +Z up (Blender convention: looks down local −Z).
 pub fn camera_looking_along_y(position: [f32; 3], lens: f32, width: u32, height: u32) -> CameraDesc {
     CameraDesc {
@@ -156,14 +168,7 @@ pub fn cornell_spheres(width: u32, height: u32) -> SceneDesc {
             .filter(|mesh| mesh.name == name)
             .for_each(|mesh| mesh.material_ids = vec![m; mesh.indices.len()]);
     }
-    d.materials.push(MaterialDesc {
-        name: "Glass".into(),
-        base_color: [1.0; 3],
-        transmission: 1.0,
-        ior: 1.5,
-        roughness: 0.0,
-        ..Default::default()
-    });
+    d.materials.push(clear_glass(0.0));
     d.materials.push(MaterialDesc {
         name: "Mirror".into(),
         base_color: [0.95; 3],
@@ -186,14 +191,7 @@ pub fn cornell_bulb(width: u32, height: u32) -> SceneDesc {
     d.meshes.retain(|m| !m.name.ends_with("Block"));
     let light = d.materials.iter().position(|m| m.name == "Light").expect("the box has a light");
     d.materials[light].emission = [0.0; 3];
-    d.materials.push(MaterialDesc {
-        name: "Glass".into(),
-        base_color: [1.0; 3],
-        transmission: 1.0,
-        ior: 1.5,
-        roughness: 0.35,
-        ..Default::default()
-    });
+    d.materials.push(clear_glass(0.35));
     d.materials.push(material("Filament", [0.0; 3], [60.0, 45.0, 25.0]));
     let (glass, filament) = (d.materials.len() as u32 - 2, d.materials.len() as u32 - 1);
     d.meshes.push(uv_sphere("Bulb", [0.0, 0.0, 0.1], 0.35, 32, 16, glass));
