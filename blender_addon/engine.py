@@ -20,6 +20,7 @@ PASSES = (
     ("Denoising Albedo", 3, "RGB", "COLOR"),
     ("Denoising Normal", 3, "XYZ", "VECTOR"),
     ("MLT Density", 3, "RGB", "COLOR"),
+    ("Noisy Image", 3, "RGB", "COLOR"),
 )
 
 
@@ -104,7 +105,7 @@ class GDMLTRenderEngine(bpy.types.RenderEngine):
 
         w, h = core_scene.size
         layer_name = depsgraph.view_layer.name
-        wanted = METHOD_PASSES.get(s.method, set())
+        wanted = METHOD_PASSES.get(s.method, set()) | ({"Noisy Image"} if s.use_denoising else set())
         for name, channels, chan_id, _ in PASSES:
             if name in wanted:
                 self.add_pass(name, channels, chan_id, layer=layer_name)
@@ -132,14 +133,23 @@ class GDMLTRenderEngine(bpy.types.RenderEngine):
                                reconstruction=s.reconstruction.lower(), alpha_rec=s.alpha_reconstruction,
                                alpha_target=s.alpha_target, large_step_probability=s.large_step_probability, chains=s.chains,
                                progress=progress, preview=preview)
-            for name, img in res["layers"].items():
+            layers = res["layers"]
+            denoised = False
+            if s.use_denoising and not res["stats"]["cancelled"]:
+                from gdmlt.oidn import denoise_or_warn
+
+                self.update_stats("GDMLT", "Denoising")
+                layers = denoise_or_warn(layers, lambda m: self.report({"WARNING"}, f"GDMLT: {m}"),
+                                         threads=s.threads)
+                denoised = "Noisy Image" in layers
+            for name, img in layers.items():
                 if name in channels_of:
                     write(name, img)
         finally:
             self.end_result(result)
         st = res["stats"]
         global last_stats
-        last_stats = dict(st, export_time=export_time, previews=previews)
+        last_stats = dict(st, export_time=export_time, previews=previews, denoised=denoised)
         for w_ in st["warnings"]:
             if w_ not in core_scene.warnings:
                 self.report({"WARNING"}, f"GDMLT: {w_}")
@@ -147,4 +157,4 @@ class GDMLTRenderEngine(bpy.types.RenderEngine):
             self.report({"WARNING"}, f"GDMLT: {st['invalid_samples']} samples were NaN/Inf and were dropped")
         extra = f" | acceptance {st['acceptance'] * 100:.0f}%" if st.get("chains") else ""
         self.update_stats("GDMLT", f"{s.method} | {st['spp_max']} per pixel | render {st['elapsed']:.2f} s, "
-                          f"export {export_time:.2f} s{extra}" + (" | cancelled" if st["cancelled"] else ""))
+                          f"export {export_time:.2f} s{extra}" + (" | denoised" if denoised else "") + (" | cancelled" if st["cancelled"] else ""))

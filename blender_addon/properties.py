@@ -1,5 +1,5 @@
 """Render settings at scene.gdmlt. These names are a public interface: scripts drive the
-engine through them (method, samples, time_limit, max_bounces, use_nee, seed, threads)."""
+engine through them (method, samples, time_limit, max_bounces, use_nee, seed, threads, use_denoising)."""
 
 import bpy
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty
@@ -41,6 +41,10 @@ class GDMLTRenderSettings(bpy.types.PropertyGroup):
                                           description="Metropolis methods: probability of a fresh independent sample per mutation")
     chains: IntProperty(name="Chains", default=0, min=0, max=1000000,
                         description="Metropolis methods: number of Markov chains (0 = automatic, one per 2000 mutations up to 1024)")
+    use_denoising: BoolProperty(name="Denoise", default=True,
+                                description="Denoise the final render with Intel Open Image Denoise, guided by the "
+                                            "prefiltered albedo and normal passes (as Cycles' OpenImageDenoise, "
+                                            "Accurate); the raw image is kept as the Noisy Image pass")
     threads: IntProperty(name="Threads", default=0, min=0, max=1024, description="Render threads (0 = all cores)")
 
 

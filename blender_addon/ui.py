@@ -28,6 +28,7 @@ class GDMLT_PT_sampling(GDMLTRenderPanel, bpy.types.Panel):
         col.prop(s, "samples")
         col.prop(s, "time_limit")
         layout.prop(s, "seed")
+        layout.prop(s, "use_denoising")
         if s.method in {"GDPT", "GDPSSMLT"}:
             col = layout.column(align=True)
             col.prop(s, "reconstruction")

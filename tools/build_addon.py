@@ -41,6 +41,26 @@ def build_wheel(out: Path) -> Path:
     return wheels[0]
 
 
+# What the extension bundles beside the core: the denoiser's binding (its wheel carries the
+# OIDN library) and what it needs, for each Python Blender ships (4.2–4.5: 3.11, 5.x: 3.13).
+# Pinned to what requirements-dev.txt tests with; Blender provides numpy.
+DEPENDENCIES = ("pyoidn==2.5.1.0", "cffi==2.1.1", "pycparser==3.12")
+BLENDER_PYTHONS = ("3.11", "3.13")
+
+
+def download_dependencies(out: Path) -> list:
+    """The dependency wheels for every Blender Python, from the package index (pip's cache
+    keeps a second build offline)."""
+    out.mkdir(parents=True, exist_ok=True)
+    for old in out.glob("*.whl"):
+        old.unlink()
+    for py in BLENDER_PYTHONS:
+        subprocess.run([sys.executable, "-m", "pip", "download", "--quiet", "--no-deps", "--only-binary=:all:",
+                        "--platform", "manylinux_2_28_x86_64", "--platform", "manylinux2014_x86_64", "--python-version", py, "--implementation", "cp",
+                        "--dest", str(out), *DEPENDENCIES], check=True)
+    return sorted(out.glob("*.whl"))
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--wheel", type=Path, help="use this wheel instead of building one with maturin")
@@ -53,14 +73,18 @@ def main(argv=None):
     if version != py_version:
         raise SystemExit(f"build_addon: manifest version {version} differs from pyproject version {py_version}")
     wheel = args.wheel or build_wheel(ROOT / "target" / "addon-wheels")
+    deps = download_dependencies(ROOT / "target" / "addon-deps")
 
     with tempfile.TemporaryDirectory() as tmp:
         stage = Path(tmp) / "gdmlt"
         shutil.copytree(ROOT / "blender_addon", stage, ignore=shutil.ignore_patterns("__pycache__", "*.pyc"))
         (stage / "wheels").mkdir()
-        shutil.copy2(wheel, stage / "wheels" / wheel.name)
+        for whl in [wheel, *deps]:
+            shutil.copy2(whl, stage / "wheels" / whl.name)
+        listed = ", ".join(f'"./wheels/{w.name}"' for w in [wheel, *deps])
         (stage / "blender_manifest.toml").write_text(
-            manifest_src.rstrip() + f'\n\n# added by tools/build_addon.py\nwheels = ["./wheels/{wheel.name}"]\n')
+            manifest_src.rstrip() + f'\n\n# added by tools/build_addon.py\nwheels = [{listed}]\n'
+            '# the core and the OIDN library are x86-64 Linux builds\nplatforms = ["linux-x64"]\n')
         args.out_dir.mkdir(parents=True, exist_ok=True)
         subprocess.run([sys.executable, str(blender_ext_cli()), "build", "--source-dir", str(stage),
                         "--output-dir", str(args.out_dir)], check=True)

@@ -4,6 +4,7 @@
     scene = gdmlt.Scene(gdmlt.builtin_scene("cornell", 128, 128))
     result = gdmlt.render(scene, method="pt", spp=64)
     result["layers"]["Combined"]        # float32 (H, W, 3), linear, top row first
+    layers = gdmlt.denoise(result["layers"])   # Intel Open Image Denoise; raw kept as "Noisy Image"
 
 Blender: ``gdmlt.enable_addon()`` registers the render engine in the running bpy.
 """
@@ -37,6 +38,7 @@ write_exr, write_png, reconstruct = _impl.write_exr, _impl.write_png, _impl.reco
 METHODS, __version__, BUILD_TARGET = _impl.METHODS, _impl.__version__, _impl.BUILD_TARGET
 RR_START_DEPTH = _impl.RR_START_DEPTH
 from .addon import enable_addon, addon_dir
+from .oidn import denoise
 
-__all__ = ["Scene", "render", "builtin_scene", "write_exr", "write_png", "reconstruct", "METHODS", "enable_addon", "addon_dir",
+__all__ = ["Scene", "render", "builtin_scene", "denoise", "write_exr", "write_png", "reconstruct", "METHODS", "enable_addon", "addon_dir",
            "__version__", "BUILD_TARGET", "RR_START_DEPTH"]

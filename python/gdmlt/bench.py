@@ -3,7 +3,7 @@ method and light mode, on a built-in scene or a .blend file. Prints a table (rel
 SMAPE as defined in docs/algorithm.md §5b) — also, with --peers, for Cycles, LuxCore (path and
 Metropolis samplers) and Mitsuba 3 at the same budgets against the same reference — and, with --plot, draws error against time (PNG,
 needs matplotlib). With --denoise, every render is also passed through Intel Open Image
-Denoise (pyoidn, with the albedo and normal passes) and reported as its own row — the
+Denoise (GDMLT's own denoiser, gdmlt/oidn.py: OIDN with the prefiltered albedo and normal passes) and reported as its own row — the
 question the paper leaves open (is GD-MLT better than MLT + a denoiser?); the denoiser's own
 time is printed, not charged to the budget. It measures; it does not pass or fail."""
 
@@ -119,10 +119,10 @@ def run(scene="cornell", size=None, budgets=(1.0, 2.0, 4.0), methods=("pt", "gdp
     out(f"# reference took {time.perf_counter() - t0:.1f} s")
     out(f"{'method':14} {'nee':5} " + " ".join(f"{'relMSE@' + f'{b:g}' + 's':>14} {'SMAPE':>7}" for b in budgets))
     if denoise:
-        try:
-            import pyoidn
-        except ImportError as e:
-            raise RuntimeError("--denoise needs pyoidn (pip install pyoidn)") from e
+        from .oidn import available, denoise_image
+
+        if not available():
+            raise RuntimeError("--denoise needs pyoidn (pip install pyoidn)")
     rows = []
     denoise_time = []
     for nee in modes:
@@ -136,9 +136,7 @@ def run(scene="cornell", size=None, budgets=(1.0, 2.0, 4.0), methods=("pt", "gdp
                 cells.append((rel_mse(img, ref), smape(img, ref)))
                 if denoise:
                     t1 = time.perf_counter()
-                    d = pyoidn.denoise(np.ascontiguousarray(img, dtype=np.float32),
-                                       albedo=layers.get("Denoising Albedo"), normal=layers.get("Denoising Normal"),
-                                       hdr=True, quality="high")
+                    d = denoise_image(img, layers.get("Denoising Albedo"), layers.get("Denoising Normal"))
                     denoise_time.append(time.perf_counter() - t1)
                     dcells.append((rel_mse(d, ref), smape(d, ref)))
             for name, cs in [(m, cells)] + ([(m + "+oidn", dcells)] if denoise else []):

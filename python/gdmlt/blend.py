@@ -9,7 +9,7 @@ PROPERTY_OF = {"method": "method", "spp": "samples", "time_limit": "time_limit",
                "nee": "use_nee", "seed": "seed", "threads": "threads",
                "reconstruction": "reconstruction", "alpha_rec": "alpha_reconstruction",
                "alpha_target": "alpha_target", "large_step_probability": "large_step_probability",
-               "chains": "chains"}
+               "chains": "chains", "denoise": "use_denoising"}
 
 
 def import_bpy():
@@ -57,7 +57,7 @@ def export_usd(path: Path, out: Path, frame=None) -> dict:
                 "max_bounces": int(g.max_bounces), "nee": bool(g.use_nee), "seed": int(g.seed),
                 "reconstruction": g.reconstruction.lower(), "alpha_rec": float(g.alpha_reconstruction),
                 "alpha_target": float(g.alpha_target), "large_step_probability": float(g.large_step_probability),
-                "chains": int(g.chains), "width": max(1, int(r.resolution_x * pct)),
+                "chains": int(g.chains), "denoise": bool(g.use_denoising), "width": max(1, int(r.resolution_x * pct)),
                 "height": max(1, int(r.resolution_y * pct))}
     if scene.camera is not None:
         settings["camera"] = scene.camera.name

@@ -74,6 +74,11 @@ def build_parser():
     nee.add_argument("--nee", dest="nee", action="store_true", default=None, help="next-event estimation with MIS (default)")
     nee.add_argument("--no-nee", dest="nee", action="store_false", help="naive path tracing: lights found only by hitting them")
     r.add_argument("--seed", type=_nonneg_int, help="random seed (default 0)")
+    den = r.add_mutually_exclusive_group()
+    den.add_argument("--denoise", dest="denoise", action="store_true", default=None,
+                     help="denoise the image with Intel Open Image Denoise, the raw one kept as the 'Noisy Image' "
+                          "layer (default: the file's setting, else on, as in Cycles)")
+    den.add_argument("--no-denoise", dest="denoise", action="store_false", help="write the raw image")
     r.add_argument("--width", type=_positive_int, help="image width in pixels (overrides the scene)")
     r.add_argument("--height", type=_positive_int, help="image height in pixels (overrides the scene)")
     r.add_argument("--threads", type=_nonneg_int, help="render threads, 0 = all cores (default)")
@@ -127,6 +132,10 @@ def build_parser():
                     help="reconstruction norm (default: the partials')")
     mg.add_argument("--alpha-rec", type=float, help="reconstruction α (default: the partials')")
     mg.add_argument("--no-png", action="store_true", help="write only the EXR")
+    mgd = mg.add_mutually_exclusive_group()
+    mgd.add_argument("--denoise", dest="denoise", action="store_true", default=True,
+                     help="denoise the merged image (default)")
+    mgd.add_argument("--no-denoise", dest="denoise", action="store_false", help="write the raw merged image")
     b = sub.add_parser("bench", help="error against a converged reference at equal time budgets, per method",
                        description="Renders a built-in scene or a .blend file with every method for the same "
                                    "wall-clock budgets and prints relMSE and SMAPE against a converged path-traced "
@@ -159,6 +168,35 @@ def _settings(args):
         "chains": args.chains}.items() if v is not None}
 
 
+def _blend_settings(args):
+    """The settings a .blend render takes from the command line (its own for the rest)."""
+    s = _settings(args)
+    if args.denoise is not None:
+        s["denoise"] = args.denoise
+    return s
+
+
+def wants_denoise(args) -> bool:
+    """--denoise/--no-denoise, else the setting a USD stage stored, else on (Cycles' default)."""
+    if args.denoise is not None:
+        return args.denoise
+    if Path(args.scene).suffix.lower() in USD_SUFFIXES:
+        from .usd import stored_settings
+
+        return bool(stored_settings(args.scene).get("denoise", True))
+    return True
+
+
+def finish_layers(layers: dict, args, threads=0) -> dict:
+    """The layers to write: denoised when asked (a warning and the raw image when OIDN is
+    missing)."""
+    if not wants_denoise(args):
+        return layers
+    from .oidn import denoise_or_warn
+
+    return denoise_or_warn(layers, lambda m: print(f"gdmlt: warning: {m}", file=sys.stderr), threads=threads)
+
+
 def render_settings(args) -> dict:
     """gdmlt.render's settings: the CLI's options over the settings stored in a USD stage by
     `gdmlt export` over the defaults."""
@@ -178,8 +216,9 @@ def render_desc(desc, args, out: Path):
     import gdmlt
 
     scene = gdmlt.Scene(desc)
-    res = gdmlt.render(scene, **render_settings(args))
-    write_layers(out, res["layers"], not args.no_png)
+    settings = render_settings(args)
+    res = gdmlt.render(scene, **settings)
+    write_layers(out, finish_layers(res["layers"], args, settings["threads"]), not args.no_png)
     return res["stats"]
 
 
@@ -295,7 +334,7 @@ def main(argv=None):
         if path.suffix.lower() == ".blend" and not distributed:
             from .blend import render_blend
 
-            stats = render_blend(path, out, _settings(args), width=args.width, height=args.height,
+            stats = render_blend(path, out, _blend_settings(args), width=args.width, height=args.height,
                                  png=not args.no_png)
         else:
             desc = scene_desc(args)
@@ -312,7 +351,7 @@ def main(argv=None):
                 layers, dropped = render_dask(desc, args.partials, render_settings(args),
                                               address=args.dask or None, workers=args.workers,
                                               log=lambda m: print(m, file=sys.stderr))
-                write_layers(out, layers, not args.no_png)
+                write_layers(out, finish_layers(layers, args), not args.no_png)
                 print(f"wrote {out}: {args.partials - len(dropped)} of {args.partials} partials merged "
                       f"in {time.perf_counter() - t0:.2f} s")
                 return 0
@@ -374,6 +413,10 @@ def merge_command(args):
     except (ValueError, OSError, KeyError) as e:
         print(f"gdmlt: error: {e}", file=sys.stderr)
         return 1
+    if args.denoise:
+        from .oidn import denoise_or_warn
+
+        layers = denoise_or_warn(layers, lambda m: print(f"gdmlt: warning: {m}", file=sys.stderr))
     out.parent.mkdir(parents=True, exist_ok=True)
     write_layers(out, layers, not args.no_png)
     print(f"wrote {out}: {len(partials)} partials merged")

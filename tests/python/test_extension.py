@@ -30,6 +30,8 @@ SCRIPT = textwrap.dedent(r'''
     res["install"] = sorted(out)
     import gdmlt
     res["core"] = gdmlt.__file__
+    import gdmlt.oidn
+    res["oidn"] = gdmlt.oidn.available()
     scene = bpy.context.scene
     res["engines"] = [getattr(e, "bl_idname", "") for e in bpy.types.RenderEngine.__subclasses__()]
     scene.render.engine = "GDMLT"
@@ -41,6 +43,7 @@ SCRIPT = textwrap.dedent(r'''
     scene.render.resolution_x = scene.render.resolution_y = 16
     scene.gdmlt.method = "PT"
     scene.gdmlt.samples = 4
+    res["denoise_default"] = scene.gdmlt.use_denoising
     bpy.ops.render.render()
     img = bpy.data.images["Render Result"]
     path = Path(sys.argv[3])
@@ -65,8 +68,12 @@ def test_zip_bundles_the_core_wheel_and_manifest(extension_zip):
         names = z.namelist()
         manifest = z.read("blender_manifest.toml").decode()
     wheels = [n for n in names if n.startswith("wheels/") and n.endswith(".whl")]
-    assert len(wheels) == 1 and "abi3" in wheels[0], names
-    assert f'"./{wheels[0]}"' in manifest and 'blender_version_min = "4.2.0"' in manifest
+    core = [n for n in wheels if n.startswith("wheels/gdmlt-")]
+    assert len(core) == 1 and "abi3" in core[0], names
+    # the denoiser's binding and its cffi for each Python Blender ships
+    assert any(n.startswith("wheels/pyoidn-") for n in wheels), names
+    assert {"cp311", "cp313"} <= {t for n in wheels if "cffi-" in n for t in ("cp311", "cp313") if t in n}, names
+    assert all(f'"./{w}"' in manifest for w in wheels) and 'blender_version_min = "4.2.0"' in manifest
     assert "__init__.py" in names and "engine.py" in names
     assert not any("__pycache__" in n for n in names)
 
@@ -83,6 +90,7 @@ def test_installed_extension_renders_in_a_fresh_blender(extension_zip, tmp_path)
     assert res["install"] == ["FINISHED"]
     assert str(tmp_path / "user") in res["core"], res["core"]
     assert "GDMLT" in res["engines"]
+    assert res["oidn"] is True and res["denoise_default"] is True  # the bundled denoiser loads in Blender
     assert res["written"] and png.stat().st_size > 0
 
 
