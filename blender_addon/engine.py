@@ -78,7 +78,11 @@ class GDMLTRenderEngine(bpy.types.RenderEngine):
             # crash when it writes the frame (`-f`, write_still) after an Esc during export.
             result = self.begin_result(0, 0, self.resolution_x, self.resolution_y)
             self.end_result(result)
-        except Exception as e:  # noqa: BLE001 - every failure must reach the user, not a blank image
+        except (KeyboardInterrupt, SystemExit):
+            raise
+        except BaseException as e:  # noqa: BLE001 - every failure must reach the user, not a blank image
+            # (BaseException: a panic in the core arrives as PyO3's PanicException, which is
+            # not an Exception, and was saved as a black frame)
             self.report({"ERROR"}, f"GDMLT: {e}")
 
     def _render(self, depsgraph):

@@ -24,4 +24,6 @@ pub enum RenderError {
     Settings(String),
     #[error("image output: {0}")]
     Output(String),
+    #[error("not enough memory: {0}")]
+    Memory(String),
 }

@@ -11,26 +11,41 @@ METHODS = ("pt", "gdpt", "pssmlt", "gdpssmlt")
 USD_SUFFIXES = (".usd", ".usda", ".usdc", ".usdz")
 
 
-def _int_at_least(lowest):
+U32_MAX, U64_MAX = 2 ** 32 - 1, 2 ** 64 - 1
+
+
+def _int_at_least(lowest, highest=U32_MAX):
+    """An integer in [lowest, highest] (the core's field holds at most `highest`)."""
     def parse(s):
+        if isinstance(s, bool) or not isinstance(s, (int, str)):
+            raise argparse.ArgumentTypeError(f"'{s}' is not an integer")
         try:
             v = int(s)
         except ValueError:
             raise argparse.ArgumentTypeError(f"'{s}' is not an integer")
         if v < lowest:
             raise argparse.ArgumentTypeError(f"must be at least {lowest}, got {v}")
+        if v > highest:
+            raise argparse.ArgumentTypeError(f"must be at most {highest}, got {v}")
         return v
     return parse
 
 
 _positive_int = _int_at_least(1)
 _nonneg_int = _int_at_least(0)
+_seed = _int_at_least(0, U64_MAX)
+_bounces = _int_at_least(0, 1024)
+_threads = _int_at_least(0, 1024)
+_chains = _int_at_least(0, 1_000_000)
+_side = _int_at_least(1, 65536)
 
 
 def _nonneg_float(s):
+    if isinstance(s, bool):
+        raise argparse.ArgumentTypeError(f"'{s}' is not a number")
     try:
         v = float(s)
-    except ValueError:
+    except (TypeError, ValueError):
         raise argparse.ArgumentTypeError(f"'{s}' is not a number")
     if not (v >= 0.0 and v != float("inf")):
         raise argparse.ArgumentTypeError(f"must be a finite number ≥ 0, got {s}")
@@ -61,7 +76,7 @@ def build_parser():
                    help="gdpssmlt: weight of the primal term in the target function (default 1.0)")
     r.add_argument("--large-step", type=_nonneg_float, dest="large_step_probability",
                    help="Metropolis methods: probability of a large step (default 0.3)")
-    r.add_argument("--chains", type=_nonneg_int,
+    r.add_argument("--chains", type=_chains,
                    help="Metropolis methods: number of Markov chains (default 0 = one per 2000 mutations, up to 1024)")
     r.add_argument("--recon", choices=["l1", "l2"], type=str.lower, dest="reconstruction",
                    help="gradient-domain reconstruction norm (default l1: robust; l2: unbiased)")
@@ -69,19 +84,19 @@ def build_parser():
                    help="screened-Poisson weight of the primal image in the reconstruction (default 0.2)")
     r.add_argument("--spp", type=_positive_int, help="samples (PT methods) or mutations (Metropolis methods) per pixel (default: the file's, else 64)")
     r.add_argument("--time", type=_nonneg_float, dest="time_limit", help="time limit in seconds, 0 = none; halts on whichever of --spp and --time comes first")
-    r.add_argument("--max-bounces", type=_nonneg_int, help="maximum bounces as in Cycles (0 = direct light; default 8)")
+    r.add_argument("--max-bounces", type=_bounces, help="maximum bounces as in Cycles (0 = direct light; default 8)")
     nee = r.add_mutually_exclusive_group()
     nee.add_argument("--nee", dest="nee", action="store_true", default=None, help="next-event estimation with MIS (default)")
     nee.add_argument("--no-nee", dest="nee", action="store_false", help="naive path tracing: lights found only by hitting them")
-    r.add_argument("--seed", type=_nonneg_int, help="random seed (default 0)")
+    r.add_argument("--seed", type=_seed, help="random seed (default 0)")
     den = r.add_mutually_exclusive_group()
     den.add_argument("--denoise", dest="denoise", action="store_true", default=None,
                      help="denoise the image with Intel Open Image Denoise, the raw one kept as the 'Noisy Image' "
                           "layer (default: the file's setting, else on, as in Cycles)")
     den.add_argument("--no-denoise", dest="denoise", action="store_false", help="write the raw image")
-    r.add_argument("--width", type=_positive_int, help="image width in pixels (overrides the scene)")
-    r.add_argument("--height", type=_positive_int, help="image height in pixels (overrides the scene)")
-    r.add_argument("--threads", type=_nonneg_int, help="render threads, 0 = all cores (default)")
+    r.add_argument("--width", type=_side, help="image width in pixels (overrides the scene)")
+    r.add_argument("--height", type=_side, help="image height in pixels (overrides the scene)")
+    r.add_argument("--threads", type=_threads, help="render threads, 0 = all cores (default)")
     r.add_argument("--no-png", action="store_true", help="write only the EXR")
     r.add_argument("--frame", type=float, help="USD: the time code to render (default: the stage's default time)")
     r.add_argument("--camera", help="USD: path of the camera prim (default: the first camera)")
@@ -183,7 +198,8 @@ def wants_denoise(args) -> bool:
     if Path(args.scene).suffix.lower() in USD_SUFFIXES:
         from .usd import stored_settings
 
-        return bool(stored_settings(args.scene).get("denoise", True))
+        stored = checked_settings(stored_settings(args.scene), f"{args.scene} (customLayerData gdmlt)")
+        return stored.get("denoise", True)
     return True
 
 
@@ -197,6 +213,46 @@ def finish_layers(layers: dict, args, threads=0) -> dict:
     return denoise_or_warn(layers, lambda m: print(f"gdmlt: warning: {m}", file=sys.stderr), threads=threads)
 
 
+def _choice(*names):
+    def parse(s):
+        if not isinstance(s, str) or s.lower() not in names:
+            raise argparse.ArgumentTypeError(f"'{s}' is not one of {', '.join(names)}")
+        return s.lower()
+    return parse
+
+
+def _flag(s):
+    if not isinstance(s, bool):
+        raise argparse.ArgumentTypeError(f"'{s}' is not true or false")
+    return s
+
+
+# The one check of every render setting, whatever it comes from: the CLI's options use these
+# parsers (argparse), and so do the settings a USD stage stores (customLayerData "gdmlt"),
+# which no CLI parser saw. The core validates again (gdmlt.render raises ValueError).
+SETTING_PARSERS = {"method": _choice(*METHODS), "spp": _positive_int, "time_limit": _nonneg_float,
+                   "max_bounces": _bounces, "nee": _flag, "seed": _seed, "threads": _threads,
+                   "reconstruction": _choice("l1", "l2"), "alpha_rec": _pos_float, "alpha_target": _pos_float,
+                   "large_step_probability": _nonneg_float, "chains": _chains, "denoise": _flag,
+                   "width": _side, "height": _side}
+
+
+def checked_settings(stored: dict, where: str) -> dict:
+    """`stored` with every known key parsed as the CLI parses it; ValueError naming the key
+    and `where` for a bad value."""
+    out = {}
+    for k, v in stored.items():
+        if k not in SETTING_PARSERS:
+            continue
+        try:
+            out[k] = SETTING_PARSERS[k](v)
+        except argparse.ArgumentTypeError as e:
+            raise ValueError(f"{where}: setting '{k}': {e}") from None
+    if out.get("large_step_probability", 0.0) > 1.0:
+        raise ValueError(f"{where}: setting 'large_step_probability' must be at most 1")
+    return out
+
+
 def render_settings(args) -> dict:
     """gdmlt.render's settings: the CLI's options over the settings stored in a USD stage by
     `gdmlt export` over the defaults."""
@@ -206,7 +262,8 @@ def render_settings(args) -> dict:
     if Path(args.scene).suffix.lower() in USD_SUFFIXES:
         from .usd import stored_settings
 
-        opts.update({k: v for k, v in stored_settings(args.scene).items() if k in opts})
+        stored = checked_settings(stored_settings(args.scene), f"{args.scene} (customLayerData gdmlt)")
+        opts.update({k: v for k, v in stored.items() if k in opts})
     opts.update(_settings(args))
     return opts
 
@@ -218,11 +275,42 @@ def render_desc(desc, args, out: Path):
     scene = gdmlt.Scene(desc)
     settings = render_settings(args)
     res = gdmlt.render(scene, **settings)
+    if res["stats"]["cancelled"]:
+        # Ctrl-C (the core stops at the signal and returns what it has): keep the work under
+        # a name that says so, never as the image the user asked for
+        out = out.with_name(out.stem + ".interrupted" + out.suffix)
+        write_layers(out, res["layers"], not args.no_png)
+        raise Interrupted(out)
     write_layers(out, finish_layers(res["layers"], args, settings["threads"]), not args.no_png)
     return res["stats"]
 
 
+class Interrupted(Exception):
+    """The render was stopped by Ctrl-C; its partial image was written to `path`."""
+
+    def __init__(self, path):
+        super().__init__(str(path))
+        self.path = path
+
+
 def main(argv=None):
+    """The command line; a failure the code did not foresee (a panic in the core arrives as
+    PyO3's PanicException, a BaseException) is reported in one line with exit 1, never as a
+    traceback or an image written anyway."""
+    try:
+        return _main(argv)
+    except KeyboardInterrupt:
+        print("gdmlt: interrupted", file=sys.stderr)
+        return 130
+    except SystemExit:
+        raise
+    except BaseException as e:  # noqa: BLE001
+        print(f"gdmlt: internal error ({type(e).__name__}): {e} — please report it with the command line",
+              file=sys.stderr)
+        return 1
+
+
+def _main(argv=None):
     parser = build_parser()
     args = parser.parse_args(argv)
     if args.command == "bench":
@@ -320,9 +408,9 @@ def main(argv=None):
         partial = (k, n)
     if args.dask is not None and args.partials < 1:
         parser.error("--partials must be at least 1")
-    out.parent.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     try:
+        out.parent.mkdir(parents=True, exist_ok=True)
         path = Path(args.scene)
         if args.scene not in BUILTIN:
             if path.suffix.lower() != ".blend" and path.suffix.lower() not in USD_SUFFIXES:
@@ -356,7 +444,13 @@ def main(argv=None):
                       f"in {time.perf_counter() - t0:.2f} s")
                 return 0
             stats = render_desc(desc, args, out)
-    except (ValueError, RuntimeError, FileNotFoundError) as e:
+    except Interrupted as e:
+        print(f"gdmlt: interrupted: the unfinished image was written to {e.path}", file=sys.stderr)
+        return 130
+    except KeyboardInterrupt:
+        print("gdmlt: interrupted", file=sys.stderr)
+        return 130
+    except (ValueError, RuntimeError, FileNotFoundError, OSError) as e:
         print(f"gdmlt: error: {e}", file=sys.stderr)
         return 1
     for w in stats.get("warnings", []):

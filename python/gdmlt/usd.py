@@ -708,7 +708,13 @@ def load(path, frame=None, width=None, height=None, camera=None):
     warnings = []
     stored = stored_settings(path)
     if width is None and height is None and "width" in stored:
-        width, height = int(stored["width"]), int(stored["height"])
+        try:
+            width, height = (int(stored[k]) for k in ("width", "height"))
+        except (KeyError, TypeError, ValueError):
+            raise ValueError(f"'{path}': customLayerData gdmlt width and height must both be integers, got "
+                             f"{stored.get('width')!r} and {stored.get('height')!r}") from None
+        if not (1 <= width <= 65536 and 1 <= height <= 65536):
+            raise ValueError(f"'{path}': customLayerData gdmlt image size {width}×{height} is not 1…65536 pixels a side")
     r = _Reader(stage, time, warnings)
     meshes, lights, world, cams = [], [], (0.0, 0.0, 0.0), []
     world_texture = world_rotation = None

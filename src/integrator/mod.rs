@@ -3,6 +3,7 @@
 //! halting, progress and cancellation, and the output.
 
 pub mod gdpt;
+pub mod memory;
 pub mod mlt;
 pub mod pt;
 
@@ -151,7 +152,8 @@ impl RenderControl {
             work_done: AtomicU64::new(0),
             work_total: AtomicU64::new(1),
             start: Instant::now(),
-            time_limit: if time_limit > 0.0 { Some(Duration::from_secs_f64(time_limit)) } else { None },
+            // a limit past what a Duration holds (≈ 5.8e11 years; e.g. 1e20 s) is no limit
+            time_limit: if time_limit > 0.0 { Duration::try_from_secs_f64(time_limit).ok() } else { None },
             preview_requested: AtomicBool::new(false),
             preview: Mutex::new(None),
         }
@@ -240,6 +242,7 @@ impl RenderOutput {
 /// Renders `scene` with the chosen method on a thread pool of the requested size.
 pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl) -> Result<RenderOutput, RenderError> {
     settings.validate()?;
+    memory::check(settings.method, scene.camera.width, scene.camera.height, memory::available())?;
     let mut builder = rayon::ThreadPoolBuilder::new();
     if settings.threads > 0 {
         builder = builder.num_threads(settings.threads);
@@ -283,6 +286,16 @@ mod tests {
         assert_eq!(esc.final_norm(Norm::L1), Norm::L1);
         esc.cancel();
         assert_eq!(esc.final_norm(Norm::L1), Norm::L2);
+    }
+
+    /// Issue 18: a time limit past what a Duration holds (1e20 s) panicked outside the
+    /// render's panic guard (the CLI then wrote a black frame and exited 0); it is no limit.
+    #[test]
+    fn a_time_limit_beyond_a_duration_is_no_limit() {
+        for t in [1e20, f64::MAX] {
+            let c = RenderControl::new(t);
+            assert!(!c.should_stop());
+        }
     }
 
     /// A target without primal share (α = 0) is refused: it leaves evenly lit regions

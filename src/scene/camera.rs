@@ -54,8 +54,8 @@ impl Camera {
             return err("matrix has NaN or Inf");
         }
         let pct = d.resolution_percentage;
-        let width = d.resolution_x * pct / 100;
-        let height = d.resolution_y * pct / 100;
+        // in u64: resolution × percentage overflows u32 for sizes a file can store
+        let (width, height) = (d.resolution_x as u64 * pct as u64 / 100, d.resolution_y as u64 * pct as u64 / 100);
         if width == 0 || height == 0 {
             return Err(SceneError::Camera(format!(
                 "image size is {width}×{height} pixels (resolution {}×{} at {pct}%): nothing to render",
@@ -63,7 +63,22 @@ impl Camera {
             )));
         }
         if width > 65536 || height > 65536 {
-            return err("image larger than 65536 pixels on a side");
+            return Err(SceneError::Camera(format!(
+                "image size {width}×{height} pixels (resolution {}×{} at {pct}%) is larger than 65536 pixels on a side",
+                d.resolution_x, d.resolution_y
+            )));
+        }
+        let (width, height) = (width as u32, height as u32);
+        if !(d.shift_x.is_finite() && d.shift_y.is_finite()) {
+            return err("shift is NaN or Inf");
+        }
+        // Blender's f-stop field stops at 0.1 in its UI; far below it the lens opening is
+        // kilometres wide and every pixel averages the whole scene: refuse what no lens is
+        if d.fstop.is_nan() || (d.fstop > 0.0 && d.fstop < 1e-3) {
+            return Err(SceneError::Camera(format!(
+                "f-stop {} is not a lens (use 0 for no depth of field, or at least 0.001)",
+                d.fstop
+            )));
         }
         let positive = |x: f32| x.is_finite() && x > 0.0;
         if !positive(d.pixel_aspect_x) || !positive(d.pixel_aspect_y) {
@@ -215,6 +230,27 @@ mod tests {
 
     fn look_down_neg_z() -> CameraDesc {
         CameraDesc { resolution_x: 200, resolution_y: 100, ..Default::default() }
+    }
+
+    /// Issue 18: resolution × percentage wrapped in u32 (42949700 × 100% gave a 27-pixel-wide
+    /// image, rendered with exit 0); it is now computed in u64 and refused above 65536.
+    /// Infinite shifts and f-stops that are no lens (black frames before) are refused.
+    #[test]
+    fn sizes_that_overflow_shifts_and_f_stops_that_are_no_camera_are_refused() {
+        let big = CameraDesc { resolution_x: 42_949_700, resolution_y: 16, ..Default::default() };
+        let e = Camera::new(&big).err().expect("refused").to_string();
+        assert!(e.contains("42949700") && e.contains("65536"), "{e}");
+        let pct = CameraDesc { resolution_x: 50_000, resolution_percentage: 100_000, ..Default::default() };
+        assert!(Camera::new(&pct).is_err());
+        for (sx, sy) in [(f32::INFINITY, 0.0), (0.0, f32::NAN)] {
+            let d = CameraDesc { shift_x: sx, shift_y: sy, ..look_down_neg_z() };
+            assert!(Camera::new(&d).err().unwrap().to_string().contains("shift"));
+        }
+        for f in [1e-30, f32::NAN] {
+            let d = CameraDesc { fstop: f, ..look_down_neg_z() };
+            assert!(Camera::new(&d).err().unwrap().to_string().contains("f-stop"), "{f}");
+        }
+        assert!(Camera::new(&CameraDesc { fstop: 2.8, ..look_down_neg_z() }).is_ok());
     }
 
     #[test]

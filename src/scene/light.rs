@@ -87,6 +87,15 @@ impl Light {
             }
         };
         let finite3 = |a: &[f32; 3]| a.iter().all(|x| x.is_finite());
+        // Cycles subtracts light for a negative strength; GDMLT's estimators (light selection
+        // by power, Metropolis targets) need light ≥ 0, so it is refused, as negative emission is
+        let (strength, name) = match d {
+            LightDesc::Point { power, name, .. }
+            | LightDesc::Spot { power, name, .. }
+            | LightDesc::Area { power, name, .. } => (power, name),
+            LightDesc::Sun { irradiance, name, .. } => (irradiance, name),
+        };
+        check(name, strength.iter().all(|&x| !(x < 0.0)), "negative power (GDMLT does not render negative light)")?;
         match d {
             LightDesc::Point { name, position, radius, power, soft_falloff, visible_camera } => {
                 check(
@@ -113,6 +122,7 @@ impl Light {
                     "NaN or Inf in position, direction or power",
                 )?;
                 check(name, v(*direction).length() > 0.0, "zero direction")?;
+                check(name, spot_size.is_finite() && spot_blend.is_finite(), "NaN or Inf spot size or blend")?;
                 let cos_half = (spot_size.clamp(0.0, PI) * 0.5).cos();
                 let spot = Spot {
                     dir: v(*direction).normalize(),
@@ -436,6 +446,45 @@ mod tests {
             assert!((pt.length() - dist).abs() < 1e-3);
             assert!((pdf - sphere_cone_pdf(Vec3::ZERO, c, 1.0)).abs() < 1e-3 * pdf);
         }
+    }
+
+    /// Issue 18: a light of negative power gave negative pixels (and a false "no light"
+    /// warning); a NaN spot size dropped a third of the samples silently. Both are refused,
+    /// naming the light.
+    #[test]
+    fn negative_power_and_nan_spot_size_are_refused_naming_the_light() {
+        let area = LightDesc::Area {
+            name: "Lamp.001".into(),
+            to_world: [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]],
+            shape: AreaShape::Rectangle,
+            size_x: 1.0,
+            size_y: 1.0,
+            power: [-10.0, 10.0, 10.0],
+            normalize: true,
+            visible_camera: false,
+        };
+        let e = Light::from_desc(&area).err().expect("refused").to_string();
+        assert!(e.contains("Lamp.001") && e.contains("negative"), "{e}");
+        let sun = LightDesc::Sun {
+            name: "Sun".into(),
+            direction: [0.0, 0.0, -1.0],
+            irradiance: [0.0, -1.0, 0.0],
+            angle: 0.01,
+            visible_camera: false,
+        };
+        assert!(Light::from_desc(&sun).is_err());
+        let spot = LightDesc::Spot {
+            name: "Spot".into(),
+            position: [0.0; 3],
+            direction: [0.0, 0.0, -1.0],
+            radius: 0.1,
+            power: [10.0; 3],
+            spot_size: f32::NAN,
+            spot_blend: 0.1,
+            soft_falloff: true,
+            visible_camera: false,
+        };
+        assert!(Light::from_desc(&spot).err().unwrap().to_string().contains("spot size"));
     }
 
     #[test]

@@ -37,7 +37,9 @@ impl Texture {
         if d.width == 0 || d.height == 0 {
             return Err(bad("has no pixels (zero width or height)".into()));
         }
-        if d.pixels.len() != d.width * d.height {
+        // checked: width·height wrapped for sizes a script can pass (a 2-pixel list then
+        // passed as a texture of 2^32 × 2^32 + … and, as a world, asked for 240 GB)
+        if d.width.checked_mul(d.height) != Some(d.pixels.len()) {
             return Err(bad(format!("{} pixels for {}×{}", d.pixels.len(), d.width, d.height)));
         }
         if d.transform.is_some_and(|m| m.iter().any(|v| !v.is_finite())) {
@@ -195,6 +197,13 @@ mod tests {
         d.width = 1;
         d.pixels = vec![[f32::NAN, 1.0, 1.0]];
         assert!(Texture::from_desc(&d).is_err()); // 1 pixel for 1×2
+        // issue 18: a size whose product wraps to the pixel count was accepted
+        let (w, h) = (usize::MAX / 2 + 1, 2);
+        assert_eq!(w.wrapping_mul(h), 0);
+        let wrap = TextureDesc { width: w, height: h, pixels: vec![], ..d.clone() };
+        assert!(Texture::from_desc(&wrap).is_err());
+        let wrap1 = TextureDesc { width: (1usize << 63) + 1, height: 2, pixels: vec![[0.0; 3]; 2], ..d.clone() };
+        assert!(Texture::from_desc(&wrap1).is_err());
         d.height = 1;
         let t = Texture::from_desc(&d).unwrap();
         assert_eq!(t.eval(Vec2::new(0.5, 0.5)), Spectrum::ZERO);
