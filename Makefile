@@ -11,7 +11,7 @@ export PATH := $(abspath $(VENV))/bin:$(PATH)
 # Keep Blender's user config out of $HOME during demos and tests.
 export BLENDER_USER_RESOURCES := $(abspath out/blender-user)
 
-.PHONY: all setup build demo test test-rust test-python examples addon bench bench-monastery bench-peers scalebench skipbench raybench clean
+.PHONY: all setup build demo test lint test-rust test-python examples addon bench bench-monastery bench-peers bench-lights scalebench skipbench raybench clean
 
 all: demo
 
@@ -40,7 +40,12 @@ demo: build
 	@mkdir -p out
 	$(VENV)/bin/gdmlt render examples/cornell.blend -o out/cornell.exr
 
-test: build test-rust test-python
+test: build lint test-rust test-python
+
+# Style and static checks: rustfmt (rustfmt.toml) and ruff's pyflakes checks (ruff.toml).
+lint: $(STAMP)
+	cargo fmt --check
+	$(VENV)/bin/ruff check python blender_addon tools tests
 
 # Every Rust test on the portable build; on x86-64 the BVH and packet tests again on the
 # x86-64-v3 build (its AVX2 node test must return exactly obvhs' hit masks, its packet
@@ -75,7 +80,7 @@ bench-monastery: build
 		--denoise --plot out/bench-monastery.png
 
 # Ray throughput of the core's BVH against Embree on 1M triangles (prints a table).
-# Against the peers, in one run each (README "Measured"): path-tracing samples/s against
+# Against the peers, in one run each (docs/benchmarks-history.md): path-tracing samples/s against
 # Mitsuba 3 and LuxCore, then error over time of every method against Cycles, LuxCore (path
 # and Metropolis) and Mitsuba on the Cornell box and the gap-lit scene. About 12 minutes.
 LLVM19 := /usr/lib/x86_64-linux-gnu/libLLVM.so.19.1
@@ -88,6 +93,18 @@ bench-peers: build
 		--peers cycles,luxcore,luxcore-mlt,mitsuba --plot out/bench-peers-cornell.png
 	$(VENV)/bin/gdmlt bench --scene gap --size 128 --budgets 1,2,4,8 --methods pt,gdpt,pssmlt,gdpssmlt \
 		--peers cycles,luxcore,luxcore-mlt,mitsuba --plot out/bench-peers-gap.png
+
+# Equal time against Cycles on .blend scenes built as artists build them (Blender lights, a
+# world colour, an HDRI interior, a 64-lamp hall): tools/make_bench_scenes.py writes them,
+# each is benchmarked at 1, 2, 4 s (table + out/bench/NAME.png). About 15 minutes.
+BENCH_SCENES := area point sun world area_point_sun area_world area_point_sun_world hall hdri_interior
+bench-lights: build
+	$(PY) -m pip install -q -r requirements-bench.txt
+	$(PY) tools/make_bench_scenes.py out/bench
+	@for s in $(BENCH_SCENES); do \
+		$(VENV)/bin/gdmlt bench --scene out/bench/$$s.blend --budgets 1,2,4 --methods pt,gdpt,gdpssmlt \
+			--modes nee --max-bounces 4 --reference-spp 4096 --peers cycles --plot out/bench/$$s.png || exit 1; \
+	done
 
 # Time per mutation / per path as the scene grows from 10k to 10M triangles and threads 1 → all.
 scalebench: build

@@ -43,6 +43,34 @@ def _to_blender_rows(img, channels):
     return out
 
 
+def render_threads(scene) -> int:
+    """GDMLT's own Threads setting when set; else Blender's fixed thread count (what
+    `blender -t N` sets, which farm managers use); else 0 = all cores."""
+    own = scene.gdmlt.threads
+    if own:
+        return own
+    r = scene.render
+    return r.threads if r.threads_mode == "FIXED" else 0
+
+
+class ProgressThrottle:
+    """When the progress line is worth printing: always in Blender's window; in background
+    mode (`blender -b`, where every update_stats call is a log line) once per 10% or 10 s."""
+
+    def __init__(self, background: bool):
+        self.background = background
+        self.last_step, self.last_time = -1, -1e9
+
+    def __call__(self, fraction: float, elapsed: float) -> bool:
+        if not self.background:
+            return True
+        step = int(fraction * 10)
+        if step != self.last_step or elapsed - self.last_time >= 10.0:
+            self.last_step, self.last_time = step, elapsed
+            return True
+        return False
+
+
 def remaining_time(fraction: float, elapsed: float) -> str:
     """' | 12.3 s left', extrapolated from the work done so far once it is 2% done."""
     if not 0.02 <= fraction < 1.0 or elapsed <= 0:
@@ -99,17 +127,31 @@ class GDMLTRenderEngine(bpy.types.RenderEngine):
         for w in warnings + list(core_scene.warnings):
             self.report({"WARNING"}, f"GDMLT: {w}")
         export_time = time.perf_counter() - t0
-        method = s.method.lower()
+        settings = dict(spp=s.samples, time_limit=s.time_limit, max_bounces=s.max_bounces, nee=s.use_nee, seed=s.seed,
+                        threads=render_threads(scene), reconstruction=s.reconstruction.lower(), alpha_rec=s.alpha_reconstruction,
+                        alpha_target=s.alpha_target, large_step_probability=s.large_step_probability, chains=s.chains)
+        chosen = None
+        if s.method == "AUTO":
+            from gdmlt.auto import plan
+
+            self.update_stats("GDMLT", "Automatic method: measuring each method on this scene")
+            settings, chosen = plan(desc, settings, self.esc_pressed)
+            self.report({"INFO"}, f"GDMLT: automatic method chose {chosen['method']} ({chosen['why']})")
+        method = settings.pop("method", s.method.lower())
+        label = method.upper() + (" (auto)" if chosen else "")
+
+        throttle = ProgressThrottle(bpy.app.background)
 
         def progress(fraction, elapsed):
-            self.update_progress(fraction)
-            self.update_stats("GDMLT", f"{s.method} | {fraction * 100:.0f}% | {elapsed:.1f} s"
-                              + remaining_time(fraction, elapsed))
+            if throttle(fraction, elapsed):
+                self.update_progress(fraction)
+                self.update_stats("GDMLT", f"{label} | {fraction * 100:.0f}% | {elapsed:.1f} s"
+                                  + remaining_time(fraction, elapsed))
             return self.esc_pressed()
 
         w, h = core_scene.size
         layer_name = depsgraph.view_layer.name
-        wanted = METHOD_PASSES.get(s.method, set()) | ({"Noisy Image"} if s.use_denoising else set())
+        wanted = METHOD_PASSES.get(method.upper(), set()) | ({"Noisy Image"} if s.use_denoising else set())
         for name, channels, chan_id, _ in PASSES:
             if name in wanted:
                 self.add_pass(name, channels, chan_id, layer=layer_name)
@@ -132,11 +174,7 @@ class GDMLTRenderEngine(bpy.types.RenderEngine):
                 self.update_result(result)
                 previews += 1
 
-            res = gdmlt.render(core_scene, method=method, spp=s.samples, time_limit=s.time_limit,
-                               max_bounces=s.max_bounces, nee=s.use_nee, seed=s.seed, threads=s.threads,
-                               reconstruction=s.reconstruction.lower(), alpha_rec=s.alpha_reconstruction,
-                               alpha_target=s.alpha_target, large_step_probability=s.large_step_probability, chains=s.chains,
-                               progress=progress, preview=preview)
+            res = gdmlt.render(core_scene, method=method, **settings, progress=progress, preview=preview)
             layers = res["layers"]
             denoised = False
             if s.use_denoising and not res["stats"]["cancelled"]:
@@ -144,7 +182,7 @@ class GDMLTRenderEngine(bpy.types.RenderEngine):
 
                 self.update_stats("GDMLT", "Denoising")
                 layers = denoise_or_warn(layers, lambda m: self.report({"WARNING"}, f"GDMLT: {m}"),
-                                         threads=s.threads)
+                                         threads=settings["threads"])
                 denoised = "Noisy Image" in layers
             for name, img in layers.items():
                 if name in channels_of:
@@ -153,12 +191,12 @@ class GDMLTRenderEngine(bpy.types.RenderEngine):
             self.end_result(result)
         st = res["stats"]
         global last_stats
-        last_stats = dict(st, export_time=export_time, previews=previews, denoised=denoised)
+        last_stats = dict(st, export_time=export_time, previews=previews, denoised=denoised, auto=chosen)
         for w_ in st["warnings"]:
             if w_ not in core_scene.warnings:
                 self.report({"WARNING"}, f"GDMLT: {w_}")
         if st["invalid_samples"]:
             self.report({"WARNING"}, f"GDMLT: {st['invalid_samples']} samples were NaN/Inf and were dropped")
         extra = f" | acceptance {st['acceptance'] * 100:.0f}%" if st.get("chains") else ""
-        self.update_stats("GDMLT", f"{s.method} | {st['spp_max']} per pixel | render {st['elapsed']:.2f} s, "
+        self.update_stats("GDMLT", f"{label} | {st['spp_max']} per pixel | render {st['elapsed']:.2f} s, "
                           f"export {export_time:.2f} s{extra}" + (" | denoised" if denoised else "") + (" | cancelled" if st["cancelled"] else ""))

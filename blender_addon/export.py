@@ -322,10 +322,14 @@ def _warn_unsupported_layers(node, warnings, what):
         warnings.append(f"{what}: Principled 'Specular Tint' is not rendered (white is used)")
 
 
-def _shader_leaves(node, weight, leaves, textures, warnings, what):
-    """Walks a Mix/Add Shader tree: appends (weight, leaf parameters) for every shader node."""
+def _shader_leaves(node, weight, leaves, textures, warnings, what, branch=()):
+    """Walks a Mix/Add Shader tree: appends (weight, leaf parameters) for every shader node.
+    `branch`: the Mix/Add nodes above this one; a node met again on its own branch is a loop
+    (Blender's editor refuses those, a script need not), refused naming material and node."""
     if weight <= 0.0:
         return
+    if node.name in branch:
+        raise ValueError(f"{what}: its shader nodes form a loop through '{node.name}'")
     if node.type == "MIX_SHADER":
         fac = min(max(_input_value(node, "Fac", warnings, what, 0.5), 0.0), 1.0)
         pairs = ((node.inputs[1], weight * (1.0 - fac)), (node.inputs[2], weight * fac))
@@ -340,7 +344,7 @@ def _shader_leaves(node, weight, leaves, textures, warnings, what):
         return
     for sock, w in pairs:
         if sock.is_linked:  # an unconnected shader socket adds nothing, as in Cycles
-            _shader_leaves(sock.links[0].from_node, w, leaves, textures, warnings, what)
+            _shader_leaves(sock.links[0].from_node, w, leaves, textures, warnings, what, branch + (node.name,))
 
 
 def _combine(leaves, warnings, what):
@@ -585,6 +589,9 @@ def camera_dict(scene, cam_ob):
         "resolution_percentage": r.resolution_percentage,
         "pixel_aspect_x": r.pixel_aspect_x, "pixel_aspect_y": r.pixel_aspect_y,
     }
+    g = getattr(scene, "gdmlt", None)
+    if g is not None:
+        d["pixel_filter"], d["filter_width"] = g.pixel_filter_type, g.filter_width
     if cam.dof.use_dof:
         d["fstop"] = cam.dof.aperture_fstop
         focus = cam.dof.focus_distance

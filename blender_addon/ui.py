@@ -29,15 +29,15 @@ class GDMLT_PT_sampling(GDMLTRenderPanel, bpy.types.Panel):
         col.prop(s, "time_limit")
         layout.prop(s, "seed")
         layout.prop(s, "use_denoising")
-        if s.method in {"GDPT", "GDPSSMLT"}:
+        if s.method in {"AUTO", "GDPT", "GDPSSMLT"}:
             col = layout.column(align=True)
             col.prop(s, "reconstruction")
             col.prop(s, "alpha_reconstruction")
-        if s.method in {"PSSMLT", "GDPSSMLT"}:
+        if s.method in {"AUTO", "PSSMLT", "GDPSSMLT"}:
             col = layout.column(align=True)
             col.prop(s, "large_step_probability")
             col.prop(s, "chains")
-            if s.method == "GDPSSMLT":
+            if s.method in {"AUTO", "GDPSSMLT"}:
                 col.prop(s, "alpha_target")
 
 
@@ -63,7 +63,22 @@ class GDMLT_PT_performance(GDMLTRenderPanel, bpy.types.Panel):
         layout.prop(context.scene.gdmlt, "threads")
 
 
-CLASSES = (GDMLT_PT_sampling, GDMLT_PT_light_paths, GDMLT_PT_performance)
+class GDMLT_PT_film(GDMLTRenderPanel, bpy.types.Panel):
+    bl_label = "Film"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    def draw(self, context):
+        s = context.scene.gdmlt
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        col = layout.column(align=True)
+        col.prop(s, "pixel_filter_type")
+        if s.pixel_filter_type != "BOX":
+            col.prop(s, "filter_width")
+
+
+CLASSES = (GDMLT_PT_sampling, GDMLT_PT_light_paths, GDMLT_PT_film, GDMLT_PT_performance)
 
 # Blender's own panels (dimensions, output, colour management, camera, light, world data,
 # material slots and surface, world surface, spot shape, depth of field, object visibility)

@@ -13,6 +13,7 @@ pub mod integrator;
 pub mod math;
 pub mod output;
 pub mod path;
+pub mod pixel_filter;
 pub mod reconstruct;
 pub mod sampler;
 pub mod scene;

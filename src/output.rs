@@ -63,6 +63,9 @@ pub fn linear_to_srgb(x: f32) -> f32 {
 
 /// Writes an RGB image as an 8-bit sRGB PNG (values clipped to [0, 1], like Blender's
 /// "Standard" view transform).
+/// The tEXt chunk every PNG GDMLT writes carries (keyword, text).
+pub const PNG_SOFTWARE: (&str, &str) = ("Software", "GDMLT");
+
 pub fn write_png(path: &Path, img: &Image) -> Result<(), RenderError> {
     if img.channels < 3 || img.width == 0 || img.height == 0 {
         return Err(RenderError::Output("PNG needs a non-empty RGB image".into()));
@@ -73,6 +76,8 @@ pub fn write_png(path: &Path, img: &Image) -> Result<(), RenderError> {
     enc.set_color(png::ColorType::Rgb);
     enc.set_depth(png::BitDepth::Eight);
     enc.set_source_srgb(png::SrgbRenderingIntent::Perceptual);
+    // marks the file as GDMLT's: the CLI replaces a PNG beside its EXR only if it carries this
+    enc.add_text_chunk(PNG_SOFTWARE.0.into(), PNG_SOFTWARE.1.into()).map_err(|e| err(&e))?;
     let mut writer = enc.write_header().map_err(|e| err(&e))?;
     let bytes: Vec<u8> = img
         .data

@@ -255,7 +255,145 @@ fn parse_camera(d: &Bound<'_, PyDict>) -> PyResult<CameraDesc> {
         pixel_aspect_y: get_or(d, "pixel_aspect_y", 1.0, ctx)?,
         fstop: get_or(d, "fstop", 0.0, ctx)?,
         focus_distance: get_or(d, "focus_distance", def.focus_distance, ctx)?,
+        pixel_filter: get_or(d, "pixel_filter", def.pixel_filter.clone(), ctx)?,
+        filter_width: get_or(d, "filter_width", def.filter_width, ctx)?,
     })
+}
+
+// The keys each dict of the scene layout may have (what the parse_* functions read). A key
+// outside them is almost always a misspelling ("lense"): it is reported as a warning naming
+// the dict, with the closest known key, instead of being ignored silently.
+const SCENE_KEYS: &[&str] =
+    &["camera", "lights", "materials", "meshes", "textures", "world", "world_rotation", "world_texture"];
+const MESH_KEYS: &[&str] = &["indices", "material_ids", "name", "normals", "positions", "uvs"];
+const MATERIAL_KEYS: &[&str] = &[
+    "alpha_texture",
+    "base_color",
+    "base_color_texture",
+    "emission",
+    "emission_texture",
+    "glass_color",
+    "glass_roughness",
+    "ior",
+    "metal_color",
+    "metal_roughness",
+    "metallic",
+    "multiscatter",
+    "name",
+    "normal_strength",
+    "normal_texture",
+    "roughness",
+    "roughness_texture",
+    "specular",
+    "specular_ior",
+    "transmission",
+    "transparency",
+    "transparent_color",
+];
+const TEXTURE_KEYS: &[&str] =
+    &["channels", "extension", "height", "interpolation", "name", "pixels", "srgb", "transform", "width"];
+const LIGHT_KEYS: &[&str] = &[
+    "angle",
+    "direction",
+    "irradiance",
+    "matrix",
+    "name",
+    "normalize",
+    "position",
+    "power",
+    "radius",
+    "shape",
+    "size",
+    "size_y",
+    "soft_falloff",
+    "spot_blend",
+    "spot_size",
+    "type",
+    "visible_camera",
+];
+const CAMERA_KEYS: &[&str] = &[
+    "clip_end",
+    "clip_start",
+    "filter_width",
+    "focus_distance",
+    "fstop",
+    "lens",
+    "matrix",
+    "ortho_scale",
+    "pixel_aspect_x",
+    "pixel_aspect_y",
+    "pixel_filter",
+    "resolution_percentage",
+    "resolution_x",
+    "resolution_y",
+    "sensor_fit",
+    "sensor_height",
+    "sensor_width",
+    "shift_x",
+    "shift_y",
+    "type",
+    "window",
+];
+
+/// Edit distance (for the "did you mean" of an unknown key).
+fn edit_distance(a: &str, b: &str) -> usize {
+    let b: Vec<char> = b.chars().collect();
+    let mut prev: Vec<usize> = (0..=b.len()).collect();
+    for (i, ca) in a.chars().enumerate() {
+        let mut cur = vec![i + 1; b.len() + 1];
+        for (j, cb) in b.iter().enumerate() {
+            cur[j + 1] = (prev[j] + usize::from(ca != *cb)).min(prev[j + 1] + 1).min(cur[j] + 1);
+        }
+        prev = cur;
+    }
+    prev[b.len()]
+}
+
+/// Warnings for the keys of `d` that are not in `known`.
+fn unknown_keys(d: &Bound<'_, PyDict>, known: &[&str], ctx: &str, out: &mut Vec<String>) {
+    for k in d.keys() {
+        let Ok(k) = k.extract::<String>() else { continue };
+        if known.contains(&k.as_str()) {
+            continue;
+        }
+        let near = known.iter().min_by_key(|c| edit_distance(&k, c)).filter(|c| edit_distance(&k, c) <= 2);
+        out.push(match near {
+            Some(c) => format!("{ctx}: unknown key '{k}' ignored (did you mean '{c}'?)"),
+            None => format!("{ctx}: unknown key '{k}' ignored"),
+        });
+    }
+}
+
+/// Every unknown key of a scene dict, as warnings naming where it is.
+fn scene_key_warnings(d: &Bound<'_, PyDict>) -> Vec<String> {
+    let mut out = Vec::new();
+    unknown_keys(d, SCENE_KEYS, "scene", &mut out);
+    for (list, known, what) in [
+        ("meshes", MESH_KEYS, "mesh"),
+        ("materials", MATERIAL_KEYS, "material"),
+        ("textures", TEXTURE_KEYS, "texture"),
+        ("lights", LIGHT_KEYS, "light"),
+    ] {
+        if let Ok(Some(items)) = d.get_item(list) {
+            for item in items.try_iter().into_iter().flatten().flatten() {
+                if let Ok(item) = item.cast_into::<PyDict>() {
+                    let name: String = item
+                        .get_item("name")
+                        .ok()
+                        .flatten()
+                        .and_then(|n| n.extract().ok())
+                        .unwrap_or_else(|| "?".to_string());
+                    unknown_keys(&item, known, &format!("{what} '{name}'"), &mut out);
+                }
+            }
+        }
+    }
+    if let Ok(Some(cam)) = d.get_item("camera") {
+        if let Ok(cam) = cam.cast_into::<PyDict>() {
+            unknown_keys(&cam, CAMERA_KEYS, "camera", &mut out);
+        }
+    }
+    out
 }
 
 fn parse_scene(d: &Bound<'_, PyDict>) -> PyResult<SceneDesc> {
@@ -304,9 +442,13 @@ impl Scene {
     #[new]
     fn new(py: Python<'_>, desc: &Bound<'_, PyDict>) -> PyResult<Self> {
         let d = parse_scene(desc)?;
+        let unknown = scene_key_warnings(desc);
         let built = py.detach(|| std::panic::catch_unwind(|| scene::Scene::build(&d)));
         match built {
-            Ok(Ok(s)) => Ok(Scene { inner: Arc::new(s) }),
+            Ok(Ok(mut s)) => {
+                s.report.warnings.extend(unknown);
+                Ok(Scene { inner: Arc::new(s) })
+            }
             Ok(Err(e)) => Err(verr(e.to_string())),
             Err(_) => Err(PyRuntimeError::new_err("internal error while building the scene (a bug: please report it)")),
         }
@@ -657,6 +799,8 @@ fn builtin_scene<'py>(py: Python<'py>, name: &str, width: u32, height: u32) -> P
     cd.set_item("clip_end", c.clip_end)?;
     cd.set_item("resolution_x", c.resolution_x)?;
     cd.set_item("resolution_y", c.resolution_y)?;
+    cd.set_item("pixel_filter", c.pixel_filter.clone())?;
+    cd.set_item("filter_width", c.filter_width)?;
     out.set_item("camera", cd)?;
     out.set_item("world", d.world)?;
     Ok(out)
@@ -695,6 +839,9 @@ fn reconstruct<'py>(
     let imgs = [primal, dx, dy, direct].map(numpy_to_image);
     let [p, gx, gy, d] = imgs;
     let (p, gx, gy, d) = (p?, gx?, gy?, d?);
+    if p.width == 0 || p.height == 0 {
+        return Err(verr("reconstruct: the images are empty (0 pixels)"));
+    }
     if p.channels != 3 || [&gx, &gy, &d].iter().any(|i| (i.width, i.height, i.channels) != (p.width, p.height, 3)) {
         return Err(verr("primal, dx, dy and direct must all be float32 arrays of the same shape (H, W, 3)"));
     }
@@ -712,6 +859,16 @@ fn reconstruct<'py>(
 fn write_png(path: std::path::PathBuf, image: &Bound<'_, PyAny>) -> PyResult<()> {
     let img = numpy_to_image(image)?;
     crate::output::write_png(&path, &img).map_err(|e| PyRuntimeError::new_err(e.to_string()))
+}
+
+/// Raises ValueError when a `width × height` render with `method` would need more memory
+/// than this process may allocate (what `render` checks first; `gdmlt.auto` asks before its
+/// pilot, which renders only a window of the frame).
+#[pyfunction]
+fn check_memory(method: &str, width: u32, height: u32) -> PyResult<()> {
+    let method = Method::parse(method).map_err(|e| verr(e.to_string()))?;
+    let available = integrator::memory::available();
+    integrator::memory::check(method, width, height, available).map_err(|e| verr(e.to_string()))
 }
 
 /// Whether this CPU runs the x86-64-v3 build (AVX2, FMA, BMI1/2, LZCNT, MOVBE, F16C), so
@@ -742,6 +899,7 @@ fn init_module(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(write_png, m)?)?;
     m.add_function(wrap_pyfunction!(reconstruct, m)?)?;
     m.add_function(wrap_pyfunction!(cpu_supports_x86_64_v3, m)?)?;
+    m.add_function(wrap_pyfunction!(check_memory, m)?)?;
     m.add("METHODS", vec!["pt", "gdpt", "pssmlt", "gdpssmlt"])?;
     // The path builder's Russian roulette starts after this many bounces (benchmarks set
     // their peers' roulette to it, so that every renderer traces paths of the same length).

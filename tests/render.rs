@@ -23,7 +23,11 @@ fn run_method(
     seed: u64,
     threads: usize,
 ) -> RenderOutput {
-    let scene = Scene::build(desc).expect("scene builds");
+    // the methods are compared pixel by pixel: every one with the box filter the Metropolis
+    // methods use (pt and gdpt default to Blackman-Harris, src/pixel_filter.rs)
+    let mut desc = desc.clone();
+    desc.camera.pixel_filter = "BOX".into();
+    let scene = Scene::build(&desc).expect("scene builds");
     let settings = RenderSettings {
         method,
         spp,

@@ -5,7 +5,6 @@ a .blend with GDMLT as its engine. Needs bpy and pybullet (`make bench-monastery
 both). Usage: python tools/make_monastery.py OUT.blend [--size W H]"""
 
 import argparse
-import math
 import os
 import sys
 import tempfile

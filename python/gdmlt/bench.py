@@ -102,20 +102,33 @@ def peer_rows(peer, scene, desc, budgets, nee, max_bounces, threads, size):
 
 def run(scene="cornell", size=None, budgets=(1.0, 2.0, 4.0), methods=("pt", "gdpt", "pssmlt", "gdpssmlt"),
         modes=(True, False), reference_spp=8192, max_bounces=8, threads=0, plot=None, extra=None, denoise=False,
-        peers=(), out=print):
+        peers=(), out=print, reference="pt", reference_seconds=60.0):
     """extra: more render settings for every run (alpha_target, reconstruction, ...).
     peers: any of PEERS, rendered at the same budgets and compared with the same reference."""
     import gdmlt
 
     desc, label = scene_desc(scene, size)
+    if {"luxcore", "luxcore-mlt", "mitsuba"} & set(peers):
+        # those peers render with a one-pixel box filter: everything here does, for this run
+        desc["camera"] = dict(desc["camera"], pixel_filter="BOX", filter_width=1.0)
     sc = gdmlt.Scene(desc)
     extra = dict(extra or {})
     cam = desc["camera"]
+    what = (f"Cycles for {reference_seconds:g} s (another seed)" if reference == "cycles"
+            else f"pt with NEE at {reference_spp} spp")
     out(f"# {label} {cam['resolution_x']}x{cam['resolution_y']}, max bounces {max_bounces}, threads={threads or 'all'}, "
-        f"reference: pt with NEE at {reference_spp} spp" + (f", settings {extra}" if extra else ""))
+        f"reference: {what}" + (f", settings {extra}" if extra else ""))
     t0 = time.perf_counter()
-    ref = gdmlt.render(sc, method="pt", spp=reference_spp, nee=True, seed=12345, threads=threads,
-                       max_bounces=max_bounces)["layers"]["Combined"]
+    if reference == "cycles":
+        # GDMLT's own error then includes any difference from Cycles' answer, not only noise
+        from . import peers as _peers
+
+        blend = scene if str(scene).lower().endswith(".blend") else None
+        ref = _peers.cycles_render([reference_seconds], max_bounces, True, threads, desc=None if blend else desc,
+                                   blend=blend, size=size, seed=977)[0][0]
+    else:
+        ref = gdmlt.render(sc, method="pt", spp=reference_spp, nee=True, seed=12345, threads=threads,
+                           max_bounces=max_bounces)["layers"]["Combined"]
     out(f"# reference took {time.perf_counter() - t0:.1f} s")
     out(f"{'method':14} {'nee':5} " + " ".join(f"{'relMSE@' + f'{b:g}' + 's':>14} {'SMAPE':>7}" for b in budgets))
     if denoise:
@@ -125,12 +138,20 @@ def run(scene="cornell", size=None, budgets=(1.0, 2.0, 4.0), methods=("pt", "gdp
             raise RuntimeError("--denoise needs pyoidn (pip install pyoidn)")
     rows = []
     denoise_time = []
+    notes = []
     for nee in modes:
         for m in methods:
             cells, dcells = [], []
             for b in budgets:
-                res = gdmlt.render(sc, method=m, spp=10 ** 7, time_limit=b, nee=nee, seed=1, threads=threads,
-                                   max_bounces=max_bounces, **extra)
+                opts = dict(spp=10 ** 7, time_limit=b, nee=nee, seed=1, threads=threads, max_bounces=max_bounces,
+                            **extra)
+                if m == "auto":  # the pilot's time is part of the budget
+                    from .auto import render as auto_render
+
+                    res = auto_render(desc, opts)
+                    notes.append(f"auto at {b:g} s chose {res['stats']['auto']['method']}")
+                else:
+                    res = gdmlt.render(sc, method=m, **opts)
                 layers = res["layers"]
                 img = layers["Combined"]
                 cells.append((rel_mse(img, ref), smape(img, ref)))
@@ -155,6 +176,8 @@ def run(scene="cornell", size=None, budgets=(1.0, 2.0, 4.0), methods=("pt", "gdp
             out(f"{peer:14} {str(nee):5} " + " ".join(f"{r:14.4g} {s:7.4f}" for r, s in cs))
             if note:
                 out(f"# {note}")
+    for n in notes:
+        out(f"# {n}")
     if denoise_time:
         out(f"# denoiser time per image: {np.median(denoise_time):.2f} s (median, not charged to the budget)")
     if plot:

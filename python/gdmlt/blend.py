@@ -40,6 +40,7 @@ def export_usd(path: Path, out: Path, frame=None) -> dict:
     if frame is not None:
         scene.frame_set(int(frame))
     _as_exportable_principled(bpy)
+    _safe_packed_image_names(bpy)
     out.parent.mkdir(parents=True, exist_ok=True)
     result = bpy.ops.wm.usd_export(filepath=str(out.resolve()), selected_objects_only=False,
                                    export_animation=False, export_materials=True, export_lights=True,
@@ -69,6 +70,28 @@ def export_usd(path: Path, out: Path, frame=None) -> dict:
     layer.customLayerData = data
     layer.Save()
     return settings
+
+
+def safe_file_name(name: str, fallback: str = "texture") -> str:
+    """`name` as a plain file name: no folders, no '..', no leading dots or separators."""
+    import re
+
+    base = re.split(r"[\\/]", name)[-1]
+    base = re.sub(r"[^A-Za-z0-9._ -]", "_", base).lstrip(". ")
+    return base or fallback
+
+
+def _safe_packed_image_names(bpy):
+    """Blender's USD exporter writes each packed image (export_textures_mode NEW) to the
+    stage's textures folder under the image's file name or, without one, its datablock name —
+    a name like '../../../x.png' in an untrusted .blend wrote outside the output folder. Every
+    packed image gets a plain file name first (in memory; the .blend is not saved)."""
+    for img in bpy.data.images:
+        if img.packed_file is None:
+            continue
+        base = safe_file_name(img.filepath or img.name, f"image{img.session_uid}")
+        img.name = safe_file_name(img.name, base)
+        img.filepath = "//" + base
 
 
 def _as_exportable_principled(bpy):
@@ -124,8 +147,12 @@ def render_blend(path: Path, out: Path, settings: dict, width=None, height=None,
     scene.render.filepath = str(out.resolve())
     scene.render.use_file_extension = False
     bpy.ops.render.render(write_still=True)
-    if png:
+    from .outputs import mark_png, png_beside
+
+    path = png_beside(out) if png else None
+    if path is not None:
         img.file_format = "PNG"
         img.color_depth = "8"
-        bpy.data.images["Render Result"].save_render(str(out.with_suffix(".png").resolve()), scene=scene)
+        bpy.data.images["Render Result"].save_render(str(path.resolve()), scene=scene)
+        mark_png(path)
     return dict(getattr(mod.engine, "last_stats", {}) or {})

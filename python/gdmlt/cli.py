@@ -8,6 +8,7 @@ from pathlib import Path
 
 BUILTIN = ("cornell", "spheres", "gap", "furnace")
 METHODS = ("pt", "gdpt", "pssmlt", "gdpssmlt")
+RENDER_METHODS = ("auto",) + METHODS  # auto: gdmlt/auto.py picks one of them per scene
 USD_SUFFIXES = (".usd", ".usda", ".usdc", ".usdz")
 
 
@@ -59,8 +60,18 @@ def _pos_float(s):
     return v
 
 
+def _version():
+    try:
+        import gdmlt
+
+        return f"gdmlt {gdmlt.__version__} ({gdmlt.BUILD_TARGET})"
+    except ImportError as e:  # the core did not load: say so, still answer --version
+        return f"gdmlt (core not loaded: {e})"
+
+
 def build_parser():
     p = argparse.ArgumentParser(prog="gdmlt", description="GDMLT: gradient-domain Metropolis light transport renderer")
+    p.add_argument("--version", action="version", version=_version())
     sub = p.add_subparsers(dest="command", required=True)
     r = sub.add_parser("render", help="render a .blend file or a built-in scene to EXR (+ PNG)",
                        description="Render SCENE (a .blend file, a USD stage (.usd, .usda, .usdc, .usdz), or a built-in name: " + ", ".join(BUILTIN) + ") "
@@ -68,10 +79,11 @@ def build_parser():
                                    "Options left out keep the .blend file's own GDMLT settings.")
     r.add_argument("scene", help="path to a .blend or USD file, or a built-in scene name (" + ", ".join(BUILTIN) + ")")
     r.add_argument("-o", "--output", required=True, help="output EXR path; a PNG is written next to it")
-    r.add_argument("--method", choices=METHODS, type=str.lower,
+    r.add_argument("--method", choices=RENDER_METHODS, type=str.lower,
                    help="light transport method: pt (path tracing), gdpt (gradient-domain path tracing), "
-                        "pssmlt (primary-sample-space Metropolis), gdpssmlt (gradient-domain Metropolis); "
-                        "default: the file's, else gdpssmlt")
+                        "pssmlt (primary-sample-space Metropolis), gdpssmlt (gradient-domain Metropolis), "
+                        "auto (a short pilot picks the one with the least error per second on this scene); "
+                        "default: the file's, else auto")
     r.add_argument("--alpha-target", type=_pos_float, dest="alpha_target",
                    help="gdpssmlt: weight of the primal term in the target function (default 1.0)")
     r.add_argument("--large-step", type=_nonneg_float, dest="large_step_probability",
@@ -162,6 +174,10 @@ def build_parser():
     b.add_argument("--methods", default="pt,gdpt,pssmlt,gdpssmlt", help="comma-separated methods")
     b.add_argument("--modes", default="nee,naive", help="light modes: nee, naive or both (default nee,naive)")
     b.add_argument("--reference-spp", type=_positive_int, default=8192)
+    b.add_argument("--reference", choices=("pt", "cycles"), default="pt",
+                   help="what every render is compared with: GDMLT pt at --reference-spp (default), or Cycles "
+                        "rendered for --reference-seconds (then GDMLT's error includes any difference from Cycles)")
+    b.add_argument("--reference-seconds", type=_pos_float, default=60.0)
     b.add_argument("--max-bounces", type=_nonneg_int, default=8)
     b.add_argument("--alpha-target", type=float, help="GDPSSMLT's α_target for every run")
     b.add_argument("--threads", type=_nonneg_int, default=0)
@@ -230,7 +246,7 @@ def _flag(s):
 # The one check of every render setting, whatever it comes from: the CLI's options use these
 # parsers (argparse), and so do the settings a USD stage stores (customLayerData "gdmlt"),
 # which no CLI parser saw. The core validates again (gdmlt.render raises ValueError).
-SETTING_PARSERS = {"method": _choice(*METHODS), "spp": _positive_int, "time_limit": _nonneg_float,
+SETTING_PARSERS = {"method": _choice(*RENDER_METHODS), "spp": _positive_int, "time_limit": _nonneg_float,
                    "max_bounces": _bounces, "nee": _flag, "seed": _seed, "threads": _threads,
                    "reconstruction": _choice("l1", "l2"), "alpha_rec": _pos_float, "alpha_target": _pos_float,
                    "large_step_probability": _nonneg_float, "chains": _chains, "denoise": _flag,
@@ -256,7 +272,7 @@ def checked_settings(stored: dict, where: str) -> dict:
 def render_settings(args) -> dict:
     """gdmlt.render's settings: the CLI's options over the settings stored in a USD stage by
     `gdmlt export` over the defaults."""
-    opts = {"method": "gdpssmlt", "spp": 64, "time_limit": 0.0, "max_bounces": 8, "nee": True, "seed": 0, "threads": 0,
+    opts = {"method": "auto", "spp": 64, "time_limit": 0.0, "max_bounces": 8, "nee": True, "seed": 0, "threads": 0,
             "reconstruction": "l1", "alpha_rec": 0.2, "alpha_target": 1.0, "large_step_probability": 0.3,
             "chains": 0}
     if Path(args.scene).suffix.lower() in USD_SUFFIXES:
@@ -272,9 +288,26 @@ def render_desc(desc, args, out: Path):
     """Renders a scene dict with the CLI's settings; writes the EXR (+ PNG)."""
     import gdmlt
 
-    scene = gdmlt.Scene(desc)
     settings = render_settings(args)
-    res = gdmlt.render(scene, **settings)
+    if settings["method"] == "auto":
+        from .auto import plan
+
+        settings, pick = plan(desc, settings)
+        print(f"gdmlt: method auto chose {pick['method']} ({pick['why']})", file=sys.stderr)
+    import signal
+
+    line = ProgressLine(settings["method"])
+    # Ctrl-C during the render: a flag the progress callback hands to the core (which stops
+    # and returns what it has), not a KeyboardInterrupt that would lose the work
+    import threading
+
+    main = threading.current_thread() is threading.main_thread()  # (signals only go there)
+    previous = signal.signal(signal.SIGINT, lambda *_: setattr(line, "interrupted", True)) if main else None
+    try:
+        res = gdmlt.render(gdmlt.Scene(desc), **settings, progress=line)
+    finally:
+        if main:
+            signal.signal(signal.SIGINT, previous)
     if res["stats"]["cancelled"]:
         # Ctrl-C (the core stops at the signal and returns what it has): keep the work under
         # a name that says so, never as the image the user asked for
@@ -283,6 +316,27 @@ def render_desc(desc, args, out: Path):
         raise Interrupted(out)
     write_layers(out, finish_layers(res["layers"], args, settings["threads"]), not args.no_png)
     return res["stats"]
+
+
+class ProgressLine:
+    """The render's progress on stderr — a line per 10% or per 10 s, with the time left (what
+    a farm log keeps) — and Ctrl-C: it stops the render, which returns what it has."""
+
+    def __init__(self, method, out=None):
+        self.method, self.out = method, out or sys.stderr
+        self.step, self.last, self.interrupted = 0, 0.0, False
+
+    def __call__(self, fraction, elapsed):
+        try:
+            step = int(fraction * 10)
+            if (step > self.step or elapsed - self.last >= 10.0) and 0 < fraction < 1:
+                self.step, self.last = step, elapsed
+                left = f", {elapsed * (1 - fraction) / fraction:.1f} s left" if fraction >= 0.02 else ""
+                print(f"gdmlt: {self.method} {fraction * 100:.0f}% after {elapsed:.1f} s{left}", file=self.out,
+                      flush=True)
+        except KeyboardInterrupt:
+            self.interrupted = True
+        return self.interrupted
 
 
 class Interrupted(Exception):
@@ -320,9 +374,9 @@ def _main(argv=None):
         except ValueError:
             parser.error(f"--budgets: '{args.budgets}' is not a comma-separated list of seconds")
         methods = tuple(m.strip() for m in args.methods.split(",") if m.strip())
-        bad = [m for m in methods if m not in METHODS]
+        bad = [m for m in methods if m not in RENDER_METHODS]
         if bad:
-            parser.error(f"--methods: unknown {', '.join(bad)} (choose from {', '.join(METHODS)})")
+            parser.error(f"--methods: unknown {', '.join(bad)} (choose from {', '.join(RENDER_METHODS)})")
         mode_of = {"nee": True, "naive": False}
         modes = tuple(mode_of.get(m.strip()) for m in args.modes.split(","))
         if None in modes:
@@ -340,7 +394,8 @@ def _main(argv=None):
         try:
             run(args.scene, size, budgets, methods, modes, reference_spp=args.reference_spp,
                 max_bounces=args.max_bounces, threads=args.threads, plot=args.plot, extra=extra,
-                denoise=args.denoise, peers=peers)
+                denoise=args.denoise, peers=peers, reference=args.reference,
+                reference_seconds=args.reference_seconds)
         except (ValueError, RuntimeError, FileNotFoundError) as e:
             print(f"gdmlt: error: {e}", file=sys.stderr)
             return 1
@@ -426,17 +481,26 @@ def _main(argv=None):
                                  png=not args.no_png)
         else:
             desc = scene_desc(args)
+            settings = render_settings(args)
+            if settings["method"] == "auto" and (partial is not None or args.dask is not None):
+                if partial is not None:
+                    parser.error("--partial needs a method other than auto: each machine's pilot could pick "
+                                 "another one, and partials of different methods do not merge")
+                from .auto import plan
+
+                settings, pick = plan(desc, settings)
+                print(f"gdmlt: method auto chose {pick['method']} ({pick['why']})", file=sys.stderr)
             if partial is not None:
                 from .distributed import render_partial, save_partial
 
-                p = render_partial(desc, partial[0], partial[1], render_settings(args))
+                p = render_partial(desc, partial[0], partial[1], settings)
                 save_partial(out, p)
                 print(f"wrote partial {partial[0]}/{partial[1]} to {out} ({p['work']:.0f} samples)")
                 return 0
             if args.dask is not None:
                 from .distributed import render_dask
 
-                layers, dropped = render_dask(desc, args.partials, render_settings(args),
+                layers, dropped = render_dask(desc, args.partials, settings,
                                               address=args.dask or None, workers=args.workers,
                                               log=lambda m: print(m, file=sys.stderr))
                 write_layers(out, finish_layers(layers, args), not args.no_png)
@@ -456,7 +520,10 @@ def _main(argv=None):
     for w in stats.get("warnings", []):
         print(f"gdmlt: warning: {w}", file=sys.stderr)
     total = time.perf_counter() - t0
-    print(f"wrote {out}" + ("" if args.no_png else f" and {out.with_suffix('.png')}"))
+    from .outputs import written_by_gdmlt
+
+    png = out.with_suffix(".png")
+    print(f"wrote {out}" + (f" and {png}" if not args.no_png and written_by_gdmlt(png) else ""))
     unit = "mutations" if stats.get("chains") else "samples"
     print(f"render {stats.get('elapsed', 0.0):.2f} s ({stats.get('spp_max', '?')} {unit} per pixel"
           f"{', method ' + stats['method'] if 'method' in stats else ''}), total {total:.2f} s")
@@ -490,8 +557,11 @@ def write_layers(out: Path, layers: dict, png: bool):
 
     names = ["Combined"] + [n for n in layers if n != "Combined"]
     gdmlt.write_exr(str(out), [(n, layers[n]) for n in names])
-    if png:
-        gdmlt.write_png(str(out.with_suffix(".png")), layers["Combined"])
+    from .outputs import png_beside
+
+    path = png_beside(out) if png else None
+    if path is not None:
+        gdmlt.write_png(str(path), layers["Combined"])
 
 
 def merge_command(args):

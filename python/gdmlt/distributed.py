@@ -19,7 +19,46 @@ from pathlib import Path
 import numpy as np
 
 GD_METHODS = ("gdpt", "gdpssmlt")
-FORMAT = 1
+# 2: partials carry what identifies them (scene and settings hashes, seed, K/N), checked by merge
+FORMAT = 2
+MAX_LAYERS = 32
+
+
+def scene_hash(desc: dict) -> str:
+    """A stable hash of a scene dict (keys sorted; arrays by dtype, shape and bytes)."""
+    import hashlib
+
+    h = hashlib.sha256()
+
+    def feed(v):
+        if isinstance(v, dict):
+            h.update(b"{")
+            for k in sorted(v, key=str):
+                h.update(str(k).encode() + b":")
+                feed(v[k])
+            h.update(b"}")
+        elif isinstance(v, (list, tuple)):
+            h.update(b"[")
+            for x in v:
+                feed(x)
+            h.update(b"]")
+        elif isinstance(v, np.ndarray):
+            a = np.ascontiguousarray(v)
+            h.update(f"{a.dtype.str}{a.shape}".encode())
+            h.update(a.tobytes())
+        else:
+            h.update(repr(v).encode())
+
+    feed(desc)
+    return h.hexdigest()[:32]
+
+
+def settings_hash(settings: dict) -> str:
+    """The render settings that must agree between partials (all but the seed and threads)."""
+    import hashlib
+
+    keep = {k: settings[k] for k in sorted(settings) if k not in ("seed", "threads", "progress", "preview")}
+    return hashlib.sha256(repr(keep).encode()).hexdigest()[:32]
 
 
 def partial_seed(seed: int, k: int) -> int:
@@ -43,7 +82,8 @@ def render_partial(desc: dict, k: int, n: int, settings: dict) -> dict:
     work = 0.5 * (float(st.get("spp_min", 0)) + float(st.get("spp_max", 0)))
     out = {f"layer:{name}": np.asarray(img, np.float32) for name, img in res["layers"].items()}
     out.update({"format": FORMAT, "method": opts.get("method", "pt"), "k": k, "n": n, "work": work * w * h,
-                "alpha_rec": float(opts.get("alpha_rec", 0.2)), "reconstruction": opts.get("reconstruction", "l1")})
+                "alpha_rec": float(opts.get("alpha_rec", 0.2)), "reconstruction": opts.get("reconstruction", "l1"),
+                "scene_hash": scene_hash(desc), "settings_hash": settings_hash(settings), "seed": opts["seed"]})
     return out
 
 
@@ -55,16 +95,92 @@ def save_partial(path, partial: dict):
     tmp.replace(path)  # a partial file is either complete or absent
 
 
+def _check_sizes(path, max_pixels=65536 * 65536):
+    """Refuses an .npz whose members would inflate beyond what a partial of its own image
+    size holds (a zip bomb), before anything is decompressed."""
+    import zipfile
+
+    with zipfile.ZipFile(path) as z:
+        infos = z.infolist()
+        if len(infos) > MAX_LAYERS + 16:
+            raise ValueError(f"{path}: {len(infos)} entries; not a GDMLT partial")
+        combined = next((i for i in infos if i.filename == "layer:Combined.npy"), None)
+        if combined is None:
+            raise ValueError(f"{path}: no Combined layer; not a GDMLT partial")
+        with z.open(combined) as f:
+            version = np.lib.format.read_magic(f)
+            read = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
+            shape, _, dtype = read(f)
+        if len(shape) != 3 or shape[2] != 3 or shape[0] * shape[1] > max_pixels or dtype != np.float32:
+            raise ValueError(f"{path}: Combined layer of shape {shape} and type {dtype} is not an RGB float32 image")
+        layer_bytes = shape[0] * shape[1] * 3 * 4 + 4096
+        for i in infos:
+            limit = layer_bytes if i.filename.startswith("layer:") else 4096
+            if i.file_size > limit:
+                raise ValueError(f"{path}: entry {i.filename} inflates to {i.file_size:,} bytes, more than a "
+                                 f"{shape[1]}×{shape[0]} partial holds ({limit:,})")
+
+
 def load_partial(path) -> dict:
-    with np.load(Path(path), allow_pickle=False) as z:
-        d = {k: z[k] for k in z.files}
-    for k in ("method", "reconstruction"):
-        d[k] = str(d[k])
-    for k in ("work", "alpha_rec"):
-        d[k] = float(d[k])
+    """A partial written by `save_partial`, checked: its size bound before decompressing, its
+    format, every layer an RGB float32 image of the Combined layer's size."""
+    import zipfile
+
+    try:
+        _check_sizes(path)
+        with np.load(Path(path), allow_pickle=False) as z:
+            d = {k: z[k] for k in z.files}
+    except (zipfile.BadZipFile, EOFError) as e:
+        raise ValueError(f"{path}: not a GDMLT partial render ({e})") from None
     if int(d.get("format", 0)) != FORMAT:
-        raise ValueError(f"{path}: not a GDMLT partial render (format {d.get('format')})")
+        raise ValueError(f"{path}: not a GDMLT partial render of this version (format {d.get('format')}, "
+                         f"expected {FORMAT}); render the partials again")
+    try:
+        for k in ("method", "reconstruction", "scene_hash", "settings_hash"):
+            d[k] = str(d[k])
+        for k in ("work", "alpha_rec"):
+            d[k] = float(d[k])
+        for k in ("k", "n", "seed"):
+            d[k] = int(d[k])
+    except KeyError as e:
+        raise ValueError(f"{path}: a GDMLT partial without its {e} field") from None
+    shape = d["layer:Combined"].shape
+    for name, a in d.items():
+        if name.startswith("layer:") and (a.dtype != np.float32 or a.shape[:2] != shape[:2] or a.ndim != 3):
+            raise ValueError(f"{path}: layer '{name[6:]}' is {a.dtype} {a.shape}, not float32 {shape}")
+    d["path"] = str(path)
     return d
+
+
+def check_partials(partials):
+    """Refuses partials that are not independent estimates of one image: other scenes or
+    settings, other sizes, the same partial twice, two with one seed, work that is not a
+    finite positive number, non-finite pixels."""
+    first = partials[0]
+    name = lambda p: p.get("path", f"partial {p.get('k')}/{p.get('n')}")  # noqa: E731
+    for p in partials:
+        for key in ("scene_hash", "settings_hash", "method", "n"):
+            if key in first and p.get(key) != first.get(key):
+                raise ValueError(f"{name(p)} is of another {key.replace('_hash', '')} than {name(first)} "
+                                 f"({p.get(key)} vs {first.get(key)}): partials must be one render split K/N")
+        if p["layer:Combined"].shape != first["layer:Combined"].shape:
+            raise ValueError(f"{name(p)} is {p['layer:Combined'].shape}, {name(first)} {first['layer:Combined'].shape}")
+        w = p["work"]
+        if not (np.isfinite(w) and w > 0):
+            raise ValueError(f"{name(p)}: its work ({w}) must be a finite number > 0")
+        for layer, a in p.items():
+            if layer.startswith("layer:"):
+                bad = int(np.size(a) - np.count_nonzero(np.isfinite(a)))
+                if bad:
+                    raise ValueError(f"{name(p)}: layer '{layer[6:]}' has {bad} NaN/Inf values")
+    for key, what in (("k", "the same partial"), ("seed", "two partials with one seed")):
+        seen = {}
+        for p in partials:
+            if key in p:
+                if p[key] in seen:
+                    raise ValueError(f"{name(p)} and {seen[p[key]]}: {what} ({key} = {p[key]}); "
+                                     "merging it twice would count its noise twice")
+                seen[p[key]] = name(p)
 
 
 def merge(partials, alpha_rec=None, reconstruction=None) -> dict:
@@ -74,14 +190,9 @@ def merge(partials, alpha_rec=None, reconstruction=None) -> dict:
     partials = list(partials)
     if not partials:
         raise ValueError("nothing to merge")
+    check_partials(partials)
     method = partials[0]["method"]
-    shape = partials[0]["layer:Combined"].shape
-    for p in partials:
-        if p["method"] != method or p["layer:Combined"].shape != shape:
-            raise ValueError(f"partials differ: {p['method']} {p['layer:Combined'].shape} vs {method} {shape}")
     work = np.array([p["work"] for p in partials], dtype=np.float64)
-    if not (work > 0).any():
-        raise ValueError("the partials did no work")
     weights = work / work.sum()
     names = [k for k in partials[0] if k.startswith("layer:")]
     merged = {}

@@ -337,7 +337,7 @@ def luxcore_render(simple: dict, budgets, max_bounces: int, nee: bool, sampler="
 
 def cycles_unbiased(scene, samples: int, seed: int, bounces: int, threads: int = 0):
     """Cycles as an unbiased reference (BLENDER.md): no clamping, no glossy filter, no
-    denoiser, no adaptive sampling, no light threshold, a one-pixel box filter, caustics on,
+    denoiser, no adaptive sampling, no light threshold, the default 1.5-pixel Blackman-Harris filter, caustics on,
     the same bounce limit for every kind."""
     scene.render.engine = "CYCLES"
     c = scene.cycles
@@ -350,8 +350,9 @@ def cycles_unbiased(scene, samples: int, seed: int, bounces: int, threads: int =
     c.sample_clamp_indirect = 0.0
     c.blur_glossy = 0.0
     c.light_sampling_threshold = 0.0  # the default 0.01 drops faint light contributions (biased)
-    c.pixel_filter_type = "BOX"
-    c.filter_width = 1.0
+    # Cycles' default pixel filter, which GDMLT's default now is too (pixel_filter.rs)
+    c.pixel_filter_type = "BLACKMAN_HARRIS"
+    c.filter_width = 1.5
     c.max_bounces = c.diffuse_bounces = c.glossy_bounces = c.transmission_bounces = bounces
     c.transparent_max_bounces = 16  # as the core (path.rs MAX_TRANSPARENT_BOUNCES): crossings are not bounces
     c.caustics_reflective = c.caustics_refractive = True
@@ -380,7 +381,7 @@ def _cycles_child(inp: str, outp: str):
                     meshes=[dict(m, positions=data[f"p{i}"], indices=data[f"t{i}"], material_ids=data[f"m{i}"])
                             for i, m in enumerate(cfg["desc"]["meshes"])])
         scene = build(bpy, desc)
-    cycles_unbiased(scene, 1 << 24, seed=1, bounces=cfg["max_bounces"], threads=cfg["threads"])
+    cycles_unbiased(scene, 1 << 24, seed=cfg.get("seed", 1), bounces=cfg["max_bounces"], threads=cfg["threads"])
     if not cfg["nee"]:
         # the paper's naive mode: emissive surfaces and the world only found by hitting them
         # (lamp objects, if any, are still sampled: Cycles cannot turn that off)
@@ -409,11 +410,11 @@ def _cycles_child(inp: str, outp: str):
     np.savez(outp, images=np.stack(images), times=np.array(times), samples=np.zeros(len(times)))
 
 
-def cycles_render(budgets, max_bounces: int, nee: bool, threads=0, desc=None, blend=None, size=None):
+def cycles_render(budgets, max_bounces: int, nee: bool, threads=0, desc=None, blend=None, size=None, seed=1):
     """Cycles images after each time limit (one render per budget, Cycles' own time limit),
     of a .blend file or of a scene dict that `simple_scene` accepts (rebuilt in Blender by
     gdmlt.blendscene). Runs in a child process (bpy)."""
-    cfg = dict(budgets=list(budgets), max_bounces=max_bounces, nee=nee, threads=threads,
+    cfg = dict(budgets=list(budgets), max_bounces=max_bounces, nee=nee, threads=threads, seed=seed,
                blend=str(Path(blend).resolve()) if blend else None, size=list(size) if size else None)
     arrays = {}
     if desc is not None:

@@ -14,7 +14,7 @@ colour × blackbody colour of the temperature and `normalize` as UsdLux defines 
 UsdGeomCamera (apertures and focal length in tenths of a scene unit, clipping, f-stop,
 focus distance, aperture offsets), time samples (`frame`), instance proxies and
 PointInstancers of meshes (flattened: copies per instance). Everything else is reported in
-the returned warnings with the fallback used (README: "USD feature table").
+the returned warnings with the fallback used (docs/features.md: "USD feature table").
 """
 
 from __future__ import annotations
@@ -425,9 +425,14 @@ class _Reader:
         pts = np.array(pts, dtype=np.float64)
         counts = np.array(counts, dtype=np.int64)
         idx = np.array(idx, dtype=np.int64)
+        if (counts < 0).any():
+            raise ValueError(f"mesh '{name}': negative faceVertexCounts ({int(counts.min())})")
         if counts.sum() != len(idx):
             raise ValueError(f"mesh '{name}': faceVertexCounts add up to {counts.sum()} but there are "
                              f"{len(idx)} faceVertexIndices")
+        if len(idx) and (idx.min() < 0 or idx.max() >= len(pts)):
+            raise ValueError(f"mesh '{name}': faceVertexIndices reach {int(idx.min())}…{int(idx.max())} "
+                             f"but there are {len(pts)} points")
         if mesh.GetSubdivisionSchemeAttr().Get() not in (None, "none"):
             self.warn(f"mesh '{name}': subdivision is not applied (the control mesh is rendered)")
         # fan triangulation: face f with n corners → (c0, c_k, c_k+1), k = 1..n−2 (corner indices)
@@ -449,8 +454,15 @@ class _Reader:
         det = np.linalg.det(m[:3, :3])
         nmat = np.linalg.inv(m[:3, :3]).T if abs(det) > 1e-30 else m[:3, :3]
 
-        def corner_values(values, interp):
+        def corner_values(values, interp, what):
+            """Per-corner values of a primvar, or None (with a warning) when it holds fewer
+            values than its interpolation needs."""
             values = np.asarray(values, dtype=np.float64)
+            need = {"vertex": len(pts), "varying": len(pts), "faceVarying": len(idx),
+                    "uniform": len(counts)}.get(interp, 1)
+            if values.ndim != 2 or len(values) < need:
+                self.warn(f"mesh '{name}': {what} has {len(values)} values, {interp} needs {need}; ignored")
+                return None
             if interp in ("vertex", "varying"):
                 return values[tris]
             if interp == "faceVarying":
@@ -468,12 +480,14 @@ class _Reader:
         else:
             normals, interp = mesh.GetNormalsAttr().Get(t), mesh.GetNormalsInterpolation()
         if normals is not None and len(normals):
-            cn = corner_values(normals, interp).reshape(-1, 3) @ nmat.T
-            out["normals"] = np.ascontiguousarray(cn, dtype=np.float32)
+            cn = corner_values(normals, interp, "normals")
+            if cn is not None:
+                out["normals"] = np.ascontiguousarray(cn.reshape(-1, 3) @ nmat.T, dtype=np.float32)
         st = pv_api.GetPrimvar("st")
         if st and st.HasValue():
-            uv = corner_values(st.ComputeFlattened(t), st.GetInterpolation()).reshape(-1, 2)
-            out["uvs"] = np.ascontiguousarray(uv, dtype=np.float32)
+            uv = corner_values(st.ComputeFlattened(t), st.GetInterpolation(), "primvar st")
+            if uv is not None:
+                out["uvs"] = np.ascontiguousarray(uv.reshape(-1, 2), dtype=np.float32)
         # materials: the prim's binding, overridden per face by GeomSubsets
         binding = UsdShade.MaterialBindingAPI(prim)
         face_mat = np.full(len(counts), self.material(binding.ComputeBoundMaterial()[0]), dtype=np.uint32)

@@ -64,7 +64,7 @@ fn render_row(scene: &Scene, settings: &RenderSettings, y: usize, lo: usize, win
     for x in 0..w as usize {
         for s in from..to {
             let mut sampler = super::pt::pixel_sampler(settings.seed, y * w as usize + x, s);
-            let raster = Vec2::new(x as f32, y as f32) + sampler.next_2d();
+            let raster = scene.camera.pixel_raster(x as f32, y as f32, sampler.next_2d());
             // the base's camera ray and its four offsets' (neighbour pixels, same lens sample)
             // traced as one packet: ray 0 the base, ray 1 + i the offset of SHIFTS[i]
             let lens = sampler.next_2d();

@@ -29,7 +29,8 @@ pub fn available() -> Option<u64> {
     let meminfo = std::fs::read_to_string("/proc/meminfo").ok();
     let avail = meminfo.as_deref().and_then(|s| field_kib(s, "MemAvailable:")).map(|k| k * 1024);
     let limit = std::fs::read_to_string("/proc/self/limits").ok().and_then(|s| address_space_limit(&s));
-    let used = std::fs::read_to_string("/proc/self/status").ok().and_then(|s| field_kib(&s, "VmSize:")).map(|k| k * 1024);
+    let used =
+        std::fs::read_to_string("/proc/self/status").ok().and_then(|s| field_kib(&s, "VmSize:")).map(|k| k * 1024);
     let left = match (limit, used) {
         (Some(l), Some(u)) => Some(l.saturating_sub(u)),
         (Some(l), None) => Some(l),

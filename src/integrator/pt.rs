@@ -42,7 +42,7 @@ fn render_row(
         let mut n = 0;
         for ((slot, ray), (x, s)) in batch.iter_mut().zip(rays.iter_mut()).zip(work.by_ref()) {
             let mut sampler = pixel_sampler(settings.seed, y * w + x, s);
-            let raster = Vec2::new(x as f32, y as f32) + sampler.next_2d();
+            let raster = scene.camera.pixel_raster(x as f32, y as f32, sampler.next_2d());
             let lens = sampler.next_2d();
             *ray = scene.camera.generate_ray(raster, lens);
             *slot = (x, lens, sampler);
@@ -127,7 +127,7 @@ mod tests {
             for x in 0..w {
                 for s in 0..3 {
                     let mut sampler = pixel_sampler(settings.seed, y * w + x, s);
-                    let raster = Vec2::new(x as f32, y as f32) + sampler.next_2d();
+                    let raster = scene.camera.pixel_raster(x as f32, y as f32, sampler.next_2d());
                     let c = trace_path(&scene, &settings.path, raster, &mut sampler, None);
                     single.add(x, c.radiance, c.very_direct, c.albedo, c.normal);
                 }

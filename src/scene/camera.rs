@@ -32,6 +32,8 @@ pub struct Camera {
     clip_end: f32,
     aperture_radius: f32,
     focus_distance: f32,
+    /// Where a pixel's samples fall (pixel_filter.rs).
+    pub filter: crate::pixel_filter::PixelFilter,
 }
 
 fn mat_from_rows(m: &[[f32; 4]; 4]) -> Mat4 {
@@ -128,6 +130,17 @@ impl Camera {
         } else {
             0.0
         };
+        let filter = if d.filter_width.is_finite() && (0.01..=10.0).contains(&d.filter_width) {
+            crate::pixel_filter::PixelFilter::from_name(&d.pixel_filter, d.filter_width)
+        } else {
+            None
+        }
+        .ok_or_else(|| {
+            SceneError::Camera(format!(
+                "pixel filter '{}' of width {} (expected BLACKMAN_HARRIS or BOX, width 0.01 to 10 pixels)",
+                d.pixel_filter, d.filter_width
+            ))
+        })?;
         let focus_distance =
             if d.focus_distance.is_finite() && d.focus_distance > 0.0 { d.focus_distance } else { 1.0 };
         let (offset, size) = match d.window {
@@ -154,7 +167,15 @@ impl Camera {
             clip_end,
             aperture_radius,
             focus_distance,
+            filter,
         })
+    }
+
+    /// The raster position of pixel (x, y)'s sample `u` ∈ [0, 1)²: the pixel centre plus the
+    /// filter's offset on each axis (every integrator takes its camera samples here).
+    #[inline]
+    pub fn pixel_raster(&self, x: f32, y: f32, u: Vec2) -> Vec2 {
+        Vec2::new(x + 0.5 + self.filter.offset(u.x), y + 0.5 + self.filter.offset(u.y))
     }
 
     /// Point on the image plane (x, y at depth 1 for perspective) for a raster position

@@ -209,6 +209,10 @@ pub struct CameraDesc {
     /// Render region (Blender's border): [x, y, width, height] in pixels of the final image,
     /// y from the top. Only that window is rendered; the image is the window's size.
     pub window: Option<[u32; 4]>,
+    /// Pixel filter (pixel_filter.rs): "BLACKMAN_HARRIS" (Cycles' default) or "BOX", and its
+    /// width in pixels (Cycles' default 1.5).
+    pub pixel_filter: String,
+    pub filter_width: f32,
 }
 
 impl Default for CameraDesc {
@@ -233,6 +237,8 @@ impl Default for CameraDesc {
             fstop: 0.0,
             focus_distance: 10.0,
             window: None,
+            pixel_filter: "BLACKMAN_HARRIS".into(),
+            filter_width: 1.5,
         }
     }
 }

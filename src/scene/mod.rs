@@ -7,6 +7,7 @@ pub mod desc;
 pub mod environment;
 pub mod light;
 pub mod light_select;
+pub mod light_tree;
 pub mod material;
 pub mod texture;
 
@@ -151,7 +152,15 @@ impl Scene {
                 }
                 let v = tri.map(|i| Vec3::from_array(m.positions[i as usize]));
                 let cross = (v[1] - v[0]).cross(v[2] - v[0]);
-                if !(cross.length_squared() > 0.0) || !cross.is_finite() {
+                if !cross.is_finite() || !cross.length_squared().is_finite() {
+                    // finite vertices whose edges' product overflows f32 (a 1e30 scale): not a
+                    // zero-area triangle, a scene too large for single precision
+                    return Err(bad(format!(
+                        "triangle {t} is too large for single precision (vertices up to {:.3e}): scale the scene down",
+                        v.iter().flat_map(|p| p.to_array()).fold(0.0f32, |a, x| a.max(x.abs()))
+                    )));
+                }
+                if !(cross.length_squared() > 0.0) {
                     report.degenerate_triangles += 1;
                     continue; // zero area: can be neither hit nor sampled
                 }

@@ -197,7 +197,7 @@ mod tests {
         d.width = 1;
         d.pixels = vec![[f32::NAN, 1.0, 1.0]];
         assert!(Texture::from_desc(&d).is_err()); // 1 pixel for 1×2
-        // issue 18: a size whose product wraps to the pixel count was accepted
+                                                  // issue 18: a size whose product wraps to the pixel count was accepted
         let (w, h) = (usize::MAX / 2 + 1, 2);
         assert_eq!(w.wrapping_mul(h), 0);
         let wrap = TextureDesc { width: w, height: h, pixels: vec![], ..d.clone() };

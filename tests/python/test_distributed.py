@@ -65,7 +65,7 @@ def test_partials_have_distinct_seeds_and_refuse_mismatched_merges(cornell):
     b = dist.render_partial(cornell, 1, 2, {"method": "pt", "spp": 4})
     assert not np.array_equal(a["layer:Combined"], b["layer:Combined"])
     c = dist.render_partial(cornell, 1, 2, {"method": "gdpt", "spp": 4})
-    with pytest.raises(ValueError, match="differ"):
+    with pytest.raises(ValueError, match="another settings"):
         dist.merge([a, c])
     with pytest.raises(ValueError):
         dist.render_partial(cornell, 2, 2, {"method": "pt", "spp": 4})
@@ -103,3 +103,56 @@ def test_dask_local_cluster_survives_a_killed_worker(cornell, reference):
     img = layers["Combined"]
     assert np.isfinite(img).all()
     assert abs(block_means(img, 4).mean() / reference.mean() - 1) < 0.03
+
+
+def _saved(tmp_path, name, p):
+    path = tmp_path / f"{name}.npz"
+    dist.save_partial(path, p)
+    return path
+
+
+def test_merge_refuses_what_is_not_one_render_split_k_of_n(cornell, tmp_path):
+    """Issue 18 [6]: each of these merged with exit 0 before (other scenes, a partial twice,
+    one seed twice, bad work, a NaN pixel that made the whole EXR NaN, int64 layers)."""
+    a = dist.render_partial(cornell, 0, 2, {"method": "pt", "spp": 2})
+    b = dist.render_partial(cornell, 1, 2, {"method": "pt", "spp": 2})
+    assert dist.merge([a, b])["Combined"].shape == (SIZE, SIZE, 3)
+    other = gdmlt.builtin_scene("spheres", SIZE, SIZE)
+    cases = {
+        "another scene": dist.render_partial(other, 1, 2, {"method": "pt", "spp": 2}),
+        "same partial": dict(a),
+        "one seed": dict(b, seed=a["seed"]),
+        "nan work": dict(b, work=float("nan")),
+        "negative work": dict(b, work=-1.0),
+        "nan pixel": dict(b, **{"layer:Combined": np.where(np.arange(SIZE * SIZE * 3).reshape(SIZE, SIZE, 3) == 7,
+                                                             np.nan, b["layer:Combined"]).astype(np.float32)}),
+    }
+    match = {"another scene": "another scene", "same partial": "same partial", "one seed": "one seed",
+             "nan work": "work", "negative work": "work", "nan pixel": "NaN"}
+    for what, bad in cases.items():
+        with pytest.raises(ValueError, match=match[what]):
+            dist.merge([a, bad])
+    # on disk: int64 layers and a zip bomb are refused before they are used or inflated
+    ints = dict(b, **{"layer:Combined": b["layer:Combined"].astype(np.int64)})
+    with pytest.raises(ValueError, match="float32|int64"):
+        dist.load_partial(_saved(tmp_path, "ints", ints))
+    bomb = dict(b, **{"layer:Huge": np.zeros((4000, 4000, 3), np.float32)})
+    path = _saved(tmp_path, "bomb", bomb)
+    assert path.stat().st_size < 1_000_000
+    with pytest.raises(ValueError, match="inflates"):
+        dist.load_partial(path)
+    ok = [dist.load_partial(_saved(tmp_path, n, p)) for n, p in (("a", a), ("b", b))]
+    assert np.isfinite(dist.merge(ok)["Combined"]).all()
+
+
+def test_merge_command_exits_1_on_a_bad_partial(cornell, tmp_path):
+    import subprocess
+    import sys
+
+    from conftest import ROOT
+
+    a = _saved(tmp_path, "a", dist.render_partial(cornell, 0, 2, {"method": "pt", "spp": 2}))
+    r = subprocess.run([sys.executable, "-m", "gdmlt.cli", "merge", str(a), str(a), "-o", str(tmp_path / "m.exr")],
+                       capture_output=True, text=True, cwd=ROOT)
+    assert r.returncode == 1 and "same partial" in r.stderr and "Traceback" not in r.stderr, r.stderr
+    assert not (tmp_path / "m.exr").exists()

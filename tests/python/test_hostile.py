@@ -2,6 +2,7 @@
 a finite, correctly sized image — never a traceback, a panic or a silently wrong image. Each
 case here failed before its fix (the issue's numbers in brackets)."""
 
+import io
 import signal
 import subprocess
 import sys
@@ -114,3 +115,159 @@ def test_an_image_larger_than_memory_is_refused_before_allocating(tmp_path):
                        capture_output=True, text=True, cwd=ROOT, timeout=300, preexec_fn=limit)
     assert r.returncode == 1, (r.returncode, r.stderr[-2000:])
     assert "memory" in r.stderr and "65536×65536" in r.stderr and "Traceback" not in r.stderr, r.stderr
+
+
+def test_export_writes_packed_textures_only_under_the_output_folder(bpy_mod, tmp_path):
+    """[4] a packed image named '../../../evil.png' in an untrusted .blend was written that
+    many folders above the stage by Blender's USD exporter (textures mode NEW)."""
+    bpy = bpy_mod
+    bpy.ops.wm.open_mainfile(filepath=str(ROOT / "examples" / "cornell.blend"))
+    img = bpy.data.images.new("../../../evil.png", 4, 4)
+    img.pixels.foreach_set(np.ones(4 * 4 * 4, np.float32))
+    img.pack()
+    img.name = "../../../evil.png"
+    mat = bpy.data.materials[0]
+    nt = mat.node_tree
+    tex = nt.nodes.new("ShaderNodeTexImage")
+    tex.image = img
+    bsdf = next(n for n in nt.nodes if n.type in ("BSDF_PRINCIPLED", "BSDF_DIFFUSE"))
+    colour = bsdf.inputs.get("Base Color") or bsdf.inputs["Color"]
+    nt.links.new(tex.outputs["Color"], colour)
+    blend = tmp_path / "untrusted.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend), copy=True)
+    stage_dir = tmp_path / "a" / "b" / "c"
+    r = _cli("export", str(blend), "-o", str(stage_dir / "stage.usda"))
+    assert r.returncode == 0, r.stderr[-2000:]
+    escaped = [p for p in tmp_path.rglob("evil*") if stage_dir not in p.parents]
+    assert not escaped, escaped
+    assert list(stage_dir.rglob("evil*")), sorted(stage_dir.rglob("*"))  # the texture is still exported
+
+
+def test_a_file_beside_the_output_that_gdmlt_did_not_write_is_kept(tmp_path):
+    """[7] `gdmlt render scene.usda -o wood.exr` overwrote the scene's texture wood.png."""
+    wood = tmp_path / "wood.png"
+    from PIL import Image
+
+    Image.new("RGB", (3, 3), (10, 20, 30)).save(wood)
+    before = wood.read_bytes()
+    r = _cli("render", "cornell", "-o", str(tmp_path / "wood.exr"), "--spp", "1", "--width", "8", "--height", "8")
+    assert r.returncode == 0, r.stderr
+    assert wood.read_bytes() == before and "not replacing" in r.stderr
+    assert (tmp_path / "wood.exr").exists()
+    # its own PNG it replaces: render twice into one name, the second image is written
+    out = tmp_path / "mine.exr"
+    for spp in ("1", "4"):
+        r = _cli("render", "cornell", "-o", str(out), "--spp", spp, "--width", "8", "--height", "8",
+                 "--method", "pt", "--no-denoise")
+        assert r.returncode == 0 and "not replacing" not in r.stderr, r.stderr
+        from gdmlt.outputs import written_by_gdmlt
+
+        assert written_by_gdmlt(out.with_suffix(".png"))
+
+
+def test_blenders_png_is_marked_as_gdmlts(tmp_path):
+    from PIL import Image
+
+    from gdmlt.outputs import mark_png, written_by_gdmlt
+
+    p = tmp_path / "b.png"
+    Image.new("RGB", (5, 4), (200, 100, 50)).save(p)
+    assert not written_by_gdmlt(p)
+    mark_png(p)
+    assert written_by_gdmlt(p)
+    im = Image.open(p)
+    im.load()  # still a valid PNG (chunk CRCs checked)
+    assert im.size == (5, 4) and im.getpixel((0, 0)) == (200, 100, 50) and im.info.get("Software") == "GDMLT"
+
+
+def test_version_is_printed():
+    r = _cli("--version")
+    assert r.returncode == 0 and r.stdout.startswith("gdmlt ") and gdmlt.__version__ in r.stdout, r.stdout
+
+
+def test_a_misspelt_scene_key_is_reported_not_ignored_silently():
+    """[10] 'lense' in the camera dict was ignored without a word."""
+    d = gdmlt.builtin_scene("cornell", 16, 16)
+    assert not [w for w in gdmlt.Scene(d).warnings if "unknown key" in w]
+    d["camera"]["lense"] = 85.0
+    d["materials"][0]["roughnes"] = 0.2
+    warnings = gdmlt.Scene(d).warnings
+    assert any("camera: unknown key 'lense'" in w and "'lens'" in w for w in warnings), warnings
+    assert any("unknown key 'roughnes'" in w and "'roughness'" in w for w in warnings), warnings
+
+
+def test_the_exporters_write_only_keys_the_core_reads(bpy_mod):
+    """Blender's export and the USD reader produce no unknown-key warnings (the check would
+    otherwise cry wolf on every render)."""
+    from gdmlt.bench import scene_desc
+
+    for name in ("lights", "textures", "mix", "specular"):
+        desc, _ = scene_desc(str(ROOT / "tests" / "scenes" / f"{name}.blend"), (8, 8))
+        assert not [w for w in gdmlt.Scene(desc).warnings if "unknown key" in w], name
+
+
+def test_usd_meshes_with_short_primvars_or_bad_counts_are_messages(tmp_path):
+    """[9] short normals/st arrays or negative face counts raised IndexError in usd.py."""
+    pxr = pytest.importorskip("pxr")
+    from test_usd import _stage
+
+    from gdmlt import usd
+
+    path = _stage(tmp_path / "s.usda")
+    stage = pxr.Usd.Stage.Open(str(path))
+    floor = pxr.UsdGeom.Mesh(stage.GetPrimAtPath("/World/Floor"))
+    floor.CreateNormalsAttr([(0, 0, 1)])  # one normal for four vertices
+    floor.SetNormalsInterpolation("vertex")
+    pv = pxr.UsdGeom.PrimvarsAPI(floor.GetPrim()).CreatePrimvar(
+        "st", pxr.Sdf.ValueTypeNames.TexCoord2fArray, pxr.UsdGeom.Tokens.faceVarying)
+    pv.Set([(0, 0), (1, 0)])  # two of four corners
+    stage.GetRootLayer().Save()
+    desc, warnings = usd.load(path)
+    assert any("normals has 1 values" in w for w in warnings), warnings
+    assert any("primvar st has 2 values" in w for w in warnings), warnings
+    assert gdmlt.Scene(desc) is not None
+    floor.GetFaceVertexCountsAttr().Set([-4, 8])
+    stage.GetRootLayer().Save()
+    with pytest.raises(ValueError, match="negative faceVertexCounts"):
+        usd.load(path)
+
+
+def test_reconstruct_of_an_empty_image_and_a_huge_scale_are_messages():
+    """[9] gdmlt.reconstruct on a 0×N array; [10] a 1e30 scale reported as 'zero-area
+    triangles' (the triangles' area overflowed)."""
+    z = np.zeros((0, 4, 3), np.float32)
+    with pytest.raises(ValueError, match="empty"):
+        gdmlt.reconstruct(z, z, z, z, 0.2, "l2")
+    d = gdmlt.builtin_scene("cornell", 8, 8)
+    d["meshes"][0]["positions"] = (np.asarray(d["meshes"][0]["positions"]) * 1e30).astype(np.float32)
+    with pytest.raises(ValueError, match="too large for single precision"):
+        gdmlt.Scene(d)
+
+
+def test_a_shader_node_loop_names_the_material(bpy_mod):
+    """[10] a node loop failed with 'maximum recursion depth' without the material's name."""
+    from gdmlt_blender import export
+
+    bpy = bpy_mod
+    bpy.ops.wm.open_mainfile(filepath=str(ROOT / "examples" / "cornell.blend"))
+    mat = bpy.data.materials[0]
+    nt = mat.node_tree
+    a, b = nt.nodes.new("ShaderNodeMixShader"), nt.nodes.new("ShaderNodeMixShader")
+    nt.links.new(b.outputs[0], a.inputs[1])
+    nt.links.new(a.outputs[0], b.inputs[1])
+    nt.links.new(a.outputs[0], nt.get_output_node("CYCLES").inputs["Surface"])
+    with pytest.raises(ValueError, match=f"{mat.name}.*loop"):
+        export.export_scene(bpy.context.evaluated_depsgraph_get())
+
+
+def test_the_command_line_reports_progress_with_the_time_left():
+    """Issue 17: `gdmlt render` printed nothing until it ended (no progress, no ETA)."""
+    from gdmlt.cli import ProgressLine
+
+    out = io.StringIO()
+    line = ProgressLine("pt", out)
+    for i in range(1, 201):  # 20 s of polls every 0.1 s, progress linear in time
+        assert line(i / 200, i * 0.1) is False
+    lines = out.getvalue().splitlines()
+    assert 9 <= len(lines) <= 12, lines  # one per 10%, not one per poll
+    assert "pt 50% after 10.0 s, 10.0 s left" in out.getvalue(), lines

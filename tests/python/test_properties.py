@@ -3,7 +3,6 @@ however broken, either build or raise ValueError naming what is wrong — never 
 panic across the FFI — and whatever builds renders finite pixels."""
 
 import numpy as np
-import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
 
 import gdmlt

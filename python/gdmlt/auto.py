@@ -1,0 +1,147 @@
+"""`method = "auto"`: a short pilot measures each method's error per second on the scene at
+hand, and the render spends the rest of its budget on the best one.
+
+Why: which method is best depends on the scene. On everyday scenes lit directly (a few lamps,
+a sun, a sky) path tracing and GDPT are 5–10× ahead of GDPSSMLT at equal time; where light
+arrives through a small gap GDPSSMLT is ahead of both (docs/benchmarks.md). No fixed default
+is right for both, and users should not have to know.
+
+The pilot (`choose`):
+1. **A window of the image**: the central quarter of each side (at least 16 × 16 pixels, the
+   whole image when it is smaller), so that each pilot render gets many samples per pixel
+   in a short time on pixels that are typical of the frame.
+2. **Two independent renders per candidate** (`pt`, `gdpt`, `gdpssmlt`; seeds differ) of
+   `t` seconds each, with the render's own bounce and NEE settings.
+3. **Error per second**: half the mean relative squared difference of the two renders,
+   (a − b)² / (((a + b)/2)² + 0.01), estimates one render's relative variance `v` after `t`
+   seconds; a Monte Carlo error falls as 1/time, so `v·t` is the method's error for one second
+   (its fixed costs — the Metropolis bootstrap — counted against it, as the real render pays
+   them too). The smallest `v·t` wins.
+
+Budget: with a time limit, the pilot takes 5% of it (each of the six renders at least 0.03 s)
+and the chosen method renders for the rest. With samples only, the budget is the time `pt`
+would take for that many samples per pixel (measured by the pilot), so `auto` at 64 samples
+takes about as long as `pt` at 64 samples.
+
+Parameters (defaults once, here): `PILOT_FRACTION = 0.05`, `MIN_PILOT_RENDER = 0.03` s,
+`CANDIDATES = ("pt", "gdpt", "gdpssmlt")` (`pssmlt` is left out: it measured behind
+`gdpssmlt` on every benchmark scene).
+"""
+
+import copy
+import time
+
+import numpy as np
+
+CANDIDATES = ("pt", "gdpt", "gdpssmlt")
+PILOT_FRACTION = 0.05
+MIN_PILOT_RENDER = 0.03
+EPS = 1e-2
+
+
+def _window(w, h):
+    """[x, y, width, height] of the central quarter of each side (≥ 16 px, ≤ the image)."""
+    ww, wh = min(w, max(16, w // 4)), min(h, max(16, h // 4))
+    return [(w - ww) // 2, (h - wh) // 2, ww, wh]
+
+
+def _image_size(cam):
+    pct = cam.get("resolution_percentage", 100)
+    return int(cam["resolution_x"]) * pct // 100, int(cam["resolution_y"]) * pct // 100
+
+
+def relative_variance(a, b):
+    """One render's relative variance from two independent renders a, b of the same pixels."""
+    m = 0.5 * (a + b)
+    return float(np.mean((a - b) ** 2 / (m ** 2 + EPS)) / 2.0)
+
+
+def choose(desc: dict, settings: dict, cancelled=lambda: False) -> dict:
+    """Runs the pilot. Returns {"method", "budget" (seconds for the whole render, pilot
+    included), "pilot_seconds", "efficiency": {method: v·t}, "why"}."""
+    import gdmlt
+
+    w, h = _image_size(desc["camera"])
+    base = desc["camera"].get("window")
+    candidates, refusal = [], None
+    for m in CANDIDATES:  # the frame itself must fit, not only the pilot's window
+        try:
+            gdmlt.check_memory(m, *(base[2:] if base else (w, h)))
+            candidates.append(m)
+        except ValueError as e:
+            refusal = refusal or e
+    if not candidates:
+        raise refusal
+    pilot_desc = copy.copy(desc)
+    pilot_desc["camera"] = dict(desc["camera"])
+    x, y, ww, wh = _window(*(base[2:] if base else (w, h)))
+    if base:
+        x, y = x + base[0], y + base[1]
+    pilot_desc["camera"]["window"] = [x, y, ww, wh]
+    scene = gdmlt.Scene(pilot_desc)
+    limit = float(settings.get("time_limit") or 0.0)
+    t_each = max(MIN_PILOT_RENDER, PILOT_FRACTION * limit / (2 * len(candidates))) if limit else 0.1
+    common = {k: settings[k] for k in ("max_bounces", "nee", "threads", "reconstruction", "alpha_rec",
+                                       "large_step_probability", "alpha_target") if k in settings}
+    seed = int(settings.get("seed", 0))
+    t0 = time.perf_counter()
+    eff, pt_rate = {}, None
+    for m in candidates:
+        imgs, elapsed, samples = [], 0.0, 0
+        for s in (1, 2):
+            if cancelled():
+                break
+            res = gdmlt.render(scene, method=m, spp=10 ** 7, time_limit=t_each, seed=(seed * 7919 + s * 104729 + 31 * CANDIDATES.index(m)) % 2 ** 63,
+                               **common)
+            imgs.append(res["layers"]["Combined"])
+            elapsed += res["stats"]["elapsed"]
+            samples += res["stats"]["spp_min"]
+        if len(imgs) < 2:
+            break
+        v = relative_variance(*imgs)
+        # a render that finished no sample (its time ran out first) or two identical images
+        # say nothing about the error: unknown, never "perfect"
+        eff[m] = v * elapsed / 2 if samples > 0 and v > 0 else float("inf")
+        if m == "pt":
+            pt_rate = elapsed / max(samples, 1) / (ww * wh)  # seconds per sample per pixel
+    pilot = time.perf_counter() - t0
+    if not eff:
+        return {"method": "pt", "budget": limit, "pilot_seconds": pilot, "efficiency": {}, "why": "cancelled"}
+    best = min(eff, key=eff.get)
+    if eff[best] == float("inf"):
+        best = "pt"  # nothing measured: the method with the least fixed cost
+    if limit:
+        budget = limit
+    else:
+        budget = max(pilot, float(settings.get("spp", 64)) * (pt_rate or 0.0) * w * h)
+    ranked = sorted(eff, key=eff.get)
+    why = (f"pilot {pilot:.2f} s on a {ww}×{wh} window: relative error × seconds "
+           + ", ".join(f"{m} {eff[m]:.3g}" for m in ranked)
+           + (f"; {best} is {eff[ranked[1]] / eff[best]:.1f}× ahead of {ranked[1]}"
+              if len(ranked) > 1 and 0 < eff[best] < float("inf") else ""))
+    return {"method": best, "budget": budget, "pilot_seconds": pilot, "efficiency": eff, "why": why}
+
+
+def plan(desc: dict, settings: dict, cancelled=lambda: False):
+    """Runs the pilot; returns (the gdmlt.render settings for the rest of the render, the
+    pilot's findings as `choose` returns them)."""
+    settings = dict(settings)
+    settings.pop("method", None)
+    pick = choose(desc, settings, cancelled)
+    rest = max(pick["budget"] - pick["pilot_seconds"], MIN_PILOT_RENDER)
+    opts = dict(settings, method=pick["method"], spp=10 ** 7, time_limit=rest)
+    if settings.get("time_limit") and settings.get("spp"):
+        opts["spp"] = int(settings["spp"])  # whichever comes first, as asked
+    return opts, pick
+
+
+def render(desc: dict, settings: dict, progress=None, preview=None, cancelled=lambda: False):
+    """gdmlt.render with method "auto": the pilot, then the chosen method for the rest of the
+    budget. Returns the render's result with stats["auto"] = what `choose` found."""
+    import gdmlt
+
+    opts, pick = plan(desc, settings, cancelled)
+    extra = {k: v for k, v in (("progress", progress), ("preview", preview)) if v is not None}
+    res = gdmlt.render(gdmlt.Scene(desc), **opts, **extra)
+    res["stats"]["auto"] = pick
+    return res

@@ -1,0 +1,107 @@
+"""method "auto" (gdmlt/auto.py): the pilot's error estimate, its budget, and the method it
+picks through the CLI and Blender. How well it picks at equal time is measured by
+`gdmlt bench --methods auto,pt,gdpt,gdpssmlt` (docs/benchmarks.md), not by a timed test."""
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import gdmlt
+from gdmlt import auto
+
+from conftest import ROOT
+
+
+def test_relative_variance_of_two_independent_images_is_unbiased():
+    """Two images = truth + independent noise of relative s.d. σ: the estimate is σ²
+    (to the eps in the denominator), within its own sampling error."""
+    rng = np.random.default_rng(5)
+    truth = rng.uniform(1.0, 3.0, (64, 64, 3))
+    for sigma in (0.01, 0.05, 0.2):
+        a = truth * (1 + sigma * rng.standard_normal(truth.shape))
+        b = truth * (1 + sigma * rng.standard_normal(truth.shape))
+        v = auto.relative_variance(a, b)
+        expect = float(np.mean(sigma ** 2 * truth ** 2 / (truth ** 2 + auto.EPS)))
+        assert abs(v / expect - 1) < 0.1, (sigma, v, expect)
+
+
+def test_the_pilot_window_is_central_and_inside_the_image():
+    for w, h in ((1920, 1080), (64, 64), (8, 300), (1, 1)):
+        x, y, ww, wh = auto._window(w, h)
+        assert 0 <= x and 0 <= y and x + ww <= w and y + wh <= h and ww >= 1 and wh >= 1
+        assert abs((x + ww / 2) - w / 2) <= 1 and abs((y + wh / 2) - h / 2) <= 1
+
+
+@pytest.fixture(scope="module")
+def cornell():
+    return gdmlt.builtin_scene("cornell", 48, 48)
+
+
+def test_with_a_time_limit_the_pilot_takes_a_share_of_it_and_the_rest_is_rendered(cornell):
+    opts, pick = auto.plan(cornell, {"method": "auto", "time_limit": 2.0, "spp": 64, "max_bounces": 4, "seed": 3})
+    assert pick["method"] in auto.CANDIDATES and opts["method"] == pick["method"]
+    assert set(pick["efficiency"]) == set(auto.CANDIDATES)
+    assert all(e > 0 for e in pick["efficiency"].values())
+    assert np.isfinite(pick["efficiency"][pick["method"]])
+    assert pick["method"] == min(pick["efficiency"], key=pick["efficiency"].get)
+    # 5% of 2 s in six renders of ≥ 0.03 s (+ scene builds): well under half the budget
+    assert pick["pilot_seconds"] < 0.6
+    assert abs(opts["time_limit"] + pick["pilot_seconds"] - 2.0) < 1e-6
+    assert opts["spp"] == 64  # samples and time: whichever first, as asked
+
+
+def test_with_samples_only_the_budget_is_what_pt_would_take(cornell):
+    opts, pick = auto.plan(cornell, {"method": "auto", "spp": 16, "max_bounces": 4})
+    t0 = __import__("time").perf_counter()
+    gdmlt.render(gdmlt.Scene(cornell), method="pt", spp=16, max_bounces=4)
+    pt_time = __import__("time").perf_counter() - t0
+    assert pick["budget"] > 0 and opts["time_limit"] > 0
+    # same order as pt's own time for 16 samples (the pilot's per-sample rate, ×3 either way)
+    assert pt_time / 3 < pick["budget"] < 3 * pt_time + pick["pilot_seconds"], (pick["budget"], pt_time)
+
+
+def test_auto_is_the_cli_default_and_says_what_it_chose(tmp_path):
+    r = subprocess.run([sys.executable, "-m", "gdmlt.cli", "render", "cornell", "-o", str(tmp_path / "a.exr"),
+                        "--width", "32", "--height", "32", "--time", "1", "--no-png", "--no-denoise"],
+                       capture_output=True, text=True, cwd=ROOT, timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert "method auto chose" in r.stderr and any(m in r.stderr for m in auto.CANDIDATES), r.stderr
+    assert "method pt" in r.stdout or "method gdpt" in r.stdout or "method gdpssmlt" in r.stdout, r.stdout
+    r = subprocess.run([sys.executable, "-m", "gdmlt.cli", "render", "cornell", "-o", str(tmp_path / "p.npz"),
+                        "--partial", "0/2", "--method", "auto"], capture_output=True, text=True, cwd=ROOT, timeout=300)
+    assert r.returncode == 2 and "--partial needs a method" in r.stderr, r.stderr
+
+
+def test_blender_automatic_method_renders_and_reports_its_choice(bpy_mod):
+    bpy = bpy_mod
+    bpy.ops.wm.open_mainfile(filepath=str(ROOT / "examples" / "cornell.blend"))
+    scene = bpy.context.scene
+    scene.render.resolution_x = scene.render.resolution_y = 24
+    scene.gdmlt.method, scene.gdmlt.samples, scene.gdmlt.time_limit = "AUTO", 4, 0.0
+    scene.gdmlt.use_denoising = False
+    import gdmlt_blender.engine as engine
+
+    bpy.ops.render.render()
+    chosen = engine.last_stats["auto"]
+    assert chosen["method"] in auto.CANDIDATES and engine.last_stats["method"] == chosen["method"]
+    assert bpy.types.Scene.bl_rna.properties  # the property group is registered
+    assert scene.gdmlt.bl_rna.properties["method"].default == "AUTO"
+
+
+def test_a_method_whose_pilot_did_no_work_is_not_chosen(cornell, monkeypatch):
+    """A pilot render that finished no sample (two black images: zero difference) once made
+    its method look perfect (division by zero in the report, failed before)."""
+    real = gdmlt.render
+
+    def starved(scene, method="pt", **kw):
+        res = real(scene, method=method, **kw)
+        if method == "gdpssmlt":
+            res["layers"]["Combined"] = np.zeros_like(res["layers"]["Combined"])
+            res["stats"]["spp_min"] = 0
+        return res
+
+    monkeypatch.setattr(gdmlt, "render", starved)
+    pick = auto.choose(cornell, {"time_limit": 1.0, "max_bounces": 3})
+    assert pick["efficiency"]["gdpssmlt"] == float("inf") and pick["method"] != "gdpssmlt"

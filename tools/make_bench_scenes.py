@@ -1,0 +1,233 @@
+"""Writes the equal-time benchmark scenes of docs/benchmarks.md as .blend files, built the way
+an artist builds them: Blender lights, Principled and Diffuse materials, a world colour or an
+HDRI. `make bench-lights` renders each with `gdmlt bench --peers cycles`.
+
+    .venv/bin/python tools/make_bench_scenes.py OUT_DIR
+
+Scenes (128², 4 bounces, saved with engine GDMLT):
+- area, point, sun, world: a ground, a Principled ball and a cube, lit by that alone
+- area_point_sun, area_world, area_point_sun_world: the same lit by those together
+- hall: a hall of 64 point lamps of varied power and colour and a 320-triangle emissive
+  sphere (the many-lights case)
+- hdri_interior: a room with a window, lit only by an HDRI sky with a sun (an Environment
+  Texture of a float image written next to the .blend and packed into it)
+"""
+
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+
+LIGHT_SETS = {
+    "area": ("area",),
+    "point": ("point",),
+    "sun": ("sun",),
+    "world": ("world",),
+    "area_point_sun": ("area", "point", "sun"),
+    "area_world": ("area", "world"),
+    "area_point_sun_world": ("area", "point", "sun", "world"),
+}
+
+
+def _reset(bpy):
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    scene = bpy.context.scene
+    world = bpy.data.worlds.new("World")
+    scene.world = world
+    if world.node_tree is None:
+        world.use_nodes = True
+    world.node_tree.nodes["Background"].inputs["Color"].default_value = (0, 0, 0, 1)
+    return scene
+
+
+def _material(bpy, name, color, kind="PRINCIPLED", roughness=0.5, emission=None):
+    mat = bpy.data.materials.new(name)
+    if mat.node_tree is None:
+        mat.use_nodes = True
+    nt = mat.node_tree
+    nt.nodes.clear()
+    out = nt.nodes.new("ShaderNodeOutputMaterial")
+    if emission is not None:
+        n = nt.nodes.new("ShaderNodeEmission")
+        n.inputs["Color"].default_value = (*color, 1)
+        n.inputs["Strength"].default_value = emission
+    elif kind == "DIFFUSE":
+        n = nt.nodes.new("ShaderNodeBsdfDiffuse")
+        n.inputs["Color"].default_value = (*color, 1)
+    else:
+        n = nt.nodes.new("ShaderNodeBsdfPrincipled")
+        n.inputs["Base Color"].default_value = (*color, 1)
+        n.inputs["Roughness"].default_value = roughness
+    nt.links.new(n.outputs[0], out.inputs["Surface"])
+    return mat
+
+
+def _add(bpy, scene, ob, mat=None):
+    if mat is not None:
+        ob.data.materials.append(mat)
+    return ob
+
+
+def _camera(bpy, scene, location, rotation_deg, lens=35):
+    cam = bpy.data.cameras.new("Camera")
+    cam.lens = lens
+    ob = bpy.data.objects.new("Camera", cam)
+    ob.location = location
+    ob.rotation_euler = tuple(math.radians(a) for a in rotation_deg)
+    scene.collection.objects.link(ob)
+    scene.camera = ob
+
+
+def _light(bpy, scene, kind, name, location, rotation_deg=(0, 0, 0), **attrs):
+    data = bpy.data.lights.new(name, kind)
+    for k, v in attrs.items():
+        setattr(data, k, v)
+    ob = bpy.data.objects.new(name, data)
+    ob.location = location
+    ob.rotation_euler = tuple(math.radians(a) for a in rotation_deg)
+    scene.collection.objects.link(ob)
+    return ob
+
+
+def _settings(scene, size=128, bounces=4):
+    r = scene.render
+    r.resolution_x = r.resolution_y = size
+    r.resolution_percentage = 100
+    scene.view_settings.view_transform = "Standard"
+    r.engine = "GDMLT"
+    s = scene.gdmlt
+    s.method, s.samples, s.seed, s.max_bounces, s.use_nee = "PT", 64, 1, bounces, True
+
+
+def objects_scene(bpy, lights):
+    """Ground, Principled ball, cube; `lights` ⊆ {area, point, sun, world}."""
+    scene = _reset(bpy)
+    bpy.ops.mesh.primitive_plane_add(size=20)
+    _add(bpy, scene, bpy.context.object, _material(bpy, "Ground", (0.6, 0.6, 0.6), "DIFFUSE"))
+    bpy.ops.mesh.primitive_uv_sphere_add(radius=0.8, location=(-0.7, 0.3, 0.8), segments=48, ring_count=24)
+    bpy.ops.object.shade_smooth()
+    _add(bpy, scene, bpy.context.object, _material(bpy, "Ball", (0.8, 0.2, 0.15), roughness=0.35))
+    bpy.ops.mesh.primitive_cube_add(size=1.0, location=(1.0, -0.2, 0.5), rotation=(0, 0, math.radians(30)))
+    _add(bpy, scene, bpy.context.object, _material(bpy, "Cube", (0.2, 0.4, 0.8), "DIFFUSE"))
+    if "area" in lights:
+        _light(bpy, scene, "AREA", "Area", (-2.0, -1.5, 3.0), (30, -25, 0), energy=300.0, size=1.0)
+    if "point" in lights:
+        _light(bpy, scene, "POINT", "Point", (2.0, -1.0, 2.0), energy=200.0, shadow_soft_size=0.1,
+               color=(1.0, 0.85, 0.7))
+    if "sun" in lights:
+        _light(bpy, scene, "SUN", "Sun", (0, 0, 5), (40, 10, 60), energy=2.0, angle=math.radians(2))
+    if "world" in lights:
+        scene.world.node_tree.nodes["Background"].inputs["Color"].default_value = (0.3, 0.35, 0.45, 1)
+    _camera(bpy, scene, (0.0, -6.0, 2.5), (70, 0, 0), lens=35)
+    _settings(scene)
+    return scene
+
+
+def hall(bpy, lamps=64):
+    """A hall 16 × 10 m: 64 point lamps of varied power and colour in a grid under the
+    ceiling, and an emissive UV sphere of 320 triangles (16 segments × 11 rings)."""
+    scene = _reset(bpy)
+    rng = np.random.default_rng(7)
+    grey = _material(bpy, "Walls", (0.65, 0.65, 0.65), "DIFFUSE")
+    bpy.ops.mesh.primitive_cube_add(size=1.0, location=(0, 0, 2.5))
+    ob = bpy.context.object
+    ob.scale = (16, 10, 5)
+    bpy.ops.object.transform_apply(scale=True)
+    bpy.ops.object.mode_set(mode="EDIT")
+    bpy.ops.mesh.flip_normals()
+    bpy.ops.object.mode_set(mode="OBJECT")
+    _add(bpy, scene, ob, grey)
+    for i, x in enumerate((-5.0, -1.5, 2.0, 5.5)):
+        bpy.ops.mesh.primitive_cube_add(size=1.0, location=(x, 1.0 - (i % 2) * 2.0, 1.0))
+        bpy.ops.object.transform_apply()
+        _add(bpy, scene, bpy.context.object, _material(bpy, f"Block{i}", tuple(rng.uniform(0.2, 0.8, 3)), "DIFFUSE"))
+    bpy.ops.mesh.primitive_uv_sphere_add(radius=0.5, location=(0.0, 3.0, 1.2), segments=16, ring_count=11)
+    emitter = bpy.context.object
+    _add(bpy, scene, emitter, _material(bpy, "Glow", (1.0, 0.6, 0.3), emission=8.0))
+    assert sum(len(p.vertices) - 2 for p in emitter.data.polygons) >= 300
+    xs, ys = np.linspace(-7, 7, 8), np.linspace(-4, 4, 8)
+    for i, (x, y) in enumerate((x, y) for x in xs for y in ys):
+        power = float(rng.choice([0.5, 2.0, 8.0]) * rng.uniform(0.5, 1.5))
+        _light(bpy, scene, "POINT", f"Lamp{i:02}", (float(x), float(y), 4.6), energy=power,
+               shadow_soft_size=0.05, color=tuple(float(c) for c in rng.uniform(0.5, 1.0, 3)))
+    _camera(bpy, scene, (0.0, -4.6, 2.0), (85, 0, 0), lens=20)
+    _settings(scene)
+    return scene
+
+
+def hdri_interior(bpy, out_dir: Path):
+    """A 6 × 6 × 3 m room with a 2 × 1.5 m window in one wall, lit only by an HDRI of a sky
+    gradient and a small bright sun (a float image written and packed)."""
+    scene = _reset(bpy)
+    w, h = 256, 128
+    v = (np.arange(h) + 0.5) / h          # 0 at the bottom row (Blender's pixel order)
+    u = (np.arange(w) + 0.5) / w
+    elev = (v - 0.5) * math.pi
+    sky = np.where(elev[:, None] > 0, 4.0, 0.6) * np.ones((h, w))
+    img = np.zeros((h, w, 4), np.float32)
+    for c, (a, b) in enumerate([(0.35, 0.9), (0.5, 0.95), (0.8, 1.0)]):
+        img[..., c] = sky * (a + (b - a) * np.clip(1 - np.sin(np.maximum(elev, 0))[:, None], 0, 1))
+    # the sun: a few pixels 2000× brighter, 30° up, towards the window
+    su, sv = 0.25, 0.5 + 30 / 180
+    d2 = ((u[None, :] - su) * w) ** 2 + ((v[:, None] - sv) * h) ** 2
+    img[..., :3] += (d2 < 4.0)[..., None] * np.array([2000.0, 1800.0, 1500.0], np.float32)
+    img[..., 3] = 1
+    image = bpy.data.images.new("Sky", w, h, float_buffer=True, alpha=False)
+    image.pixels.foreach_set(img.ravel())
+    path = out_dir / "hdri_interior_sky.exr"
+    image.filepath_raw = str(path)
+    image.file_format = "OPEN_EXR"
+    image.save()
+    image.pack()
+    nt = scene.world.node_tree
+    env = nt.nodes.new("ShaderNodeTexEnvironment")
+    env.image = image
+    nt.links.new(env.outputs["Color"], nt.nodes["Background"].inputs["Color"])
+    walls = _material(bpy, "Plaster", (0.75, 0.72, 0.68), "DIFFUSE")
+    floor = _material(bpy, "Floor", (0.45, 0.3, 0.2), roughness=0.4)
+
+    def box(name, loc, size, mat):
+        bpy.ops.mesh.primitive_cube_add(size=1.0, location=loc)
+        ob = bpy.context.object
+        ob.name = name
+        ob.scale = size
+        bpy.ops.object.transform_apply(scale=True)
+        _add(bpy, scene, ob, mat)
+
+    box("Floor", (0, 0, -0.05), (6, 6, 0.1), floor)
+    box("Ceiling", (0, 0, 3.05), (6, 6, 0.1), walls)
+    box("Back", (0, 3.05, 1.5), (6, 0.1, 3), walls)
+    box("Left", (-3.05, 0, 1.5), (0.1, 6, 3), walls)
+    box("Right", (3.05, 0, 1.5), (0.1, 6, 3), walls)
+    # the front wall (−y) with a window 2 × 1.5 m: four pieces around the hole
+    box("FrontL", (-2.0, -3.05, 1.5), (2.0, 0.1, 3), walls)
+    box("FrontR", (2.0, -3.05, 1.5), (2.0, 0.1, 3), walls)
+    box("FrontB", (0, -3.05, 0.375), (2.0, 0.1, 0.75), walls)
+    box("FrontT", (0, -3.05, 2.625), (2.0, 0.1, 0.75), walls)
+    box("Table", (0.5, 0.8, 0.4), (1.2, 0.8, 0.8), _material(bpy, "Wood", (0.5, 0.35, 0.2), roughness=0.3))
+    _camera(bpy, scene, (-2.4, -2.6, 1.6), (80, 0, -40), lens=18)
+    _settings(scene)
+    return scene
+
+
+def main(argv):
+    out = Path(argv[0] if argv else "out/bench").resolve()
+    out.mkdir(parents=True, exist_ok=True)
+    from gdmlt.blend import import_bpy
+    import gdmlt
+
+    bpy = import_bpy()
+    gdmlt.enable_addon()
+    for name, lights in LIGHT_SETS.items():
+        objects_scene(bpy, lights)
+        bpy.ops.wm.save_as_mainfile(filepath=str(out / f"{name}.blend"))
+    hall(bpy)
+    bpy.ops.wm.save_as_mainfile(filepath=str(out / "hall.blend"))
+    hdri_interior(bpy, out)
+    bpy.ops.wm.save_as_mainfile(filepath=str(out / "hdri_interior.blend"))
+    print(f"wrote {len(LIGHT_SETS) + 2} scenes to {out}")
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])
