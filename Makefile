@@ -28,6 +28,8 @@ setup: $(STAMP)
 # -C target-cpu=x86-64-v3 as gdmlt/_core_v3 (its own target dir, so neither build evicts
 # the other); `import gdmlt` loads the v3 one only on CPUs that run it.
 V3_SO := python/gdmlt/_core_v3.abi3.so
+# The benchmarks live beside the product (benchmarks/gdmlt_bench), not in its wheel.
+BENCH := PYTHONPATH=benchmarks $(PY) -m gdmlt_bench
 build: $(STAMP)
 	$(VENV)/bin/maturin develop --release --quiet
 	@if [ "$$(uname -m)" = x86_64 ]; then \
@@ -45,7 +47,7 @@ test: build lint test-rust test-python
 # Style and static checks: rustfmt (rustfmt.toml) and ruff's pyflakes checks (ruff.toml).
 lint: $(STAMP)
 	cargo fmt --check
-	$(VENV)/bin/ruff check python blender_addon tools tests
+	$(VENV)/bin/ruff check python blender_addon tools tests benchmarks
 
 # Every Rust test on the portable build; on x86-64 the BVH and packet tests again on the
 # x86-64-v3 build (its AVX2 node test must return exactly obvhs' hit masks, its packet
@@ -68,7 +70,7 @@ addon: build
 # Error over time on the built-in Cornell box (prints a table, draws out/bench-cornell.png).
 bench: build
 	$(PY) -m pip install -q -r requirements-bench.txt
-	$(VENV)/bin/gdmlt bench --scene cornell --size 128 --budgets 1,2,4,8 --plot out/bench-cornell.png
+	$(BENCH) bench --scene cornell --size 128 --budgets 1,2,4,8 --plot out/bench-cornell.png
 
 # The seed paper's setting: a large scene lit by one small light (pybullet's monastery),
 # naive and NEE, every method, also after OIDN; table + out/bench-monastery.png. About 5
@@ -76,7 +78,7 @@ bench: build
 bench-monastery: build
 	$(PY) -m pip install -q -r requirements-bench.txt
 	$(PY) tools/make_monastery.py out/monastery.blend --size 192 108
-	$(VENV)/bin/gdmlt bench --scene out/monastery.blend --budgets 1,2,4,8 --reference-spp 8192 \
+	$(BENCH) bench --scene out/monastery.blend --budgets 1,2,4,8 --reference-spp 8192 \
 		--denoise --plot out/bench-monastery.png
 
 # Ray throughput of the core's BVH against Embree on 1M triangles (prints a table).
@@ -88,10 +90,10 @@ bench-peers: build
 	$(PY) -m pip install -q -r requirements-bench.txt
 	@[ -e $(LLVM19) ] || apt-get install -y -q libllvm19 || \
 		echo "note: Mitsuba's LLVM backend needs libllvm19 (apt-get install libllvm19); its rows will be skipped"
-	$(VENV)/bin/gdmlt pathbench
-	$(VENV)/bin/gdmlt bench --scene cornell --size 128 --budgets 1,2,4,8 --methods pt,gdpt,pssmlt,gdpssmlt \
+	$(BENCH) pathbench
+	$(BENCH) bench --scene cornell --size 128 --budgets 1,2,4,8 --methods pt,gdpt,pssmlt,gdpssmlt \
 		--peers cycles,luxcore,luxcore-mlt,mitsuba --plot out/bench-peers-cornell.png
-	$(VENV)/bin/gdmlt bench --scene gap --size 128 --budgets 1,2,4,8 --methods pt,gdpt,pssmlt,gdpssmlt \
+	$(BENCH) bench --scene gap --size 128 --budgets 1,2,4,8 --methods pt,gdpt,pssmlt,gdpssmlt \
 		--peers cycles,luxcore,luxcore-mlt,mitsuba --plot out/bench-peers-gap.png
 
 # Equal time against Cycles on .blend scenes built as artists build them (Blender lights, a
@@ -102,21 +104,21 @@ bench-lights: build
 	$(PY) -m pip install -q -r requirements-bench.txt
 	$(PY) tools/make_bench_scenes.py out/bench
 	@for s in $(BENCH_SCENES); do \
-		$(VENV)/bin/gdmlt bench --scene out/bench/$$s.blend --budgets 1,2,4 --methods pt,gdpt,gdpssmlt \
+		$(BENCH) bench --scene out/bench/$$s.blend --budgets 1,2,4 --methods pt,gdpt,gdpssmlt \
 			--modes nee --max-bounces 4 --reference-spp 4096 --peers cycles --plot out/bench/$$s.png || exit 1; \
 	done
 
 # Time per mutation / per path as the scene grows from 10k to 10M triangles and threads 1 → all.
 scalebench: build
-	$(VENV)/bin/gdmlt scalebench
+	$(BENCH) scalebench
 
 # What skipping what a scene does not need saves: samples/s with and without the shortcuts.
 skipbench: build
-	$(VENV)/bin/gdmlt skipbench
+	$(BENCH) skipbench
 
 raybench: build
 	$(PY) -m pip install -q -r requirements-bench.txt
-	$(VENV)/bin/gdmlt raybench
+	$(BENCH) raybench
 
 # Regenerates examples/*.blend from the built-in scene definitions (needs bpy).
 examples: build

@@ -18,6 +18,8 @@ pub mod reconstruct;
 pub mod sampler;
 pub mod scene;
 pub mod shift;
+#[cfg(test)]
+pub(crate) mod test_stats;
 
 #[cfg(feature = "python")]
 mod python;

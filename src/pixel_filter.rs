@@ -128,8 +128,7 @@ mod tests {
                     df += 1;
                 }
             }
-            let df = (df - 1) as f64;
-            let crit = df * (1.0 - 2.0 / (9.0 * df) + 3.09 * (2.0 / (9.0 * df)).sqrt()).powi(3);
+            let crit = crate::test_stats::critical_1e3(df - 1);
             if chi2 >= crit {
                 for (b, &c) in counts.iter().enumerate() {
                     let lo = (b as f64 / bins as f64 - 0.5) * w;

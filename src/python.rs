@@ -418,6 +418,7 @@ fn parse_scene(d: &Bound<'_, PyDict>) -> PyResult<SceneDesc> {
         )?,
         world: get_or(d, "world", [0.0; 3], "scene")?,
         world_texture: get_or(d, "world_texture", None, "scene")?,
+        general_paths: get_or(d, "general_paths", false, "scene")?,
         world_rotation: match d.get_item("world_rotation")? {
             Some(r) if !r.is_none() => {
                 let v = floats(&r, 3, "scene: world_rotation")?;
@@ -455,7 +456,7 @@ impl Scene {
     }
     /// Closest hits of a batch of rays (origins and directions float32 N×3) with the core's
     /// BVH: (t, triangle) as float32 and int64 arrays, t = inf and triangle = −1 for a miss.
-    /// For benchmarks (gdmlt raybench) and tests; `threads` 0 = all cores. `packets`: closest
+    /// For benchmarks (gdmlt_bench raybench) and tests; `threads` 0 = all cores. `packets`: closest
     /// hits of each run of eight consecutive rays traced as one packet (as the path tracer's
     /// camera rays; for coherent rays).
     #[pyo3(signature = (origins, directions, threads=0, occlusion=false, packets=false))]

@@ -10,6 +10,11 @@ seed-to-seed spread of both renderers.
 tests/python/test_convergence.py runs the same comparison at scale 1 and asserts on it.
 """
 
+import sys as _sys
+from pathlib import Path as _Path
+
+_sys.path.insert(0, str(_Path(__file__).resolve().parent.parent / "benchmarks"))  # gdmlt_bench
+
 import argparse
 import math
 import sys
@@ -179,7 +184,7 @@ def samples(method, spp):
 
 
 def _cycles(bpy, scene, spp, seed, path):
-    from gdmlt.peers import cycles_unbiased
+    from gdmlt_bench.peers import cycles_unbiased
     sys.path.insert(0, str(ROOT / "tests" / "python"))
     from conftest import read_exr
 

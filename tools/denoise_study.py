@@ -4,13 +4,18 @@ with Intel Open Image Denoise, by relMSE and 8×8 block error against a `pt` ref
 Usage: .venv/bin/python tools/denoise_study.py SCENE [BUDGET_S] [REFERENCE_SPP]
 SCENE: a built-in name (cornell, gap, …) or a .blend file; 128² images."""
 
+import sys as _sys
+from pathlib import Path as _Path
+
+_sys.path.insert(0, str(_Path(__file__).resolve().parent.parent / "benchmarks"))  # gdmlt_bench
+
 import sys
 import time
 
 import numpy as np
 
 import gdmlt
-from gdmlt.bench import rel_mse, scene_desc
+from gdmlt_bench.bench import rel_mse, scene_desc
 from gdmlt.oidn import denoise_image
 
 

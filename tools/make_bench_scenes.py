@@ -1,6 +1,6 @@
 """Writes the equal-time benchmark scenes of docs/benchmarks.md as .blend files, built the way
 an artist builds them: Blender lights, Principled and Diffuse materials, a world colour or an
-HDRI. `make bench-lights` renders each with `gdmlt bench --peers cycles`.
+HDRI. `make bench-lights` renders each with `python -m gdmlt_bench bench --peers cycles`.
 
     .venv/bin/python tools/make_bench_scenes.py OUT_DIR
 
@@ -42,12 +42,9 @@ def _reset(bpy):
 
 
 def _material(bpy, name, color, kind="PRINCIPLED", roughness=0.5, emission=None):
-    mat = bpy.data.materials.new(name)
-    if mat.node_tree is None:
-        mat.use_nodes = True
-    nt = mat.node_tree
-    nt.nodes.clear()
-    out = nt.nodes.new("ShaderNodeOutputMaterial")
+    from make_test_scenes import empty_material
+
+    mat, nt, out = empty_material(bpy, name)
     if emission is not None:
         n = nt.nodes.new("ShaderNodeEmission")
         n.inputs["Color"].default_value = (*color, 1)
@@ -91,13 +88,9 @@ def _light(bpy, scene, kind, name, location, rotation_deg=(0, 0, 0), **attrs):
 
 
 def _settings(scene, size=128, bounces=4):
-    r = scene.render
-    r.resolution_x = r.resolution_y = size
-    r.resolution_percentage = 100
-    scene.view_settings.view_transform = "Standard"
-    r.engine = "GDMLT"
-    s = scene.gdmlt
-    s.method, s.samples, s.seed, s.max_bounces, s.use_nee = "PT", 64, 1, bounces, True
+    from make_test_scenes import gdmlt_settings  # (this folder is on sys.path when run)
+
+    gdmlt_settings(scene, size, bounces)
 
 
 def objects_scene(bpy, lights):

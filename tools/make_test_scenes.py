@@ -74,6 +74,13 @@ def lights(bpy, size=48, bounces=4):
     if world.node_tree is None:
         world.use_nodes = True
     world.node_tree.nodes["Background"].inputs["Color"].default_value = (0, 0, 0, 1)
+    gdmlt_settings(scene, size, bounces)
+    return scene
+
+
+def gdmlt_settings(scene, size, bounces):
+    """What every saved test and benchmark scene renders with: GDMLT, PT, 64 samples, seed 1,
+    NEE, `bounces`, a square image of `size` at 100%, the Standard view transform."""
     r = scene.render
     r.resolution_x = r.resolution_y = size
     r.resolution_percentage = 100
@@ -81,7 +88,6 @@ def lights(bpy, size=48, bounces=4):
     r.engine = "GDMLT"
     s = scene.gdmlt
     s.method, s.samples, s.seed, s.max_bounces, s.use_nee = "PT", 64, 1, bounces, True
-    return scene
 
 
 def specular(bpy, size=40, bounces=6):
@@ -163,15 +169,20 @@ def keep_lights(bpy, scene, keep):
     return scene
 
 
-def fresh_material(bpy, ob, name):
-    """A new node material with only an output node, made the object's only material:
-    (node tree, output node)."""
+def empty_material(bpy, name):
+    """A new node material holding only its output node: (material, node tree, output)."""
     mat = bpy.data.materials.new(name)
     if mat.node_tree is None:
         mat.use_nodes = True
     nt = mat.node_tree
     nt.nodes.clear()
-    out = nt.nodes.new("ShaderNodeOutputMaterial")
+    return mat, nt, nt.nodes.new("ShaderNodeOutputMaterial")
+
+
+def fresh_material(bpy, ob, name):
+    """A new node material with only an output node, made the object's only material:
+    (node tree, output node)."""
+    mat, nt, out = empty_material(bpy, name)
     ob.data.materials.clear()
     ob.data.materials.append(mat)
     return nt, out

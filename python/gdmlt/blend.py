@@ -19,6 +19,33 @@ def import_bpy():
     return bpy
 
 
+def scene_desc(scene: str, size=None):
+    """(scene dict, label, export warnings) of a built-in scene name (size = (w, h), default
+    128²) or of a .blend file (its own resolution unless size is given), exported through the
+    add-on as F12 would."""
+    import gdmlt
+
+    path = Path(scene)
+    if path.suffix.lower() != ".blend":
+        w, h = size or (128, 128)
+        return gdmlt.builtin_scene(scene, w, h), scene, []
+    if not path.is_file():
+        raise FileNotFoundError(f"file not found: {path}")
+    bpy = import_bpy()
+    from .addon import enable_addon
+
+    enable_addon()
+    import gdmlt_blender.export as export
+
+    bpy.ops.wm.open_mainfile(filepath=str(path.resolve()))
+    sc = bpy.context.scene
+    if size:
+        sc.render.resolution_x, sc.render.resolution_y = size
+        sc.render.resolution_percentage = 100
+    desc, warnings = export.export_scene(bpy.context.evaluated_depsgraph_get())
+    return desc, path.stem, list(warnings)
+
+
 def apply_settings(scene, settings: dict):
     for k, v in settings.items():
         setattr(scene.gdmlt, PROPERTY_OF[k], v.upper() if k in ("method", "reconstruction") else v)

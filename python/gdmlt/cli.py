@@ -125,31 +125,6 @@ def build_parser():
     ex.add_argument("scene", help=".blend file")
     ex.add_argument("-o", "--output", required=True, help="output .usd, .usda, .usdc or .usdz")
     ex.add_argument("--frame", type=int, help="the frame to export (default: the file's current frame)")
-    rb = sub.add_parser("raybench", help="ray throughput of the core's BVH against Embree (embreex)",
-                        description="Closest-hit and occlusion rays, coherent and incoherent, 1 thread and all, "
-                                    "on a procedural mesh and the Cornell box: Mrays/s of the core and of Embree.")
-    rb.add_argument("--triangles", type=_positive_int, default=1_000_000)
-    rb.add_argument("--rays", type=_positive_int, default=1_000_000)
-    pb = sub.add_parser("pathbench", help="path-tracing samples/s against Mitsuba 3 and LuxCore",
-                        description="Camera samples per second of `pt` (NEE and naive) against Mitsuba 3 and LuxCore "
-                                    "PATHCPU on the Cornell box and on it with a ~1M-triangle sphere inside; same "
-                                    "scene arrays, resolution, depth and threads. Needs requirements-bench.txt and "
-                                    "Debian's libllvm19 (for Mitsuba's LLVM backend).")
-    pb.add_argument("--size", type=_positive_int, default=128)
-    pb.add_argument("--triangles", type=_positive_int, default=1_000_000)
-    pb.add_argument("--max-bounces", type=int, default=8)
-    pb.add_argument("--seconds", type=float, default=8.0, help="about how long each cell renders")
-    kb = sub.add_parser("skipbench", help="what skipping what a scene does not need saves (samples/s)",
-                        description="Samples per second of pt and gdpt with the scene's shortcuts and with the "
-                                    "general code paths (GDMLT_NO_SHORTCUTS=1), on the built-in Cornell box, "
-                                    "its glass/mirror/plastic variant and its transparent variant.")
-    kb.add_argument("--size", type=_positive_int, default=96)
-    kb.add_argument("--seconds", type=float, default=2.0, help="about how long each timed render takes")
-    sb = sub.add_parser("scalebench", help="time per mutation and per path as scene size and threads grow",
-                        description="µs per GDPSSMLT mutation and per PT path on the Cornell box with a bumpy "
-                                    "sphere of 10k to 10M triangles, 1 thread and all; build time and memory.")
-    sb.add_argument("--sizes", default="10000,100000,1000000,10000000", help="comma-separated triangle counts")
-    sb.add_argument("--size", type=_positive_int, default=64, help="image side in pixels")
     mg = sub.add_parser("merge", help="merge partial renders (--partial K/N) into one EXR",
                         description="Averages partial renders weighted by their samples and, for the "
                                     "gradient-domain methods, reconstructs once from the merged buffers.")
@@ -163,30 +138,6 @@ def build_parser():
     mgd.add_argument("--denoise", dest="denoise", action="store_true", default=True,
                      help="denoise the merged image (default)")
     mgd.add_argument("--no-denoise", dest="denoise", action="store_false", help="write the raw merged image")
-    b = sub.add_parser("bench", help="error against a converged reference at equal time budgets, per method",
-                       description="Renders a built-in scene or a .blend file with every method for the same "
-                                   "wall-clock budgets and prints relMSE and SMAPE against a converged path-traced "
-                                   "reference (and, with --plot, draws them).")
-    b.add_argument("--scene", default="cornell", help="built-in name (" + ", ".join(BUILTIN) + ") or a .blend file")
-    b.add_argument("--size", type=_positive_int, nargs="+", metavar="N",
-                   help="image size: N (square) or W H (default: 128 for built-ins, the file's own for .blend)")
-    b.add_argument("--budgets", default="1,2,4", help="comma-separated seconds (default 1,2,4)")
-    b.add_argument("--methods", default="pt,gdpt,pssmlt,gdpssmlt", help="comma-separated methods")
-    b.add_argument("--modes", default="nee,naive", help="light modes: nee, naive or both (default nee,naive)")
-    b.add_argument("--reference-spp", type=_positive_int, default=8192)
-    b.add_argument("--reference", choices=("pt", "cycles"), default="pt",
-                   help="what every render is compared with: GDMLT pt at --reference-spp (default), or Cycles "
-                        "rendered for --reference-seconds (then GDMLT's error includes any difference from Cycles)")
-    b.add_argument("--reference-seconds", type=_pos_float, default=60.0)
-    b.add_argument("--max-bounces", type=_nonneg_int, default=8)
-    b.add_argument("--alpha-target", type=float, help="GDPSSMLT's α_target for every run")
-    b.add_argument("--threads", type=_nonneg_int, default=0)
-    b.add_argument("--plot", help="write a PNG of relMSE against time (needs matplotlib)")
-    b.add_argument("--denoise", action="store_true",
-                   help="also report every render after Intel Open Image Denoise (needs pyoidn)")
-    b.add_argument("--peers", default="",
-                   help="also render with these at the same budgets: cycles, luxcore (PATHCPU + Sobol), "
-                        "luxcore-mlt (PATHCPU + Metropolis), mitsuba (comma-separated; needs requirements-bench.txt)")
     return p
 
 
@@ -367,39 +318,6 @@ def main(argv=None):
 def _main(argv=None):
     parser = build_parser()
     args = parser.parse_args(argv)
-    if args.command == "bench":
-        from .bench import run
-        try:
-            budgets = tuple(float(x) for x in args.budgets.split(","))
-        except ValueError:
-            parser.error(f"--budgets: '{args.budgets}' is not a comma-separated list of seconds")
-        methods = tuple(m.strip() for m in args.methods.split(",") if m.strip())
-        bad = [m for m in methods if m not in RENDER_METHODS]
-        if bad:
-            parser.error(f"--methods: unknown {', '.join(bad)} (choose from {', '.join(RENDER_METHODS)})")
-        mode_of = {"nee": True, "naive": False}
-        modes = tuple(mode_of.get(m.strip()) for m in args.modes.split(","))
-        if None in modes:
-            parser.error(f"--modes: '{args.modes}' must list nee and/or naive")
-        if args.size and len(args.size) > 2:
-            parser.error("--size takes N or W H")
-        size = None if not args.size else (args.size[0], args.size[-1])
-        extra = {} if args.alpha_target is None else {"alpha_target": args.alpha_target}
-        from .bench import PEERS
-
-        peers = tuple(x.strip() for x in args.peers.split(",") if x.strip())
-        bad = [x for x in peers if x not in PEERS]
-        if bad:
-            parser.error(f"--peers: unknown {', '.join(bad)} (choose from {', '.join(PEERS)})")
-        try:
-            run(args.scene, size, budgets, methods, modes, reference_spp=args.reference_spp,
-                max_bounces=args.max_bounces, threads=args.threads, plot=args.plot, extra=extra,
-                denoise=args.denoise, peers=peers, reference=args.reference,
-                reference_seconds=args.reference_seconds)
-        except (ValueError, RuntimeError, FileNotFoundError) as e:
-            print(f"gdmlt: error: {e}", file=sys.stderr)
-            return 1
-        return 0
     if args.command == "merge":
         return merge_command(args)
     if args.command == "export":
@@ -418,34 +336,6 @@ def _main(argv=None):
             return 1
         print(f"wrote {out} ({stored['width']}×{stored['height']}, method {stored['method']}, "
               f"{stored['spp']} per pixel)")
-        return 0
-    if args.command == "scalebench":
-        from .scalebench import run as scalebench
-
-        try:
-            sizes = tuple(int(x) for x in args.sizes.split(","))
-        except ValueError:
-            parser.error(f"--sizes: '{args.sizes}' is not a comma-separated list of triangle counts")
-        scalebench(sizes, args.size)
-        return 0
-    if args.command == "skipbench":
-        from .skipbench import run as skipbench
-
-        skipbench(args.size, args.seconds)
-        return 0
-    if args.command == "pathbench":
-        from .pathbench import run as pathbench
-
-        pathbench(args.size, args.triangles, args.max_bounces, args.seconds)
-        return 0
-    if args.command == "raybench":
-        from .raybench import run as raybench
-
-        try:
-            raybench(args.triangles, args.rays)
-        except RuntimeError as e:
-            print(f"gdmlt: error: {e}", file=sys.stderr)
-            return 1
         return 0
     out = Path(args.output)
     distributed = args.partial is not None or args.dask is not None
@@ -542,11 +432,10 @@ def scene_desc(args):
 
         desc, warnings = load(path, frame=args.frame, width=args.width, height=args.height, camera=args.camera)
     else:
-        from .bench import scene_desc as blend_desc
+        from .blend import scene_desc as blend_desc
 
         size = (args.width, args.height) if args.width and args.height else None
-        desc, _ = blend_desc(str(path), size)
-        warnings = []
+        desc, _, warnings = blend_desc(str(path), size)  # (its warnings were dropped before)
     for w in warnings:
         print(f"gdmlt: warning: {w}", file=sys.stderr)
     return desc

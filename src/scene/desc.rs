@@ -258,4 +258,8 @@ pub struct SceneDesc {
     /// Rotation (row-major 3×3) from world directions to the texture's frame (Blender's
     /// Z-up equirectangular mapping); None = identity.
     pub world_rotation: Option<[[f32; 3]; 3]>,
+    /// Take the general code paths even where the scene allows a shortcut (no transparency:
+    /// any-hit shadow rays; single-lobe materials: that lobe alone). Off by default; the
+    /// benchmark `skipbench` turns it on to measure what the shortcuts save.
+    pub general_paths: bool,
 }

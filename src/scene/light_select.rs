@@ -482,17 +482,9 @@ mod tests {
                 assert!((q as f64 - pmf[li]).abs() <= 1e-4 * pmf[li].max(1e-4), "light {li}: {q} vs {}", pmf[li]);
                 counts[li] += 1;
             }
-            let (mut chi2, mut bins) = (0.0, 0usize);
-            for (c, q) in counts.iter().zip(&pmf) {
-                let e = q * n as f64;
-                if e >= 5.0 {
-                    chi2 += (*c as f64 - e).powi(2) / e;
-                    bins += 1;
-                }
-            }
-            let df = (bins - 1) as f64;
-            let crit = df * (1.0 - 2.0 / (9.0 * df) + 3.09 * (2.0 / (9.0 * df)).sqrt()).powi(3);
-            assert!(chi2 < crit, "p = {p}: chi2 {chi2} over {bins} lights (critical {crit})");
+            let (chi2, df) = crate::test_stats::chi_square(&counts, &pmf, n);
+            let crit = crate::test_stats::critical_1e3(df);
+            assert!(chi2 < crit, "p = {p}: chi2 {chi2} at {df} degrees of freedom (critical {crit})");
         }
     }
 

@@ -299,23 +299,9 @@ mod tests {
                 assert!((0.0..1.0).contains(&rest));
                 counts[e as usize] += 1;
             }
-            let (mut chi2, mut bins) = (0.0, 0usize);
-            let (mut rare_expected, mut rare_seen) = (0.0, 0usize);
-            for (c, q) in counts.iter().zip(&pmf) {
-                let e = q * draws as f64;
-                if e >= 5.0 {
-                    chi2 += (*c as f64 - e).powi(2) / e;
-                    bins += 1;
-                } else {
-                    rare_expected += e;
-                    rare_seen += c;
-                }
-            }
-            // Wilson–Hilferty: the 1e-3 critical value of chi-square with df = bins − 1
-            let df = (bins - 1) as f64;
-            let crit = df * (1.0 - 2.0 / (9.0 * df) + 3.09 * (2.0 / (9.0 * df)).sqrt()).powi(3);
-            assert!(chi2 < crit, "p = {p}: chi2 {chi2} over {bins} lights (critical {crit})");
-            assert!((rare_seen as f64 - rare_expected).abs() < 5.0 * rare_expected.sqrt() + 5.0);
+            let (chi2, df) = crate::test_stats::chi_square(&counts, &pmf, draws);
+            let crit = crate::test_stats::critical_1e3(df);
+            assert!(chi2 < crit, "p = {p}: chi2 {chi2} at {df} degrees of freedom (critical {crit})");
         }
     }
 

@@ -274,9 +274,9 @@ impl Scene {
         let accel = if positions.is_empty() { None } else { Some(Accel::build(&positions)) };
         // What the scene does not need is decided here, once: no transparent material → shadow
         // rays are any-hit occlusion tests; single-lobe materials → their BSDF alone, not the
-        // Principled mixture. GDMLT_NO_SHORTCUTS=1 takes the general paths anyway (for
-        // `gdmlt skipbench`, which measures what these decisions save).
-        let shortcuts = std::env::var_os("GDMLT_NO_SHORTCUTS").is_none_or(|v| v.is_empty() || v == "0");
+        // Principled mixture. `general_paths` takes the general paths anyway (for the
+        // skipbench benchmark, which measures what these decisions save).
+        let shortcuts = !desc.general_paths;
         if !shortcuts {
             materials.iter_mut().for_each(|m| m.general = true);
         }

@@ -1,4 +1,5 @@
 import os
+import sys
 import tempfile
 from pathlib import Path
 
@@ -6,6 +7,9 @@ import numpy as np
 import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
+# the benchmarks' package (benchmarks/gdmlt_bench: Cycles as a reference, the peer
+# translations) is not part of gdmlt; the tests that need it import it from the checkout
+sys.path.insert(0, str(ROOT / "benchmarks"))
 os.environ.setdefault("BLENDER_USER_RESOURCES", str(Path(tempfile.gettempdir()) / "gdmlt-test-blender-user"))
 
 

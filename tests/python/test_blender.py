@@ -199,7 +199,7 @@ def open_scene(bpy, name, engine, spp, seed, keep=None):
     if keep is not None:
         keep_lights(bpy, scene, keep)
     if engine == "CYCLES":
-        from gdmlt.peers import cycles_unbiased
+        from gdmlt_bench.peers import cycles_unbiased
 
         cycles_unbiased(scene, spp, seed, scene.gdmlt.max_bounces)
     else:

@@ -75,6 +75,13 @@ def test_zip_bundles_the_core_wheel_and_manifest(extension_zip):
     assert {"cp311", "cp313"} <= {t for n in wheels if "cffi-" in n for t in ("cp311", "cp313") if t in n}, names
     assert all(f'"./{w}"' in manifest for w in wheels) and 'blender_version_min = "4.2.0"' in manifest
     assert "__init__.py" in names and "engine.py" in names
+    # the benchmarks are not part of the product (issue 19): no benchmark module in the wheel
+    import io
+
+    with zipfile.ZipFile(extension_zip) as z, zipfile.ZipFile(io.BytesIO(z.read(core[0]))) as whl:
+        modules = {n.rsplit("/", 1)[-1] for n in whl.namelist() if n.startswith("gdmlt/")}
+    assert "cli.py" in modules and not modules & {"bench.py", "peers.py", "pathbench.py", "raybench.py",
+                                                   "scalebench.py", "skipbench.py"}, modules
     assert not any("__pycache__" in n for n in names)
 
 

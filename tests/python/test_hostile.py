@@ -199,10 +199,10 @@ def test_a_misspelt_scene_key_is_reported_not_ignored_silently():
 def test_the_exporters_write_only_keys_the_core_reads(bpy_mod):
     """Blender's export and the USD reader produce no unknown-key warnings (the check would
     otherwise cry wolf on every render)."""
-    from gdmlt.bench import scene_desc
+    from gdmlt.blend import scene_desc
 
     for name in ("lights", "textures", "mix", "specular"):
-        desc, _ = scene_desc(str(ROOT / "tests" / "scenes" / f"{name}.blend"), (8, 8))
+        desc, _, _ = scene_desc(str(ROOT / "tests" / "scenes" / f"{name}.blend"), (8, 8))
         assert not [w for w in gdmlt.Scene(desc).warnings if "unknown key" in w], name
 
 

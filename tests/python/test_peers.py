@@ -1,4 +1,4 @@
-"""The peer translation used by the benchmarks (gdmlt.peers): it must render the same scene
+"""The peer translation used by the benchmarks (gdmlt_bench.peers): it must render the same scene
 as GDMLT, or refuse. Cycles (bpy, always installed for the tests) checks the translation
 end to end; Mitsuba and LuxCore are benchmark-only dependencies."""
 
@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import gdmlt
-from gdmlt import peers
+from gdmlt_bench import peers
 
 
 def test_scenes_a_peer_cannot_reproduce_are_refused_by_name():

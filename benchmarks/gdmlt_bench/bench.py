@@ -24,33 +24,14 @@ def smape(img, ref):
 
 
 def scene_desc(scene: str, size):
-    """The scene dictionary of a built-in scene (size = (w, h)) or of a .blend file (its own
-    resolution unless size is given), exported through the addon as F12 would."""
-    import gdmlt
+    """(scene dict, label) of a built-in name or a .blend file (gdmlt.blend.scene_desc), its
+    export warnings printed as comments of the table."""
+    from gdmlt.blend import scene_desc as desc_of
 
-    path = Path(scene)
-    if path.suffix.lower() != ".blend":
-        w, h = size or (128, 128)
-        return gdmlt.builtin_scene(scene, w, h), scene
-    if not path.is_file():
-        raise FileNotFoundError(f"file not found: {path}")
-    from .blend import import_bpy
-
-    bpy = import_bpy()
-    from .addon import enable_addon
-
-    enable_addon()
-    import gdmlt_blender.export as export
-
-    bpy.ops.wm.open_mainfile(filepath=str(path.resolve()))
-    sc = bpy.context.scene
-    if size:
-        sc.render.resolution_x, sc.render.resolution_y = size
-        sc.render.resolution_percentage = 100
-    desc, warnings = export.export_scene(bpy.context.evaluated_depsgraph_get())
+    desc, label, warnings = desc_of(scene, size)
     for w in warnings:
         print(f"# warning: {w}")
-    return desc, path.stem
+    return desc, label
 
 
 PEERS = ("cycles", "luxcore", "luxcore-mlt", "mitsuba")
@@ -132,7 +113,7 @@ def run(scene="cornell", size=None, budgets=(1.0, 2.0, 4.0), methods=("pt", "gdp
     out(f"# reference took {time.perf_counter() - t0:.1f} s")
     out(f"{'method':14} {'nee':5} " + " ".join(f"{'relMSE@' + f'{b:g}' + 's':>14} {'SMAPE':>7}" for b in budgets))
     if denoise:
-        from .oidn import available, denoise_image
+        from gdmlt.oidn import available, denoise_image
 
         if not available():
             raise RuntimeError("--denoise needs pyoidn (pip install pyoidn)")
@@ -146,7 +127,7 @@ def run(scene="cornell", size=None, budgets=(1.0, 2.0, 4.0), methods=("pt", "gdp
                 opts = dict(spp=10 ** 7, time_limit=b, nee=nee, seed=1, threads=threads, max_bounces=max_bounces,
                             **extra)
                 if m == "auto":  # the pilot's time is part of the budget
-                    from .auto import render as auto_render
+                    from gdmlt.auto import render as auto_render
 
                     res = auto_render(desc, opts)
                     notes.append(f"auto at {b:g} s chose {res['stats']['auto']['method']}")

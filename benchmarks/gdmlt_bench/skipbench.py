@@ -1,7 +1,7 @@
 """`gdmlt skipbench`: what "skip what the scene does not need" saves. `Scene::build` decides
 once per scene which general code paths a render can leave out — shadow rays become any-hit
 occlusion tests when no material is transparent, and single-lobe materials use their own BSDF
-rather than the Principled mixture. `GDMLT_NO_SHORTCUTS=1` makes it take the general paths
+rather than the Principled mixture. The scene setting `general_paths` makes it take the general paths
 anyway; this benchmark renders the same scenes both ways in one run and prints samples per
 second and their ratio. It measures; it does not pass or fail.
 
@@ -10,7 +10,6 @@ that a machine's slow moments hit both."""
 
 from __future__ import annotations
 
-import os
 import time
 
 from .pathbench import rate_gdmlt
@@ -27,22 +26,14 @@ def _timed(sc, method, size, spp, threads):
 def _scene(desc, shortcuts):
     import gdmlt
 
-    old = os.environ.get("GDMLT_NO_SHORTCUTS")
-    os.environ["GDMLT_NO_SHORTCUTS"] = "0" if shortcuts else "1"
-    try:
-        return gdmlt.Scene(desc)  # the decision is taken while the scene is built
-    finally:
-        if old is None:
-            del os.environ["GDMLT_NO_SHORTCUTS"]
-        else:
-            os.environ["GDMLT_NO_SHORTCUTS"] = old
+    return gdmlt.Scene(dict(desc, general_paths=not shortcuts))
 
 
 def run(size=96, seconds=2.0, threads=0, out=print):
     import gdmlt
 
     out(f"# gdmlt skipbench: samples/s with the scene's shortcuts and with the general paths "
-        f"(GDMLT_NO_SHORTCUTS=1), {size}x{size}, best of 3 runs of ~{seconds:g} s, threads={threads or 'all'}")
+        f"(scene setting general_paths), {size}x{size}, best of 3 runs of ~{seconds:g} s, threads={threads or 'all'}")
     out(f"{'scene':10} {'method':6} {'shortcuts Ms/s':>15} {'general Ms/s':>13} {'speed-up':>9} {'mean ratio':>11}")
     rows = []
     for name in ("cornell", "spheres", "veil"):

@@ -10,7 +10,7 @@ and LuxCore's `path.pathdepth.total` B + 1; the bench prints each peer's image m
 GDMLT's to show the translation renders the same scene.
 
 LuxCore's bundled allocator crashes a process that imports numpy-heavy libraries after it, so
-it always runs in a child process (`python -m gdmlt.peers luxcore IN.npz OUT.npz`)."""
+it always runs in a child process (`python -m gdmlt_bench.peers luxcore IN.npz OUT.npz`)."""
 
 from __future__ import annotations
 
@@ -363,7 +363,7 @@ def cycles_unbiased(scene, samples: int, seed: int, bounces: int, threads: int =
 
 
 def _cycles_child(inp: str, outp: str):
-    from .blend import import_bpy
+    from gdmlt.blend import import_bpy
 
     data = np.load(inp, allow_pickle=False)
     cfg = json.loads(str(data["config"]))
@@ -375,7 +375,7 @@ def _cycles_child(inp: str, outp: str):
             scene.render.resolution_x, scene.render.resolution_y = cfg["size"]
             scene.render.resolution_percentage = 100
     else:
-        from .blendscene import build
+        from gdmlt.blendscene import build
 
         desc = dict(cfg["desc"], camera=dict(cfg["desc"]["camera"], matrix=data["matrix"]),
                     meshes=[dict(m, positions=data[f"p{i}"], indices=data[f"t{i}"], material_ids=data[f"m{i}"])
@@ -438,8 +438,10 @@ def _run_child(kind: str, cfg: dict, arrays: dict):
     with tempfile.TemporaryDirectory() as tmp:
         inp, outp = Path(tmp) / "in.npz", Path(tmp) / "out.npz"
         np.savez(inp, config=json.dumps(cfg, default=lambda o: o.item() if hasattr(o, "item") else str(o)), **arrays)
-        r = subprocess.run([sys.executable, "-m", "gdmlt.peers", kind, str(inp), str(outp)],
-                           capture_output=True, text=True)
+        env = dict(os.environ, PYTHONPATH=os.pathsep.join(
+            [str(Path(__file__).resolve().parent.parent)] + [p for p in [os.environ.get("PYTHONPATH")] if p]))
+        r = subprocess.run([sys.executable, "-m", "gdmlt_bench.peers", kind, str(inp), str(outp)],
+                           capture_output=True, text=True, env=env)
         if r.returncode != 0 or not outp.exists():
             raise RuntimeError(f"{kind} child failed ({r.returncode}): {r.stderr.strip()[-600:]}")
         out = np.load(outp)
@@ -450,4 +452,4 @@ if __name__ == "__main__":
     if len(sys.argv) == 4 and sys.argv[1] in ("luxcore", "cycles"):
         {"luxcore": _luxcore_child, "cycles": _cycles_child}[sys.argv[1]](sys.argv[2], sys.argv[3])
     else:
-        sys.exit("usage: python -m gdmlt.peers luxcore|cycles IN.npz OUT.npz")
+        sys.exit("usage: python -m gdmlt_bench.peers luxcore|cycles IN.npz OUT.npz")

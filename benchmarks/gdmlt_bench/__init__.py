@@ -1,0 +1,1 @@
+"""GDMLT's benchmarks (see __main__.py); not part of the product."""
