@@ -44,9 +44,11 @@ demo: build
 
 test: build lint test-rust test-python
 
-# Style and static checks: rustfmt (rustfmt.toml) and ruff's pyflakes checks (ruff.toml).
+# Style and static checks: rustfmt (rustfmt.toml), clippy with warnings as errors (the
+# binding included), and ruff's pyflakes checks (ruff.toml).
 lint: $(STAMP)
 	cargo fmt --check
+	cargo clippy --release --all-targets --features python -q -- -D warnings
 	$(VENV)/bin/ruff check python blender_addon tools tests benchmarks
 
 # Every Rust test on the portable build; on x86-64 the BVH and packet tests again on the

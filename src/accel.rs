@@ -849,9 +849,9 @@ mod tests {
                 p.tmax[i] = if i % 2 == 0 { f32::INFINITY } else { r(40.0).abs() };
             }
             let got = accel.closest_packet(&p);
-            for i in 0..LANES {
+            for (i, &got_i) in got.iter().enumerate().take(LANES) {
                 let want = if i < p.count { accel.closest(p.o[i], p.d[i], p.tmin[i], p.tmax[i]) } else { None };
-                match (got[i], want) {
+                match (got_i, want) {
                     (Some(a), Some(b)) => {
                         hits[case / 1200] += 1;
                         assert_eq!(a.t, b.t, "case {case} ray {i}");

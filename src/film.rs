@@ -113,10 +113,10 @@ impl Film {
         let mut img = Image::new(self.width, self.height, 3);
         for (y, row) in self.rows.iter().enumerate() {
             let acc = pick(row);
-            for x in 0..self.width {
-                let n = row.count[x].max(1) as f64;
-                for c in 0..3 {
-                    img.data[(y * self.width + x) * 3 + c] = (acc[x][c] / n) as f32;
+            for (x, (px, &count)) in acc.iter().zip(&row.count).enumerate().take(self.width) {
+                let n = count.max(1) as f64;
+                for (c, v) in px.iter().enumerate() {
+                    img.data[(y * self.width + x) * 3 + c] = (v / n) as f32;
                 }
             }
         }

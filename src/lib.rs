@@ -4,6 +4,9 @@
 //! `path`, the one path builder) → `film` → output (`output`: EXR/PNG) and the Python
 //! binding (`python`, behind the `python` feature).
 
+// `!(x > 0.0)` is this crate's NaN-safe test (true for NaN), used on purpose throughout.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 pub mod accel;
 pub mod bsdf;
 pub mod distribution;

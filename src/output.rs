@@ -91,7 +91,7 @@ pub fn write_png(path: &Path, img: &Image) -> Result<(), RenderError> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use exr::prelude::{read_all_flat_layers_from_file, Text};
+    use exr::prelude::read_all_flat_layers_from_file;
 
     #[test]
     fn exr_round_trip_is_bit_exact() {
@@ -108,7 +108,7 @@ mod tests {
         let img = read_all_flat_layers_from_file(&p).unwrap();
         let layer = &img.layer_data[0];
         let find = |name: &str| -> Vec<f32> {
-            let ch = layer.channel_data.list.iter().find(|c| c.name == Text::from(name)).unwrap();
+            let ch = layer.channel_data.list.iter().find(|c| c.name.eq(name)).unwrap();
             ch.sample_data.values_as_f32().collect()
         };
         let r = find("R");

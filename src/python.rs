@@ -432,6 +432,9 @@ fn parse_scene(d: &Bound<'_, PyDict>) -> PyResult<SceneDesc> {
     })
 }
 
+/// `Scene.trace_rays`' answer: (t as float32, triangle as int64).
+type Hits<'py> = (Bound<'py, PyArray1<f32>>, Bound<'py, PyArray1<i64>>);
+
 /// A scene ready to render (BVH built). Construct from the dict layout of gdmlt.scene.
 #[pyclass(frozen, module = "gdmlt._core")]
 struct Scene {
@@ -469,7 +472,7 @@ impl Scene {
         threads: usize,
         occlusion: bool,
         packets: bool,
-    ) -> PyResult<(Bound<'py, PyArray1<f32>>, Bound<'py, PyArray1<i64>>)> {
+    ) -> PyResult<Hits<'py>> {
         let o = floats(origins, 3, "origins")?;
         let d = floats(directions, 3, "directions")?;
         if o.len() != d.len() {

@@ -85,7 +85,7 @@ mod tests {
     /// is now refused up front with the size it needs.
     #[test]
     fn a_render_larger_than_memory_is_refused_with_what_it_needs() {
-        let e = check(Method::Gdpssmlt, 65536, 65536, Some(4_000_000 * 1024)).err().expect("refused").to_string();
+        let e = check(Method::Gdpssmlt, 65536, 65536, Some(4_000_000 * 1024)).expect_err("refused").to_string();
         assert!(e.contains("65536×65536") && e.contains("GiB") && e.contains("available"), "{e}");
         assert!(check(Method::Pt, 1920, 1080, Some(4_000_000 * 1024)).is_ok());
         assert!(check(Method::Gdpssmlt, 65536, 65536, None).is_ok()); // unknown: not refused

@@ -259,7 +259,7 @@ mod tests {
     #[test]
     fn sizes_that_overflow_shifts_and_f_stops_that_are_no_camera_are_refused() {
         let big = CameraDesc { resolution_x: 42_949_700, resolution_y: 16, ..Default::default() };
-        let e = Camera::new(&big).err().expect("refused").to_string();
+        let e = Camera::new(&big).expect_err("refused").to_string();
         assert!(e.contains("42949700") && e.contains("65536"), "{e}");
         let pct = CameraDesc { resolution_x: 50_000, resolution_percentage: 100_000, ..Default::default() };
         assert!(Camera::new(&pct).is_err());

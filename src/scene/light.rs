@@ -463,7 +463,7 @@ mod tests {
             normalize: true,
             visible_camera: false,
         };
-        let e = Light::from_desc(&area).err().expect("refused").to_string();
+        let e = Light::from_desc(&area).expect_err("refused").to_string();
         assert!(e.contains("Lamp.001") && e.contains("negative"), "{e}");
         let sun = LightDesc::Sun {
             name: "Sun".into(),
