@@ -207,7 +207,8 @@ def merge(partials, alpha_rec=None, reconstruction=None) -> dict:
     return merged
 
 
-def render_dask(desc: dict, n: int, settings: dict, address=None, workers=2, retries=2, log=print):
+def render_dask(desc: dict, n: int, settings: dict, address=None, workers=2, retries=2, log=print,
+                connect_timeout=10):
     """Renders n partials on a Dask cluster and merges them. Returns (layers, dropped k's)."""
     from distributed import Client, LocalCluster
 
@@ -217,7 +218,11 @@ def render_dask(desc: dict, n: int, settings: dict, address=None, workers=2, ret
                                dashboard_address=None, worker_dashboard_address=None)
         address = cluster.scheduler_address
     try:
-        with Client(address) as client:
+        try:
+            client = Client(address, timeout=connect_timeout)
+        except (OSError, TimeoutError) as e:
+            raise RuntimeError(f"cannot reach the Dask scheduler at {address} within {connect_timeout} s: {e}") from None
+        with client:
             # every worker renders with all of its machine's cores unless told otherwise
             futures = [client.submit(render_partial, desc, k, n, settings, key=f"gdmlt-partial-{k}-{n}",
                                      retries=retries, pure=False) for k in range(n)]

@@ -96,6 +96,11 @@ impl Light {
             LightDesc::Sun { irradiance, name, .. } => (irradiance, name),
         };
         check(name, strength.iter().all(|&x| !(x < 0.0)), "negative power (GDMLT does not render negative light)")?;
+        check(
+            name,
+            strength.iter().all(|&x| x <= super::material::MAX_RADIANCE),
+            "power too large for single precision (an infinite strength in Blender is stored as 3.4e38)",
+        )?;
         match d {
             LightDesc::Point { name, position, radius, power, soft_falloff, visible_camera } => {
                 check(

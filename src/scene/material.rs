@@ -40,6 +40,10 @@ pub struct Material {
     pub general: bool,
 }
 
+/// The largest emission (and light power) accepted: beyond it a path's throughput × emission
+/// can overflow f32 (Blender stores an infinite strength as f32::MAX, 3.4e38).
+pub const MAX_RADIANCE: f32 = 1e20;
+
 impl Material {
     pub fn from_desc(d: &MaterialDesc, textures: usize) -> Result<Material, SceneError> {
         let bad = |what: &str| SceneError::Material { material: d.name.clone(), what: what.to_string() };
@@ -73,6 +77,14 @@ impl Material {
         }
         if d.emission.iter().any(|&x| x < 0.0) {
             return Err(bad("negative emission"));
+        }
+        // Blender stores an infinite strength as f32::MAX: finite, but every path that
+        // meets it overflows to Inf and is dropped (a black image and a "no light" warning)
+        if d.emission.iter().any(|&x| x > MAX_RADIANCE) {
+            return Err(bad(&format!(
+                "emission {:.3e} is too large for single precision (at most {MAX_RADIANCE:e})",
+                d.emission.iter().fold(0.0f32, |a, &x| a.max(x))
+            )));
         }
         Ok(Material {
             name: d.name.clone(),

@@ -271,3 +271,22 @@ def test_the_command_line_reports_progress_with_the_time_left():
     lines = out.getvalue().splitlines()
     assert 9 <= len(lines) <= 12, lines  # one per 10%, not one per poll
     assert "pt 50% after 10.0 s, 10.0 s left" in out.getvalue(), lines
+
+
+def test_an_unreachable_dask_scheduler_is_a_message():
+    """[9] an unreachable scheduler ended in a traceback."""
+    r = subprocess.run([sys.executable, "-m", "gdmlt.cli", "render", "cornell", "-o", "/tmp/gdmlt-unreachable.exr",
+                        "--method", "pt", "--dask", "tcp://127.0.0.1:9", "--partials", "2"],
+                       capture_output=True, text=True, cwd=ROOT, timeout=120)
+    assert r.returncode == 1, r.stderr[-2000:]
+    assert "cannot reach the Dask scheduler" in r.stderr and "Traceback" not in r.stderr, r.stderr[-2000:]
+
+
+def test_an_infinite_emission_strength_is_refused_naming_the_material():
+    """[10] Emission Strength inf (Blender stores f32::MAX) rendered a black room with a
+    'no light' warning: every path that met it overflowed and was dropped."""
+    d = gdmlt.builtin_scene("cornell", 8, 8)
+    light = next(m for m in d["materials"] if max(m.get("emission", (0, 0, 0))) > 0)
+    light["emission"] = [3.4028234663852886e38] * 3
+    with pytest.raises(ValueError, match=f"{light['name']}.*too large"):
+        gdmlt.Scene(d)
