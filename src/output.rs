@@ -3,7 +3,10 @@
 
 use crate::error::RenderError;
 use crate::film::Image;
-use exr::prelude::{AnyChannel, AnyChannels, Encoding, FlatSamples, Layer, LayerAttributes, SmallVec, WritableImage};
+use exr::prelude::{
+    AnyChannel, AnyChannels, AttributeValue, Encoding, FlatSamples, Layer, LayerAttributes, SmallVec, Text,
+    WritableImage,
+};
 use std::path::Path;
 
 fn channel_names(layer: &str, channels: usize, first: bool) -> Vec<String> {
@@ -18,6 +21,12 @@ fn channel_names(layer: &str, channels: usize, first: bool) -> Vec<String> {
 
 /// Writes named images of equal size into one EXR file. The first image is the main RGB.
 pub fn write_exr(path: &Path, layers: &[(&str, &Image)]) -> Result<(), RenderError> {
+    write_exr_with(path, layers, &[])
+}
+
+/// `write_exr` with text attributes in the file's header (`metadata`: name, value), e.g.
+/// what rendered the image and whether the render was interrupted.
+pub fn write_exr_with(path: &Path, layers: &[(&str, &Image)], metadata: &[(&str, &str)]) -> Result<(), RenderError> {
     let Some((_, first)) = layers.first() else {
         return Err(RenderError::Output("no image to write".into()));
     };
@@ -38,12 +47,14 @@ pub fn write_exr(path: &Path, layers: &[(&str, &Image)]) -> Result<(), RenderErr
             list.push(AnyChannel::new(cname.as_str(), FlatSamples::F32(samples)));
         }
     }
-    let layer = Layer::new(
-        (w, h),
-        LayerAttributes::default(),
-        Encoding::SMALL_LOSSLESS,
-        AnyChannels::sort(SmallVec::from_vec(list)),
-    );
+    let mut attributes = LayerAttributes::default();
+    for (k, v) in metadata {
+        let (Some(k), Some(v)) = (Text::new_or_none(*k), Text::new_or_none(*v)) else {
+            return Err(RenderError::Output(format!("metadata '{k}' is not storable EXR text")));
+        };
+        attributes.other.insert(k, AttributeValue::Text(v));
+    }
+    let layer = Layer::new((w, h), attributes, Encoding::SMALL_LOSSLESS, AnyChannels::sort(SmallVec::from_vec(list)));
     exr::prelude::Image::from_layer(layer)
         .write()
         .to_file(path)

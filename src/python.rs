@@ -813,11 +813,19 @@ fn builtin_scene<'py>(py: Python<'py>, name: &str, width: u32, height: u32) -> P
 /// Writes images into one EXR: `layers` is a list of (name, float32 array (H, W, C)); the
 /// first is the main RGB.
 #[pyfunction]
-fn write_exr(py: Python<'_>, path: std::path::PathBuf, layers: Vec<(String, Bound<'_, PyAny>)>) -> PyResult<()> {
+#[pyo3(signature = (path, layers, metadata=None))]
+fn write_exr(
+    py: Python<'_>,
+    path: std::path::PathBuf,
+    layers: Vec<(String, Bound<'_, PyAny>)>,
+    metadata: Option<std::collections::BTreeMap<String, String>>,
+) -> PyResult<()> {
     let imgs: Vec<(String, Image)> =
         layers.iter().map(|(n, a)| Ok((n.clone(), numpy_to_image(a)?))).collect::<PyResult<_>>()?;
     let refs: Vec<(&str, &Image)> = imgs.iter().map(|(n, i)| (n.as_str(), i)).collect();
-    py.detach(|| crate::output::write_exr(&path, &refs)).map_err(|e| PyRuntimeError::new_err(e.to_string()))
+    let meta = metadata.unwrap_or_default();
+    let meta: Vec<(&str, &str)> = meta.iter().map(|(k, v)| (k.as_str(), v.as_str())).collect();
+    py.detach(|| crate::output::write_exr_with(&path, &refs, &meta)).map_err(|e| PyRuntimeError::new_err(e.to_string()))
 }
 
 /// The gradient-domain image from (primal without very-direct light, dx, dy, very direct),

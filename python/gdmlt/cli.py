@@ -259,14 +259,18 @@ def render_desc(desc, args, out: Path):
     finally:
         if main:
             signal.signal(signal.SIGINT, previous)
-    if res["stats"]["cancelled"]:
+    st = res["stats"]
+    meta = {"gdmlt/version": gdmlt.__version__, "gdmlt/method": st["method"], "gdmlt/samples": str(st["spp_max"]),
+            "gdmlt/render_seconds": f"{st['elapsed']:.3f}", "gdmlt/interrupted": "yes" if st["cancelled"] else "no"}
+    if st["cancelled"]:
         # Ctrl-C (the core stops at the signal and returns what it has): keep the work under
-        # a name that says so, never as the image the user asked for
+        # a name that says so, never as the image the user asked for, and say so in its header
         out = out.with_name(out.stem + ".interrupted" + out.suffix)
-        write_layers(out, res["layers"], not args.no_png)
+        write_layers(out, res["layers"], not args.no_png, dict(meta, **{"gdmlt/denoised": "no"}))
         raise Interrupted(out)
-    write_layers(out, finish_layers(res["layers"], args, settings["threads"]), not args.no_png)
-    return res["stats"]
+    layers = finish_layers(res["layers"], args, settings["threads"])
+    write_layers(out, layers, not args.no_png, dict(meta, **{"gdmlt/denoised": "yes" if "Noisy Image" in layers else "no"}))
+    return st
 
 
 class ProgressLine:
@@ -441,11 +445,12 @@ def scene_desc(args):
     return desc
 
 
-def write_layers(out: Path, layers: dict, png: bool):
+def write_layers(out: Path, layers: dict, png: bool, metadata=None):
+    """The EXR (every layer; `metadata`: text attributes in its header) and the PNG beside it."""
     import gdmlt
 
     names = ["Combined"] + [n for n in layers if n != "Combined"]
-    gdmlt.write_exr(str(out), [(n, layers[n]) for n in names])
+    gdmlt.write_exr(str(out), [(n, layers[n]) for n in names], metadata)
     from .outputs import png_beside
 
     path = png_beside(out) if png else None

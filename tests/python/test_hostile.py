@@ -92,6 +92,10 @@ def test_ctrl_c_exits_130_and_keeps_the_work_under_another_name(tmp_path):
     assert not out.exists()
     partial = tmp_path / "c.interrupted.exr"
     assert partial.exists() and np.isfinite(read_exr(partial)).all()
+    import OpenEXR
+
+    header = OpenEXR.File(str(partial), header_only=True).header()  # its header says so too
+    assert header.get("gdmlt/interrupted") == "yes" and header.get("gdmlt/method") == "pt", header
 
 
 def test_an_output_folder_that_cannot_be_made_is_an_error(tmp_path):
