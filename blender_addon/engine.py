@@ -53,29 +53,12 @@ def render_threads(scene) -> int:
     return r.threads if r.threads_mode == "FIXED" else 0
 
 
-class ProgressThrottle:
-    """When the progress line is worth printing: always in Blender's window; in background
-    mode (`blender -b`, where every update_stats call is a log line) once per 10% or 10 s."""
-
-    def __init__(self, background: bool):
-        self.background = background
-        self.last_step, self.last_time = -1, -1e9
-
-    def __call__(self, fraction: float, elapsed: float) -> bool:
-        if not self.background:
-            return True
-        step = int(fraction * 10)
-        if step != self.last_step or elapsed - self.last_time >= 10.0:
-            self.last_step, self.last_time = step, elapsed
-            return True
-        return False
-
-
 def remaining_time(fraction: float, elapsed: float) -> str:
-    """' | 12.3 s left', extrapolated from the work done so far once it is 2% done."""
-    if not 0.02 <= fraction < 1.0 or elapsed <= 0:
-        return ""
-    return f" | {elapsed * (1.0 - fraction) / fraction:.1f} s left"
+    """' | 12.3 s left' for the stats line (gdmlt.progress.seconds_left), or ''."""
+    from gdmlt.progress import seconds_left
+
+    left = seconds_left(fraction, elapsed)
+    return "" if left is None else f" | {left:.1f} s left"
 
 
 class GDMLTRenderEngine(bpy.types.RenderEngine):
@@ -140,7 +123,10 @@ class GDMLTRenderEngine(bpy.types.RenderEngine):
         method = settings.pop("method", s.method.lower())
         label = method.upper() + (" (auto)" if chosen else "")
 
-        throttle = ProgressThrottle(bpy.app.background)
+        from gdmlt.progress import ProgressThrottle
+
+        # a background render's every stats line is a log line: once per 10% or 10 s there
+        throttle = ProgressThrottle(every_poll=not bpy.app.background)
 
         def progress(fraction, elapsed):
             if throttle(fraction, elapsed):

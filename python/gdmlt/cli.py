@@ -158,22 +158,10 @@ def _blend_settings(args):
     return s
 
 
-def wants_denoise(args) -> bool:
-    """--denoise/--no-denoise, else the setting a USD stage stored, else on (Cycles' default)."""
-    if args.denoise is not None:
-        return args.denoise
-    if Path(args.scene).suffix.lower() in USD_SUFFIXES:
-        from .usd import stored_settings
-
-        stored = checked_settings(stored_settings(args.scene), f"{args.scene} (customLayerData gdmlt)")
-        return stored.get("denoise", True)
-    return True
-
-
-def finish_layers(layers: dict, args, threads=0) -> dict:
+def finish_layers(layers: dict, denoise: bool, threads=0) -> dict:
     """The layers to write: denoised when asked (a warning and the raw image when OIDN is
     missing)."""
-    if not wants_denoise(args):
+    if not denoise:
         return layers
     from .oidn import denoise_or_warn
 
@@ -220,9 +208,10 @@ def checked_settings(stored: dict, where: str) -> dict:
     return out
 
 
-def render_settings(args) -> dict:
-    """gdmlt.render's settings: the CLI's options over the settings stored in a USD stage by
-    `gdmlt export` over the defaults."""
+def render_settings(args) -> tuple:
+    """(gdmlt.render's settings, whether to denoise): the CLI's options over the settings a
+    USD stage stored (`gdmlt export`, read once) over the defaults; denoising defaults to on,
+    as in Cycles."""
     opts = {"method": "auto", "spp": 64, "time_limit": 0.0, "max_bounces": 8, "nee": True, "seed": 0, "threads": 0,
             "reconstruction": "l1", "alpha_rec": 0.2, "alpha_target": 1.0, "large_step_probability": 0.3,
             "chains": 0}
@@ -230,16 +219,18 @@ def render_settings(args) -> dict:
         from .usd import stored_settings
 
         stored = checked_settings(stored_settings(args.scene), f"{args.scene} (customLayerData gdmlt)")
-        opts.update({k: v for k, v in stored.items() if k in opts})
+    else:
+        stored = {}
+    opts.update({k: v for k, v in stored.items() if k in opts})
     opts.update(_settings(args))
-    return opts
+    denoise = args.denoise if args.denoise is not None else stored.get("denoise", True)
+    return opts, denoise
 
 
-def render_desc(desc, args, out: Path):
-    """Renders a scene dict with the CLI's settings; writes the EXR (+ PNG)."""
+def render_desc(desc, settings: dict, denoise: bool, out: Path, png: bool):
+    """Renders a scene dict with `settings` (render_settings'); writes the EXR (+ PNG)."""
     import gdmlt
 
-    settings = render_settings(args)
     if settings["method"] == "auto":
         from .auto import plan
 
@@ -266,10 +257,10 @@ def render_desc(desc, args, out: Path):
         # Ctrl-C (the core stops at the signal and returns what it has): keep the work under
         # a name that says so, never as the image the user asked for, and say so in its header
         out = out.with_name(out.stem + ".interrupted" + out.suffix)
-        write_layers(out, res["layers"], not args.no_png, dict(meta, **{"gdmlt/denoised": "no"}))
+        write_layers(out, res["layers"], png, dict(meta, **{"gdmlt/denoised": "no"}))
         raise Interrupted(out)
-    layers = finish_layers(res["layers"], args, settings["threads"])
-    write_layers(out, layers, not args.no_png, dict(meta, **{"gdmlt/denoised": "yes" if "Noisy Image" in layers else "no"}))
+    layers = finish_layers(res["layers"], denoise, settings["threads"])
+    write_layers(out, layers, png, dict(meta, **{"gdmlt/denoised": "yes" if "Noisy Image" in layers else "no"}))
     return st
 
 
@@ -278,15 +269,18 @@ class ProgressLine:
     a farm log keeps) — and Ctrl-C: it stops the render, which returns what it has."""
 
     def __init__(self, method, out=None):
+        from .progress import ProgressThrottle
+
         self.method, self.out = method, out or sys.stderr
-        self.step, self.last, self.interrupted = 0, 0.0, False
+        self.throttle, self.interrupted = ProgressThrottle(), False
 
     def __call__(self, fraction, elapsed):
+        from .progress import seconds_left
+
         try:
-            step = int(fraction * 10)
-            if (step > self.step or elapsed - self.last >= 10.0) and 0 < fraction < 1:
-                self.step, self.last = step, elapsed
-                left = f", {elapsed * (1 - fraction) / fraction:.1f} s left" if fraction >= 0.02 else ""
+            if self.throttle(fraction, elapsed):
+                left = seconds_left(fraction, elapsed)
+                left = f", {left:.1f} s left" if left is not None else ""
                 print(f"gdmlt: {self.method} {fraction * 100:.0f}% after {elapsed:.1f} s{left}", file=self.out,
                       flush=True)
         except KeyboardInterrupt:
@@ -375,7 +369,7 @@ def _main(argv=None):
                                  png=not args.no_png)
         else:
             desc = scene_desc(args)
-            settings = render_settings(args)
+            settings, denoise = render_settings(args)
             if settings["method"] == "auto" and (partial is not None or args.dask is not None):
                 if partial is not None:
                     parser.error("--partial needs a method other than auto: each machine's pilot could pick "
@@ -397,11 +391,11 @@ def _main(argv=None):
                 layers, dropped = render_dask(desc, args.partials, settings,
                                               address=args.dask or None, workers=args.workers,
                                               log=lambda m: print(m, file=sys.stderr))
-                write_layers(out, finish_layers(layers, args), not args.no_png)
+                write_layers(out, finish_layers(layers, denoise), not args.no_png)
                 print(f"wrote {out}: {args.partials - len(dropped)} of {args.partials} partials merged "
                       f"in {time.perf_counter() - t0:.2f} s")
                 return 0
-            stats = render_desc(desc, args, out)
+            stats = render_desc(desc, settings, denoise, out, not args.no_png)
     except Interrupted as e:
         print(f"gdmlt: interrupted: the unfinished image was written to {e.path}", file=sys.stderr)
         return 130
@@ -471,10 +465,7 @@ def merge_command(args):
     except (ValueError, OSError, KeyError) as e:
         print(f"gdmlt: error: {e}", file=sys.stderr)
         return 1
-    if args.denoise:
-        from .oidn import denoise_or_warn
-
-        layers = denoise_or_warn(layers, lambda m: print(f"gdmlt: warning: {m}", file=sys.stderr))
+    layers = finish_layers(layers, args.denoise)
     out.parent.mkdir(parents=True, exist_ok=True)
     write_layers(out, layers, not args.no_png)
     print(f"wrote {out}: {len(partials)} partials merged")

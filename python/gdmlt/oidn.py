@@ -64,15 +64,27 @@ def _finite_rgb(img, name):
     return a
 
 
-def _run(pyoidn, threads, images, *, hdr, clean_aux, quality):
-    """One OIDN RT filter execution on a fresh CPU device; images maps OIDN slot → array
-    (the 'output' slot is written)."""
-    dev = pyoidn.Device(pyoidn.OIDN_DEVICE_TYPE_CPU)
-    try:
+class _Device:
+    """One committed OIDN CPU device for the filter runs of one denoise (the guides'
+    prefilters and the image): created once, released on exit."""
+
+    def __init__(self, pyoidn, threads):
+        self.pyoidn = pyoidn
+        self.dev = pyoidn.Device(pyoidn.OIDN_DEVICE_TYPE_CPU)
         if threads:
-            dev.set_int("numThreads", int(threads))
-        dev.commit()
-        flt = pyoidn.Filter(dev, pyoidn.OIDN_FILTER_TYPE_RT)
+            self.dev.set_int("numThreads", int(threads))
+        self.dev.commit()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.dev.release()
+
+    def run(self, images, *, hdr, clean_aux, quality):
+        """One RT filter execution; `images` maps OIDN slot → array ('output' is written)."""
+        pyoidn = self.pyoidn
+        flt = pyoidn.Filter(self.dev, pyoidn.OIDN_FILTER_TYPE_RT)
         try:
             for slot, arr in images.items():
                 flt.set_image(slot, arr, pyoidn.OIDN_FORMAT_FLOAT3)
@@ -81,13 +93,11 @@ def _run(pyoidn, threads, images, *, hdr, clean_aux, quality):
             flt.set_quality(quality)
             flt.commit()
             flt.execute()
-            err = dev.get_error()
+            err = self.dev.get_error()
             if err:
                 raise RuntimeError(f"denoise: OIDN failed: {err}")
         finally:
             flt.release()
-    finally:
-        dev.release()
 
 
 def denoise_image(color, albedo=None, normal=None, *, prefilter=True, threads=0, quality="high"):
@@ -109,14 +119,16 @@ def denoise_image(color, albedo=None, normal=None, *, prefilter=True, threads=0,
     for slot, g in guides.items():
         if g.shape != c.shape:
             raise ValueError(f"denoise: the {slot} guide is {g.shape[1]}×{g.shape[0]}, the image {c.shape[1]}×{c.shape[0]}")
-        if prefilter:
-            clean = np.empty_like(g)
-            _run(pyoidn, threads, {slot: g, "output": clean}, hdr=False, clean_aux=False, quality=q)
-            g = clean
-        images[slot] = g
     out = np.empty_like(c)
-    images["output"] = out
-    _run(pyoidn, threads, images, hdr=True, clean_aux=prefilter and bool(guides), quality=q)
+    with _Device(pyoidn, threads) as dev:
+        for slot, g in guides.items():
+            if prefilter:
+                clean = np.empty_like(g)
+                dev.run({slot: g, "output": clean}, hdr=False, clean_aux=False, quality=q)
+                g = clean
+            images[slot] = g
+        images["output"] = out
+        dev.run(images, hdr=True, clean_aux=prefilter and bool(guides), quality=q)
     return out
 
 

@@ -769,7 +769,9 @@ def test_blender_thread_count_is_used_and_the_background_log_stays_short(bpy_mod
     scene.gdmlt.threads, scene.render.threads_mode = 0, "AUTO"
     assert engine.render_threads(scene) == 0
     # 20 s of progress polled every 50 ms: at most one line per 10% or 10 s in background
-    quiet, window = engine.ProgressThrottle(True), engine.ProgressThrottle(False)
+    from gdmlt.progress import ProgressThrottle
+
+    quiet, window = ProgressThrottle(), ProgressThrottle(every_poll=True)
     polls = [(i / 400, i * 0.05) for i in range(401)]
     assert sum(quiet(f, t) for f, t in polls) <= 13
     assert all(window(f, t) for f, t in polls)
