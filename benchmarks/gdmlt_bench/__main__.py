@@ -4,7 +4,7 @@ them. `make bench`, `make bench-lights`, `make bench-peers`, ... run them with
 PYTHONPATH=benchmarks.
 
 Commands: bench (error over time against a reference, with --peers Cycles, LuxCore, Mitsuba),
-pathbench, raybench, scalebench, skipbench."""
+pathbench, raybench, reconbench, scalebench, skipbench."""
 
 import argparse
 import sys
@@ -40,6 +40,10 @@ def build_parser():
                                     "sphere of 10k to 10M triangles, 1 thread and all; build time and memory.")
     sb.add_argument("--sizes", default="10000,100000,1000000,10000000", help="comma-separated triangle counts")
     sb.add_argument("--size", type=_positive_int, default=64, help="image side in pixels")
+    cb = sub.add_parser("reconbench", help="seconds of the L1 and L2 reconstruction by image size",
+                        description="Times gdmlt.reconstruct (L1 and L2) on synthetic noisy RGB inputs and prints "
+                                    "the MSE of each result against the image the inputs were made from.")
+    cb.add_argument("--sizes", default="480x270,960x540,1920x1080", help="comma-separated WxH")
     b = sub.add_parser("bench", help="error against a converged reference at equal time budgets, per method",
                        description="Renders a built-in scene or a .blend file with every method for the same "
                                    "wall-clock budgets and prints relMSE and SMAPE against a converged path-traced "
@@ -111,6 +115,17 @@ def main(argv=None):
         except ValueError:
             parser.error(f"--sizes: '{args.sizes}' is not a comma-separated list of triangle counts")
         scalebench(sizes, args.size)
+        return 0
+    if args.command == "reconbench":
+        from .reconbench import run as reconbench
+
+        try:
+            sizes = [tuple(int(v) for v in s.lower().split("x")) for s in args.sizes.split(",")]
+        except ValueError:
+            parser.error(f"--sizes: '{args.sizes}' is not a comma-separated list of WxH")
+        if any(len(s) != 2 or min(s) < 1 for s in sizes):
+            parser.error(f"--sizes: '{args.sizes}' is not a comma-separated list of WxH")
+        reconbench(sizes)
         return 0
     if args.command == "skipbench":
         from .skipbench import run as skipbench

@@ -13,9 +13,9 @@
 //! within ±2% where it was −10% to −20%, relMSE equal or lower for gdpt, up to 1.2× for
 //! gdpssmlt.
 
-use super::{solve_cg, solve_l2_dct, Channel, WeightedProblem};
+use super::cg::{Problem, RowPlanar, Weights, BAND};
+use super::{solve_l2_dct, Channel};
 use rayon::prelude::*;
-use std::borrow::Cow;
 
 #[derive(Clone, Debug)]
 pub struct IrlsParams {
@@ -37,65 +37,105 @@ impl Default for IrlsParams {
     }
 }
 
+/// The IRLS weights of the residual rows at `sol`: 1/(‖e‖_RGB + reg), normalised to mean 1
+/// over all existing rows (the last column's x rows and the last row's y rows do not exist).
+fn irls_weights(p: &Problem, sol: &RowPlanar, reg: f32) -> Weights {
+    let (w, h) = (p.width(), p.height());
+    let mut g = vec![0.0f32; w * h];
+    let mut wx = vec![0.0f32; w * h];
+    let mut wy = vec![0.0f32; w * h];
+    let sums: Vec<f64> = g
+        .par_chunks_mut(BAND * w)
+        .zip(wx.par_chunks_mut(BAND * w).zip(wy.par_chunks_mut(BAND * w)))
+        .enumerate()
+        .map(|(b, (gb, (xb, yb)))| {
+            let mut sum = 0.0f64;
+            let (mut eg, mut ex, mut ey) = (vec![0.0f32; w], vec![0.0f32; w], vec![0.0f32; w]);
+            for (k, ((gr, xr), yr)) in
+                gb.chunks_exact_mut(w).zip(xb.chunks_exact_mut(w)).zip(yb.chunks_exact_mut(w)).enumerate()
+            {
+                let y = b * BAND + k;
+                eg.fill(0.0);
+                ex.fill(0.0);
+                ey.fill(0.0);
+                for c in 0..3 {
+                    let (s, pr, gx, gy) = (sol.row(y, c), p.primal.row(y, c), p.dx.row(y, c), p.dy.row(y, c));
+                    for ((e, &si), &pi) in eg.iter_mut().zip(s).zip(pr) {
+                        *e += (p.alpha * (si - pi)).powi(2);
+                    }
+                    for ((e, &gi), (&si, &sn)) in ex.iter_mut().zip(gx).zip(s.iter().zip(&s[1..])) {
+                        *e += (sn - si - gi).powi(2);
+                    }
+                    if y + 1 < h {
+                        for ((e, &gi), (&si, &sn)) in ey.iter_mut().zip(gy).zip(s.iter().zip(sol.row(y + 1, c))) {
+                            *e += (sn - si - gi).powi(2);
+                        }
+                    }
+                }
+                for (o, e) in gr.iter_mut().zip(&eg) {
+                    *o = 1.0 / (e.sqrt() + reg);
+                }
+                for (o, e) in xr[..w - 1].iter_mut().zip(&ex) {
+                    *o = 1.0 / (e.sqrt() + reg);
+                }
+                if y + 1 < h {
+                    for (o, e) in yr.iter_mut().zip(&ey) {
+                        *o = 1.0 / (e.sqrt() + reg);
+                    }
+                }
+                sum += gr.iter().chain(xr.iter()).chain(yr.iter()).map(|&v| v as f64).sum::<f64>();
+            }
+            sum
+        })
+        .collect();
+    // one normalisation over all 3N rows (as the reference implementation): the rows'
+    // weights keep their ratios across the primal and the two gradient images
+    let rows = w * h + (w - 1) * h + w * (h - 1);
+    let m = (sums.iter().sum::<f64>() / rows.max(1) as f64) as f32;
+    if m > 0.0 && m.is_finite() {
+        for v in [&mut g, &mut wx, &mut wy] {
+            v.par_iter_mut().for_each(|x| *x /= m);
+        }
+    }
+    Weights { g, x: wx, y: wy }
+}
+
 /// `stop` is asked between outer iterations and inside every CG iteration: when it turns true
 /// (Esc), the current iterate — the L2 solution refined so far — is returned.
 pub fn solve_l1(chans: &[Channel], alpha: f64, params: &IrlsParams, stop: &(dyn Fn() -> bool + Sync)) -> Vec<Vec<f64>> {
     let (w, h) = (chans[0].width, chans[0].height);
-    let n = w * h;
     // channels are independent given the shared weights: solved in parallel
     let l2: Vec<Vec<f64>> = chans.par_iter().map(|c| solve_l2_dct(c, alpha)).collect();
-    let mut sol = l2.clone();
+    let p = Problem {
+        alpha: alpha as f32,
+        primal: RowPlanar::from_planes([chans[0].primal, chans[1].primal, chans[2].primal], w, h),
+        dx: RowPlanar::from_planes([chans[0].dx, chans[1].dx, chans[2].dx], w, h),
+        dy: RowPlanar::from_planes([chans[0].dy, chans[1].dy, chans[2].dy], w, h),
+    };
+    let mut sol = RowPlanar::from_planes([&l2[0], &l2[1], &l2[2]], w, h);
     let mut reg = params.reg0;
+    let mut refined = false;
     for _ in 0..params.outer_iterations {
         if stop() {
             break;
         }
-        let weights: Vec<[f64; 3]> = (0..n)
-            .into_par_iter()
-            .with_min_len(4096)
-            .map(|i| {
-                let (x, y) = (i % w, i / w);
-                let (mut eg, mut ex, mut ey) = (0.0, 0.0, 0.0);
-                for (c, s) in chans.iter().zip(&sol) {
-                    eg += (alpha * (s[i] - c.primal[i])).powi(2);
-                    if x + 1 < w {
-                        ex += (s[i + 1] - s[i] - c.dx[i]).powi(2);
-                    }
-                    if y + 1 < h {
-                        ey += (s[i + w] - s[i] - c.dy[i]).powi(2);
-                    }
-                }
-                [1.0 / (eg.sqrt() + reg), 1.0 / (ex.sqrt() + reg), 1.0 / (ey.sqrt() + reg)]
-            })
-            .collect();
-        // one normalisation over all 3N rows (as the reference implementation): the rows'
-        // weights keep their ratios across the primal and the two gradient images
-        // (the last column's x rows and the last row's y rows do not exist: left out)
-        let rows = n + (w - 1) * h + w * (h - 1);
-        let m = (0..n)
-            .map(|i| {
-                let w_i = &weights[i];
-                w_i[0] + if i % w + 1 < w { w_i[1] } else { 0.0 } + if i / w + 1 < h { w_i[2] } else { 0.0 }
-            })
-            .sum::<f64>()
-            / rows.max(1) as f64;
-        let split = |k: usize| -> Vec<f64> { weights.iter().map(|w| if m > 0.0 { w[k] / m } else { 1.0 }).collect() };
-        let (wg, wx, wy) = (split(0), split(1), split(2));
-        sol.par_iter_mut().zip(chans.par_iter()).for_each(|(s, c)| {
-            let p =
-                WeightedProblem { c, alpha, wg: Cow::Borrowed(&wg), wx: Cow::Borrowed(&wx), wy: Cow::Borrowed(&wy) };
-            *s = solve_cg(&p, s, params.cg_iterations, 1e-10, stop);
-        });
+        let wts = irls_weights(&p, &sol, reg as f32);
+        p.solve(&wts, &mut sol, params.cg_iterations, 1e-10, stop);
+        refined = true;
         reg *= params.decay;
     }
-    let r = params.low_frequency_radius;
-    if r == 0 {
-        return sol;
+    if !refined {
+        return l2; // stopped before the first reweighting: the exact L2 solution
     }
-    sol.into_par_iter()
-        .zip(l2.par_iter())
-        .map(|(l1, l2)| {
-            let (b2, b1) = (box_blur(l2, w, h, r), box_blur(&l1, w, h, r));
+    let r = params.low_frequency_radius;
+    (0..3)
+        .into_par_iter()
+        .map(|c| {
+            let l1 = sol.plane(c);
+            if r == 0 {
+                return l1;
+            }
+            let (b2, b1) = (box_blur(&l2[c], w, h, r), box_blur(&l1, w, h, r));
             l1.iter().zip(b2.iter().zip(&b1)).map(|(v, (a, b))| v + (a - b)).collect()
         })
         .collect()
