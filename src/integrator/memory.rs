@@ -2,8 +2,10 @@
 //! large for the machine is refused with a message instead of an allocation abort.
 //!
 //! The per-pixel figures are the films and accumulation buffers each method keeps (measured
-//! as peak resident memory over an empty process: 1024² Cornell box, one sample, rounded up):
-//! `pt` 160 B, `gdpt` 540 B, `pssmlt` 450 B, `gdpssmlt` 1150 B per pixel.
+//! as peak resident memory over an empty process: 1024² Cornell box, one sample, rounded up;
+//! 2026-12-02): `pt` 160 B, `gdpt` 456 B, `pssmlt` 276 B, `gdpssmlt` 612 B per pixel, the
+//! same on 1 and 2 threads (the Metropolis methods keep one image whatever the thread count;
+//! their chains' splat logs are bounded by chains × ROUND, ≤ 90 MB, not by the image).
 
 use super::Method;
 use crate::error::RenderError;
@@ -12,9 +14,9 @@ use crate::error::RenderError;
 pub fn bytes_per_pixel(method: Method) -> u64 {
     match method {
         Method::Pt => 200,
-        Method::Gdpt => 600,
-        Method::Pssmlt => 500,
-        Method::Gdpssmlt => 1200,
+        Method::Gdpt => 500,
+        Method::Pssmlt => 300,
+        Method::Gdpssmlt => 650,
     }
 }
 

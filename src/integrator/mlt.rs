@@ -12,9 +12,15 @@
 //! step of every chain is one more independent state, so b is refined with them as the
 //! render goes (Kelemen et al. 2002): its error shrinks with the mutations, not only with
 //! the bootstrap's size. Expected-value splatting: proposed × a/F_p, current × (1−a)/F_c;
-//! image × b/mpp. Chains are split into a
-//! fixed number of groups with their own buffers, summed in order: the image depends only on
-//! the seed (not on the thread count) unless a time limit stops chains early.
+//! image × b/mpp.
+//!
+//! Parallelism and memory: chains run in rounds of `ROUND` mutations, all chains in parallel
+//! (so every core is busy); each records its splats in its own log, sorted into
+//! `MERGE_BANDS` bands of the image as they are made, and after the round the logs are added
+//! to the one image, band by band in parallel, chain by chain in order. The image therefore
+//! depends only on the seed (not on the thread count, unless a time limit stops chains
+//! early), and memory is one image plus logs whose size is bounded by chains × `ROUND`,
+//! whatever the image size or thread count.
 
 use super::{ChainStart, RenderControl, RenderOutput, RenderSettings, RenderStats};
 use crate::distribution::Distribution1D;
@@ -40,8 +46,8 @@ fn bootstrap_samples(w: usize, h: usize) -> usize {
 /// Probability that a small step also redraws the shift direction d (its own symmetric
 /// mutation: a Gaussian step of the other coordinates never changes d).
 pub const DIRECTION_MUTATION_PROBABILITY: f32 = 0.1;
-/// Fixed number of accumulation groups (independent of the thread count).
-const GROUPS: usize = 8;
+/// Bands a chain's splats are sorted into, for the parallel merge after each round.
+const MERGE_BANDS: usize = 64;
 /// Samples per pixel of the very-direct image of gdpssmlt (and of the denoising passes of
 /// both Metropolis methods): 16 before the chains run, then topped up between rounds to a
 /// quarter of the mutations per pixel done (whenever that doubles it), up to the maximum, so
@@ -52,6 +58,8 @@ const SHIFTS: [(i32, i32); 4] = [(1, 0), (-1, 0), (0, 1), (0, -1)];
 const PRIMAL: usize = 0;
 const DX: usize = 1;
 const DY: usize = 2;
+/// The log entry of a mutation's current state (the density image).
+const DENSITY: usize = 3;
 
 /// What one state contributes, before the 1/F weighting.
 #[derive(Clone, Copy, Default)]
@@ -139,18 +147,121 @@ impl Target<'_> {
     }
 }
 
-/// Mutations a chain runs before the next chain of its group gets its turn.
+/// Mutations a chain runs per round (between merges, previews and stop checks).
 const ROUND: u64 = 256;
+
+/// One splat as a chain records it: `at` = pixel · 4 + layer (`DENSITY` counts a visit).
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Splat {
+    at: u64,
+    v: [f32; 3],
+}
+
+/// What a chain records in one round: its splats (sorted by merge band once the round is
+/// over), and its tallies. Both buffers are reserved for a full round when the chain is made,
+/// so recording allocates nothing.
+struct Log {
+    raw: Vec<Splat>,
+    sorted: Vec<Splat>,
+    /// `sorted[offsets[b]..offsets[b + 1]]` are band b's splats.
+    offsets: [usize; MERGE_BANDS + 1],
+    /// Pixels per merge band.
+    band_pixels: u64,
+    mutations: u64,
+    accepted: u64,
+    /// Sum of F over the large-step proposals, and their number.
+    large_f: f64,
+    large_steps: u64,
+}
+
+impl Log {
+    /// Splats one mutation records at most: proposal and current state (three each for
+    /// gdpssmlt: base, offset, gradient; one for pssmlt) and a visit.
+    fn max_splats_per_mutation(gradient: bool) -> usize {
+        if gradient {
+            7
+        } else {
+            3
+        }
+    }
+
+    fn new(pixels: usize, gradient: bool) -> Log {
+        let cap = ROUND as usize * Log::max_splats_per_mutation(gradient);
+        Log {
+            raw: Vec::with_capacity(cap),
+            sorted: Vec::with_capacity(cap),
+            offsets: [0; MERGE_BANDS + 1],
+            band_pixels: (pixels as u64).div_ceil(MERGE_BANDS as u64).max(1),
+            mutations: 0,
+            accepted: 0,
+            large_f: 0.0,
+            large_steps: 0,
+        }
+    }
+
+    fn clear(&mut self) {
+        self.raw.clear();
+        self.sorted.clear();
+        self.offsets = [0; MERGE_BANDS + 1];
+        (self.mutations, self.accepted, self.large_f, self.large_steps) = (0, 0, 0.0, 0);
+    }
+
+    fn band(&self, s: &Splat) -> usize {
+        (s.at / 4 / self.band_pixels) as usize
+    }
+
+    #[inline]
+    fn push(&mut self, layer: usize, pixel: usize, v: [f32; 3]) {
+        self.raw.push(Splat { at: pixel as u64 * 4 + layer as u64, v });
+    }
+
+    /// Records the splats of a state with weight `weight` (skipped when not positive/finite).
+    fn splat(&mut self, s: &Splats, weight: f64) {
+        if weight <= 0.0 || !weight.is_finite() {
+            return;
+        }
+        for &(layer, pixel, v) in &s.items[..s.n] {
+            let v = [(v.x as f64 * weight) as f32, (v.y as f64 * weight) as f32, (v.z as f64 * weight) as f32];
+            self.push(layer, pixel, v);
+        }
+    }
+
+    /// Sorts the round's splats by band (a stable counting sort: each band keeps the order
+    /// the splats were made in).
+    fn sort_by_band(&mut self) {
+        let mut counts = [0usize; MERGE_BANDS + 1];
+        for s in &self.raw {
+            counts[self.band(s) + 1] += 1;
+        }
+        for b in 0..MERGE_BANDS {
+            counts[b + 1] += counts[b];
+        }
+        self.offsets = counts;
+        self.sorted.clear();
+        self.sorted.resize(self.raw.len(), Splat { at: 0, v: [0.0; 3] });
+        for s in &self.raw {
+            let b = self.band(s);
+            self.sorted[counts[b]] = *s;
+            counts[b] += 1;
+        }
+    }
+
+    fn band_splats(&self, b: usize) -> &[Splat] {
+        &self.sorted[self.offsets[b]..self.offsets[b + 1]]
+    }
+}
 
 struct Chain {
     s: PssSampler,
     cur: Evaluated,
     d: usize,
     remaining: u64,
+    path: Path,
+    log: Log,
 }
 
 /// One Metropolis–Hastings step with expected-value splatting (docs/algorithm.md §2).
-fn mutate(target: &Target, c: &mut Chain, path: &mut Path, group: &mut Group, gradient: bool) {
+fn mutate(target: &Target, c: &mut Chain, gradient: bool) {
     c.s.start_iteration();
     let d_new = if !gradient {
         c.d
@@ -159,53 +270,98 @@ fn mutate(target: &Target, c: &mut Chain, path: &mut Path, group: &mut Group, gr
     } else {
         c.d
     };
-    let prop = target.evaluate(&mut c.s, path, Some(d_new));
+    let prop = target.evaluate(&mut c.s, &mut c.path, Some(d_new));
     let (fc, fp) = (c.cur.f[c.d], prop.f[d_new]);
     let a = if fc > 0.0 { (fp / fc).min(1.0) } else { 1.0 };
     if fp > 0.0 {
-        splat(group, &prop.splats[d_new], a as f64 / fp as f64);
+        c.log.splat(&prop.splats[d_new], a as f64 / fp as f64);
     }
     if c.s.is_large_step() {
         // an independent uniform state (u, d): one more sample of b = E[F]
-        group.large_f += fp as f64;
-        group.large_steps += 1;
+        c.log.large_f += fp as f64;
+        c.log.large_steps += 1;
     }
     if fc > 0.0 {
-        splat(group, &c.cur.splats[c.d], (1.0 - a) as f64 / fc as f64);
+        c.log.splat(&c.cur.splats[c.d], (1.0 - a) as f64 / fc as f64);
     }
     if c.s.rng().next_1d() < a {
         c.s.accept();
         c.cur = prop;
         c.d = d_new;
-        group.accepted += 1;
+        c.log.accepted += 1;
     } else {
         c.s.reject();
     }
-    group.density[c.cur.splats[c.d].pixel] += 1.0;
-    group.mutations += 1;
+    c.log.push(DENSITY, c.cur.splats[c.d].pixel, [0.0; 3]);
+    c.log.mutations += 1;
 }
 
-struct Group {
-    layers: [Vec<[f64; 3]>; 3],
-    density: Vec<f64>,
+/// One merge band of the image: its slice of every layer and of the density.
+type BandMut<'a> = (Vec<&'a mut [[f64; 3]]>, &'a mut [u32]);
+
+/// The image so far: the splat sums of each layer (primal; and dx, dy for gdpssmlt), the
+/// chains' visits per pixel, and the tallies.
+struct Accum {
+    layers: Vec<Vec<[f64; 3]>>,
+    density: Vec<u32>,
     mutations: u64,
     accepted: u64,
-    /// Sum of F over the group's large-step proposals, and their number.
     large_f: f64,
     large_steps: u64,
-    /// The group's path storage, kept across rounds (no allocation per round).
-    path: Path,
 }
 
-fn splat(group: &mut Group, s: &Splats, weight: f64) {
-    if weight <= 0.0 || !weight.is_finite() {
-        return;
+impl Accum {
+    fn new(pixels: usize, gradient: bool) -> Accum {
+        let n_layers = if gradient { 3 } else { 1 };
+        Accum {
+            layers: (0..n_layers).map(|_| vec![[0.0; 3]; pixels]).collect(),
+            density: vec![0; pixels],
+            mutations: 0,
+            accepted: 0,
+            large_f: 0.0,
+            large_steps: 0,
+        }
     }
-    for &(layer, pixel, v) in &s.items[..s.n] {
-        let a = &mut group.layers[layer][pixel];
-        a[0] += v.x as f64 * weight;
-        a[1] += v.y as f64 * weight;
-        a[2] += v.z as f64 * weight;
+
+    /// Adds the chains' logs of a round: band by band in parallel, chain by chain in order
+    /// within a band (so every pixel sums its splats in the same order on any thread count).
+    fn merge(&mut self, chains: &[Chain]) {
+        let Some(first) = chains.first() else { return };
+        let bp = first.log.band_pixels as usize;
+        let mut layer_bands: Vec<std::slice::ChunksMut<'_, [f64; 3]>> =
+            self.layers.iter_mut().map(|l| l.chunks_mut(bp)).collect();
+        let bands: Vec<BandMut> = self
+            .density
+            .chunks_mut(bp)
+            .map(|d| (layer_bands.iter_mut().map(|it| it.next().expect("same band count")).collect(), d))
+            .collect();
+        bands.into_par_iter().enumerate().for_each(|(b, (mut layers, density))| {
+            let base = b * bp;
+            for c in chains {
+                for s in c.log.band_splats(b) {
+                    let (pixel, layer) = ((s.at / 4) as usize - base, (s.at % 4) as usize);
+                    if layer == DENSITY {
+                        density[pixel] += 1;
+                    } else {
+                        let a = &mut layers[layer][pixel];
+                        a[0] += s.v[0] as f64;
+                        a[1] += s.v[1] as f64;
+                        a[2] += s.v[2] as f64;
+                    }
+                }
+            }
+        });
+        for c in chains {
+            self.mutations += c.log.mutations;
+            self.accepted += c.log.accepted;
+            self.large_f += c.log.large_f;
+            self.large_steps += c.log.large_steps;
+        }
+    }
+
+    /// b = E[F] from the bootstrap's F sum and every large step so far.
+    fn normalisation(&self, boot_sum: f64, n_boot: usize) -> f64 {
+        (boot_sum + self.large_f) / (n_boot as u64 + self.large_steps) as f64
     }
 }
 
@@ -252,81 +408,63 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl,
     first.add(scene, settings.seed, VERY_DIRECT_SPP.0, control);
     let mut direct = first.very_direct(gradient);
 
-    // Every group starts its chains (bootstrap replay, direction ∝ F) ...
-    let mut states: Vec<(Group, Vec<Chain>)> = (0..GROUPS)
+    // Every chain starts from a bootstrap state (replayed; direction ∝ F) ...
+    let mut chains: Vec<Chain> = (0..n_chains)
         .into_par_iter()
-        .map(|g| {
-            let group = Group {
-                layers: [vec![[0.0; 3]; w * h], vec![[0.0; 3]; w * h], vec![[0.0; 3]; w * h]],
-                density: vec![0.0; w * h],
-                mutations: 0,
-                accepted: 0,
-                large_f: 0.0,
-                large_steps: 0,
-                path: Path::default(),
+        .filter_map(|chain| {
+            let mutations = total / n_chains as u64 + u64::from((chain as u64) < total % n_chains as u64);
+            let mut pick = IndependentSampler::new(chain_seed, chain as u64);
+            let (start, _) = starts.sample(pick.next_1d())?;
+            let start = match settings.chain_start {
+                ChainStart::Proportional => start,
+                ChainStart::Dimmest => dimmest?,
             };
+            let mut s = PssSampler::new(boot_seed, start as u64, p_large);
             let mut path = Path::default();
-            let chains: Vec<Chain> = (g..n_chains)
-                .step_by(GROUPS)
-                .filter_map(|chain| {
-                    let mutations = total / n_chains as u64 + u64::from((chain as u64) < total % n_chains as u64);
-                    let mut pick = IndependentSampler::new(chain_seed, chain as u64);
-                    let (start, _) = starts.sample(pick.next_1d())?;
-                    let start = match settings.chain_start {
-                        ChainStart::Proportional => start,
-                        ChainStart::Dimmest => dimmest?,
-                    };
-                    let mut s = PssSampler::new(boot_seed, start as u64, p_large);
-                    s.start_iteration();
-                    let cur = target.evaluate(&mut s, &mut path, None);
-                    s.accept();
-                    // its own proposal stream (two chains may start from the same bootstrap state)
-                    s.reseed(chain_seed ^ 0x5EED, chain as u64);
-                    let fsum: f32 = cur.f.iter().sum();
-                    let (mut d, mut acc) = (0, pick.next_1d() * fsum);
-                    while d < 3 && acc >= cur.f[d] {
-                        acc -= cur.f[d];
-                        d += 1;
-                    }
-                    Some(Chain { s, cur, d, remaining: mutations })
-                })
-                .collect();
-            (group, chains)
+            s.start_iteration();
+            let cur = target.evaluate(&mut s, &mut path, None);
+            s.accept();
+            // its own proposal stream (two chains may start from the same bootstrap state)
+            s.reseed(chain_seed ^ 0x5EED, chain as u64);
+            let fsum: f32 = cur.f.iter().sum();
+            let (mut d, mut acc) = (0, pick.next_1d() * fsum);
+            while d < 3 && acc >= cur.f[d] {
+                acc -= cur.f[d];
+                d += 1;
+            }
+            Some(Chain { s, cur, d, remaining: mutations, path, log: Log::new(w * h, gradient) })
         })
         .collect();
+    let mut image = Accum::new(w * h, gradient);
     // ... and all chains advance in rounds of ROUND mutations, so that a time limit or Esc
     // stops them at about the same length, and intermediate images can be taken in between.
-    while !control.should_stop() && states.iter().any(|(_, chains)| chains.iter().any(|c| c.remaining > 0)) {
-        states.par_iter_mut().for_each(|(group, chains)| {
-            let mut path = std::mem::take(&mut group.path);
-            for c in chains.iter_mut() {
-                if control.should_stop() {
-                    break;
-                }
-                let n = c.remaining.min(ROUND);
-                for _ in 0..n {
-                    mutate(&target, c, &mut path, group, gradient);
-                }
-                c.remaining -= n;
-                control.work_done.fetch_add(n, Ordering::Relaxed);
+    while !control.should_stop() && chains.iter().any(|c| c.remaining > 0) {
+        chains.par_iter_mut().with_max_len(1).for_each(|c| {
+            c.log.clear();
+            if control.should_stop() {
+                return;
             }
-            group.path = path;
+            let n = c.remaining.min(ROUND);
+            for _ in 0..n {
+                mutate(&target, c, gradient);
+            }
+            c.log.sort_by_band();
+            c.remaining -= n;
+            control.work_done.fetch_add(n, Ordering::Relaxed);
         });
-        let done: u64 = states.iter().map(|(g, _)| g.mutations).sum();
-        let target = very_direct_target(done, w * h);
+        image.merge(&chains);
+        let target = very_direct_target(image.mutations, w * h);
         if target >= 2 * first.spp {
             first.add(scene, settings.seed, target, control);
             direct = first.very_direct(gradient);
         }
         control.offer_preview(|| {
-            let groups: Vec<&Group> = states.iter().map(|(g, _)| g).collect();
-            let b = normalisation(boot_sum, n_boot, &groups);
-            resolve(&groups, b, w, h, gradient, &direct, settings.alpha_rec, Norm::L2, &|| false).remove(0).1
+            let b = image.normalisation(boot_sum, n_boot);
+            resolve(&image, b, w, h, gradient, &direct, settings.alpha_rec, Norm::L2, &|| false).remove(0).1
         });
     }
-    let groups: Vec<&Group> = states.iter().map(|(g, _)| g).collect();
-    let mutations: u64 = groups.iter().map(|g| g.mutations).sum();
-    let accepted: u64 = groups.iter().map(|g| g.accepted).sum();
+    drop(chains);
+    let (mutations, accepted) = (image.mutations, image.accepted);
     let mpp = mutations as f64 / (w * h) as f64;
     let mut stats = RenderStats {
         method: if gradient { "gdpssmlt" } else { "pssmlt" },
@@ -335,7 +473,7 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl,
         ..Default::default()
     };
     stats.acceptance = accepted as f64 / mutations.max(1) as f64;
-    let b = normalisation(boot_sum, n_boot, &groups);
+    let b = image.normalisation(boot_sum, n_boot);
     stats.normalization = b;
     stats.chains = n_chains;
     if starts.is_empty() {
@@ -345,19 +483,12 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl,
     let direct = first.very_direct(gradient);
     let [albedo, normal] = [1, 2].map(|k| first.mean(k));
     let norm = control.final_norm(settings.reconstruction);
-    let mut layers = resolve(&groups, b, w, h, gradient, &direct, settings.alpha_rec, norm, &|| control.is_cancelled());
+    let mut layers = resolve(&image, b, w, h, gradient, &direct, settings.alpha_rec, norm, &|| control.is_cancelled());
     let img = |v: Vec<f64>| Image { width: w, height: h, channels: 3, data: v.into_iter().map(|x| x as f32).collect() };
     layers.push(("Denoising Albedo".into(), img(albedo)));
     layers.push(("Denoising Normal".into(), img(normal)));
     stats.elapsed = control.elapsed();
     RenderOutput { layers, stats }
-}
-
-/// b = E[F] from the bootstrap's F sum and every group's large steps so far (summed in
-/// group order: the same value whatever the thread count).
-fn normalisation(boot_sum: f64, n_boot: usize, groups: &[&Group]) -> f64 {
-    let (f, n) = groups.iter().fold((boot_sum, n_boot as u64), |(f, n), g| (f + g.large_f, n + g.large_steps));
-    f / n as f64
 }
 
 /// Samples per pixel of the first-hit images after `mutations` mutations over `pixels`.
@@ -438,11 +569,11 @@ impl FirstHits {
     }
 }
 
-/// The output layers from the group buffers so far: splats × b/mpp; for gdpssmlt the
-/// screened Poisson reconstruction plus the very-direct image.
+/// The output layers from the image so far: splats × b/mpp; for gdpssmlt the screened
+/// Poisson reconstruction plus the very-direct image.
 #[allow(clippy::too_many_arguments)]
 fn resolve(
-    groups: &[&Group],
+    image: &Accum,
     b: f64,
     w: usize,
     h: usize,
@@ -452,29 +583,13 @@ fn resolve(
     norm: Norm,
     stop: &(dyn Fn() -> bool + Sync),
 ) -> Vec<(String, Image)> {
-    let mutations: u64 = groups.iter().map(|g| g.mutations).sum();
-    let mpp = mutations as f64 / (w * h) as f64;
+    let mpp = image.mutations as f64 / (w * h) as f64;
     let scale = if mpp > 0.0 { b / mpp } else { 0.0 };
-    let sum_layer = |l: usize| -> Vec<f64> {
-        let mut out = vec![0.0; w * h * 3];
-        for g in groups {
-            for (i, v) in g.layers[l].iter().enumerate() {
-                for c in 0..3 {
-                    out[i * 3 + c] += v[c] * scale;
-                }
-            }
-        }
-        out
-    };
+    let sum_layer =
+        |l: usize| -> Vec<f64> { image.layers[l].par_iter().flat_map_iter(|v| v.map(|x| x * scale)).collect() };
     let primal = sum_layer(PRIMAL);
-    let mut density = vec![0.0; w * h];
-    for g in groups {
-        for (a, d) in density.iter_mut().zip(&g.density) {
-            *a += d;
-        }
-    }
-    let dmean = density.iter().sum::<f64>() / (w * h) as f64;
-    let density_img: Vec<f64> = density.iter().flat_map(|v| [v / dmean.max(1e-300); 3]).collect();
+    let dmean = image.density.iter().map(|&d| d as f64).sum::<f64>() / (w * h) as f64;
+    let density_img: Vec<f64> = image.density.iter().flat_map(|&v| [v as f64 / dmean.max(1e-300); 3]).collect();
     let img = |v: &[f64]| Image { width: w, height: h, channels: 3, data: v.iter().map(|&x| x as f32).collect() };
     if !gradient {
         return vec![("Combined".into(), img(&primal)), ("MLT Density".into(), img(&density_img))];
