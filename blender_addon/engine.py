@@ -39,7 +39,7 @@ def _to_blender_rows(img, channels):
     out = np.empty((h, w, channels), np.float32)
     out[..., :3] = img[::-1, :, :3]
     if channels == 4:
-        out[..., 3] = 1.0
+        out[..., 3] = img[::-1, :, 3] if img.shape[2] >= 4 else 1.0
     return out
 
 
@@ -170,9 +170,12 @@ class GDMLTRenderEngine(bpy.types.RenderEngine):
                 layers = denoise_or_warn(layers, lambda m: self.report({"WARNING"}, f"GDMLT: {m}"),
                                          threads=settings["threads"])
                 denoised = "Noisy Image" in layers
+            from gdmlt.outputs import with_alpha
+
             for name, img in layers.items():
                 if name in channels_of:
-                    write(name, img)
+                    # Combined carries the transparent film's alpha in its A channel
+                    write(name, with_alpha(layers) if name == "Combined" else img)
         finally:
             self.end_result(result)
         st = res["stats"]

@@ -592,6 +592,8 @@ def camera_dict(scene, cam_ob):
     g = getattr(scene, "gdmlt", None)
     if g is not None:
         d["pixel_filter"], d["filter_width"] = g.pixel_filter_type, g.filter_width
+    if r.film_transparent:
+        d["film_transparent"] = True
     if cam.dof.use_dof:
         d["fstop"] = cam.dof.aperture_fstop
         focus = cam.dof.focus_distance

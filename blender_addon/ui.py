@@ -76,6 +76,9 @@ class GDMLT_PT_film(GDMLTRenderPanel, bpy.types.Panel):
         col.prop(s, "pixel_filter_type")
         if s.pixel_filter_type != "BOX":
             col.prop(s, "filter_width")
+        # Blender's own setting, as Cycles' Film > Transparent: the world seen by the camera
+        # becomes alpha
+        layout.prop(context.scene.render, "film_transparent", text="Transparent")
 
 
 CLASSES = (GDMLT_PT_sampling, GDMLT_PT_light_paths, GDMLT_PT_film, GDMLT_PT_performance)

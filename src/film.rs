@@ -2,6 +2,7 @@
 //! resolves to. Non-finite samples never reach it: they are counted and dropped.
 
 use crate::math::{is_finite_spectrum, Spectrum};
+use crate::path::PathContribution;
 use glam::Vec3;
 
 /// A float image, rows from the top, `channels` interleaved.
@@ -29,6 +30,19 @@ impl Image {
     }
 }
 
+impl Image {
+    /// Zeroes the colour of pixels whose alpha is 0: every camera sample there reached the
+    /// world through a transparent film, so the colour is exactly 0 (a premultiplied image).
+    /// The gradient-domain reconstruction spreads a little light into them; this takes it back.
+    pub fn clear_uncovered(&mut self, alpha: &Image) {
+        for (px, &a) in self.data.chunks_mut(self.channels).zip(&alpha.data) {
+            if a <= 0.0 {
+                px.iter_mut().for_each(|v| *v = 0.0);
+            }
+        }
+    }
+}
+
 /// Accumulators for one row of pixels; rows are owned by one thread at a time, so no locks.
 #[derive(Clone, Debug)]
 pub struct FilmRow {
@@ -37,6 +51,8 @@ pub struct FilmRow {
     pub direct: Vec<[f64; 3]>,
     pub albedo: Vec<[f64; 3]>,
     pub normal: Vec<[f64; 3]>,
+    /// Sum of the samples' `transparent` (film transparency; 0 unless the film is transparent).
+    pub transparent: Vec<f64>,
     pub count: Vec<u32>,
     pub invalid: u64,
 }
@@ -48,6 +64,7 @@ impl FilmRow {
             direct: vec![[0.0; 3]; width],
             albedo: vec![[0.0; 3]; width],
             normal: vec![[0.0; 3]; width],
+            transparent: vec![0.0; width],
             count: vec![0; width],
             invalid: 0,
         }
@@ -56,7 +73,8 @@ impl FilmRow {
     /// Adds one sample; a NaN/Inf radiance is counted and replaced by black (the sample
     /// still counts, so the estimator stays an average over all samples drawn).
     #[inline]
-    pub fn add(&mut self, x: usize, radiance: Spectrum, direct: Spectrum, albedo: Spectrum, normal: Vec3) {
+    pub fn add(&mut self, x: usize, sample: &PathContribution) {
+        let (radiance, direct, albedo, normal) = (sample.radiance, sample.very_direct, sample.albedo, sample.normal);
         let c = if is_finite_spectrum(radiance) {
             radiance
         } else {
@@ -76,6 +94,9 @@ impl FilmRow {
         }
         acc(&mut self.albedo[x], albedo);
         acc(&mut self.normal[x], normal);
+        if sample.transparent.is_finite() {
+            self.transparent[x] += sample.transparent as f64;
+        }
         self.count[x] += 1;
     }
 }
@@ -135,5 +156,15 @@ impl Film {
     }
     pub fn normal(&self) -> Image {
         self.resolve(|r| &r.normal)
+    }
+    /// Alpha (one channel): 1 − the mean transparency of each pixel's samples.
+    pub fn alpha(&self) -> Image {
+        let mut img = Image::new(self.width, self.height, 1);
+        for (y, row) in self.rows.iter().enumerate() {
+            for (x, (&t, &n)) in row.transparent.iter().zip(&row.count).enumerate() {
+                img.data[y * self.width + x] = (1.0 - t / n.max(1) as f64) as f32;
+            }
+        }
+        img
     }
 }

@@ -84,17 +84,33 @@ pub fn write_png(path: &Path, img: &Image) -> Result<(), RenderError> {
     let err = |e: &dyn std::fmt::Display| RenderError::Output(format!("{}: {e}", path.display()));
     let file = std::fs::File::create(path).map_err(|e| err(&e))?;
     let mut enc = png::Encoder::new(std::io::BufWriter::new(file), img.width as u32, img.height as u32);
-    enc.set_color(png::ColorType::Rgb);
+    let rgba = img.channels >= 4;
+    enc.set_color(if rgba { png::ColorType::Rgba } else { png::ColorType::Rgb });
     enc.set_depth(png::BitDepth::Eight);
     enc.set_source_srgb(png::SrgbRenderingIntent::Perceptual);
     // marks the file as GDMLT's: the CLI replaces a PNG beside its EXR only if it carries this
     enc.add_text_chunk(PNG_SOFTWARE.0.into(), PNG_SOFTWARE.1.into()).map_err(|e| err(&e))?;
     let mut writer = enc.write_header().map_err(|e| err(&e))?;
-    let bytes: Vec<u8> = img
-        .data
-        .chunks(img.channels)
-        .flat_map(|px| (0..3).map(move |c| (linear_to_srgb(px[c]) * 255.0 + 0.5) as u8))
-        .collect();
+    let byte = |v: f32| (v.clamp(0.0, 1.0) * 255.0 + 0.5) as u8;
+    let bytes: Vec<u8> = if rgba {
+        // PNG alpha is straight: the premultiplied colour is divided by alpha first (as
+        // Blender does when it saves a transparent film as PNG)
+        img.data
+            .chunks(img.channels)
+            .flat_map(|px| {
+                let a = if px[3].is_finite() { px[3].clamp(0.0, 1.0) } else { 1.0 };
+                let k = if a > 0.0 { 1.0 / a } else { 0.0 };
+                [
+                    byte(linear_to_srgb(px[0] * k)),
+                    byte(linear_to_srgb(px[1] * k)),
+                    byte(linear_to_srgb(px[2] * k)),
+                    byte(a),
+                ]
+            })
+            .collect()
+    } else {
+        img.data.chunks(img.channels).flat_map(|px| (0..3).map(move |c| byte(linear_to_srgb(px[c])))).collect()
+    };
     writer.write_image_data(&bytes).map_err(|e| err(&e))?;
     writer.finish().map_err(|e| err(&e))
 }

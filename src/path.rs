@@ -129,6 +129,10 @@ pub struct PathContribution {
     /// Albedo and normal of the first surface, for denoising passes.
     pub albedo: Spectrum,
     pub normal: Vec3,
+    /// With a transparent film: the throughput (mean over RGB) with which the camera ray
+    /// reached the world — 1 for a miss, less through tinted transparent surfaces, 0 when it
+    /// stopped at a surface. Its mean is 1 − alpha, as Cycles' "transparent" sum.
+    pub transparent: f32,
 }
 
 /// A path's camera ray and what it hits first: the start of `trace_path_from` (a caller may
@@ -254,6 +258,12 @@ pub fn trace_path_from<S: Sampler>(
         add(&mut out, beta * crossed, camera_ray);
 
         let Some(hit) = hit else {
+            if camera_visibility && scene.camera.film_transparent {
+                // the world behind the camera ray (or behind the transparent surfaces it
+                // crossed) is the film's transparency, not light
+                out.transparent += (beta.x + beta.y + beta.z) / 3.0;
+                break;
+            }
             let (le, pdf_light) = scene.world_eval(prev_p, d);
             if le.max_element() > 0.0 {
                 add(&mut out, beta * le * mis(pdf_light), camera_ray);
@@ -423,6 +433,7 @@ pub fn first_hit(scene: &Scene, cam: &CameraRay, hit: Option<TriHit>) -> FirstHi
     let tmax = hit.map_or(cam.tmax, |h| h.t);
     scene.for_each_light_crossed(cam.origin, cam.origin, cam.dir, tmax, true, |_, _, le, _| *l += le);
     match hit {
+        None if scene.camera.film_transparent => {}
         None => out.very_direct += scene.world_eval(cam.origin, cam.dir).0,
         Some(h) => {
             let si = scene.interaction(&h, cam.dir);
@@ -434,6 +445,27 @@ pub fn first_hit(scene: &Scene, cam: &CameraRay, hit: Option<TriHit>) -> FirstHi
         }
     }
     out
+}
+
+/// The expected throughput with which camera ray `cam` (first hitting `hit`) reaches the
+/// world straight through transparent surfaces (the product of their pass-through
+/// throughputs; 0 at an opaque surface): 1 − alpha of a transparent film, without the noise
+/// of choosing pass-through or not (the path's own `transparent` has the same mean).
+pub fn camera_transparency(scene: &Scene, cam: &CameraRay, hit: Option<TriHit>) -> f32 {
+    let mut t = Spectrum::ONE;
+    let mut hit = hit;
+    for _ in 0..=MAX_TRANSPARENT_BOUNCES {
+        let Some(h) = hit else {
+            return (t.x + t.y + t.z) / 3.0;
+        };
+        let si = scene.interaction(&h, cam.dir);
+        t *= scene.bsdf_at(&si).pass_through();
+        if !(t.max_element() > 0.0) {
+            return 0.0;
+        }
+        hit = scene.intersect(si.spawn_origin(cam.dir), cam.dir, 0.0, f32::INFINITY);
+    }
+    0.0 // past the transparent-bounce limit the path tracer stops too: opaque
 }
 
 #[inline]

@@ -257,6 +257,7 @@ fn parse_camera(d: &Bound<'_, PyDict>) -> PyResult<CameraDesc> {
         focus_distance: get_or(d, "focus_distance", def.focus_distance, ctx)?,
         pixel_filter: get_or(d, "pixel_filter", def.pixel_filter.clone(), ctx)?,
         filter_width: get_or(d, "filter_width", def.filter_width, ctx)?,
+        film_transparent: get_or(d, "film_transparent", false, ctx)?,
     })
 }
 
@@ -314,6 +315,7 @@ const LIGHT_KEYS: &[&str] = &[
 const CAMERA_KEYS: &[&str] = &[
     "clip_end",
     "clip_start",
+    "film_transparent",
     "filter_width",
     "focus_distance",
     "fstop",
@@ -805,6 +807,7 @@ fn builtin_scene<'py>(py: Python<'py>, name: &str, width: u32, height: u32) -> P
     cd.set_item("resolution_y", c.resolution_y)?;
     cd.set_item("pixel_filter", c.pixel_filter.clone())?;
     cd.set_item("filter_width", c.filter_width)?;
+    cd.set_item("film_transparent", c.film_transparent)?;
     out.set_item("camera", cd)?;
     out.set_item("world", d.world)?;
     Ok(out)

@@ -443,13 +443,17 @@ def write_layers(out: Path, layers: dict, png: bool, metadata=None):
     """The EXR (every layer; `metadata`: text attributes in its header) and the PNG beside it."""
     import gdmlt
 
-    names = ["Combined"] + [n for n in layers if n != "Combined"]
-    gdmlt.write_exr(str(out), [(n, layers[n]) for n in names], metadata)
+    from .outputs import with_alpha
+
+    combined = with_alpha(layers)
+    names = [n for n in layers if n not in ("Combined", "Alpha")]
+    gdmlt.write_exr(str(out), [("Combined", combined)] + [(n, layers[n]) for n in names], metadata)
     from .outputs import png_beside
 
     path = png_beside(out) if png else None
     if path is not None:
-        gdmlt.write_png(str(path), layers["Combined"])
+        gdmlt.write_png(str(path), combined)
+
 
 
 def merge_command(args):

@@ -42,3 +42,15 @@ def mark_png(path: Path):
     body = MARK[4:]
     chunk = struct.pack(">I", len(body)) + MARK + struct.pack(">I", zlib.crc32(MARK) & 0xFFFFFFFF)
     Path(path).write_bytes(data[:ihdr_end] + chunk + data[ihdr_end:])
+
+
+def with_alpha(layers: dict):
+    """The Combined image, as RGBA when the render has an "Alpha" layer (a transparent film:
+    the colour is premultiplied, as Blender's and Cycles' EXRs), else RGB."""
+    import numpy as np
+
+    c = layers["Combined"]
+    a = layers.get("Alpha")
+    if a is None:
+        return c
+    return np.ascontiguousarray(np.concatenate([c[..., :3], a[..., :1]], axis=2), dtype=np.float32)

@@ -80,6 +80,16 @@ pub enum Bsdf {
 }
 
 impl Bsdf {
+    /// The expected throughput of the pass-through lobe, τ·tint (zero without one): what a
+    /// ray going straight through carries on, on average.
+    #[inline]
+    pub fn pass_through(&self) -> Spectrum {
+        match self {
+            Bsdf::Principled { pass, pass_tint, .. } => *pass_tint * *pass,
+            _ => Spectrum::ZERO,
+        }
+    }
+
     /// f(wo, wi)·|cos θi| for non-delta lobes; zero for delta lobes.
     #[inline]
     pub fn eval(&self, wo: Vec3, wi: Vec3) -> Spectrum {

@@ -28,6 +28,8 @@ pub struct GdRow {
     pub direct: Vec<[f64; 3]>,
     pub albedo: Vec<[f64; 3]>,
     pub normal: Vec<[f64; 3]>,
+    /// Sum of the base samples' film transparency.
+    pub transparent: Vec<f64>,
     pub invalid: u64,
 }
 
@@ -41,6 +43,7 @@ impl GdRow {
             direct: z.clone(),
             albedo: z.clone(),
             normal: z,
+            transparent: vec![0.0; w],
             invalid: 0,
         }
     }
@@ -83,6 +86,7 @@ fn render_row(scene: &Scene, settings: &RenderSettings, y: usize, lo: usize, win
             acc(&mut me.direct[x], c.very_direct, 1.0);
             acc(&mut me.albedo[x], c.albedo, 1.0);
             acc(&mut me.normal[x], c.normal, 1.0);
+            me.transparent[x] += c.transparent as f64;
             for (i, (dx, dy)) in SHIFTS.into_iter().enumerate() {
                 let (nx, ny) = (x as i32 + dx, y as i32 + dy);
                 let inside = nx >= 0 && ny >= 0 && nx < w && ny < h;
@@ -191,16 +195,23 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl)
     let n = |v: &[f64]| f32_image(w, h, v);
     let albedo = to_image(&rows, |r| &r.albedo, scale);
     let normal = to_image(&rows, |r| &r.normal, scale);
+    let mut layers = vec![
+        ("Combined".into(), combined),
+        ("GD Primal".into(), primal_full),
+        ("GD Gradient X".into(), dx),
+        ("GD Gradient Y".into(), dy),
+        ("Very Direct".into(), direct),
+        ("Denoising Albedo".into(), n(&albedo)),
+        ("Denoising Normal".into(), n(&normal)),
+    ];
+    if scene.camera.film_transparent {
+        let data = rows.iter().flat_map(|r| r.transparent.iter().map(|t| (1.0 - t * scale) as f32)).collect();
+        let alpha = Image { width: w, height: h, channels: 1, data };
+        layers[0].1.clear_uncovered(&alpha);
+        layers.push(("Alpha".into(), alpha));
+    }
     RenderOutput {
-        layers: vec![
-            ("Combined".into(), combined),
-            ("GD Primal".into(), primal_full),
-            ("GD Gradient X".into(), dx),
-            ("GD Gradient Y".into(), dy),
-            ("Very Direct".into(), direct),
-            ("Denoising Albedo".into(), n(&albedo)),
-            ("Denoising Normal".into(), n(&normal)),
-        ],
+        layers,
         stats: RenderStats {
             method: "gdpt",
             elapsed: control.elapsed(),

@@ -26,7 +26,7 @@ use super::{ChainStart, RenderControl, RenderOutput, RenderSettings, RenderStats
 use crate::distribution::Distribution1D;
 use crate::film::Image;
 use crate::math::{abs_luminance, is_finite_spectrum, Spectrum};
-use crate::path::{first_hit, trace_path, Path};
+use crate::path::{camera_transparency, first_hit, trace_path, Path};
 use crate::reconstruct::{gradient_domain_image, Norm};
 use crate::sampler::{mix64, IndependentSampler, PssSampler, Sampler};
 use crate::scene::{CameraRay, Scene};
@@ -487,6 +487,14 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl,
     let img = |v: Vec<f64>| Image { width: w, height: h, channels: 3, data: v.into_iter().map(|x| x as f32).collect() };
     layers.push(("Denoising Albedo".into(), img(albedo)));
     layers.push(("Denoising Normal".into(), img(normal)));
+    if let Some(alpha) = first.alpha() {
+        // alpha comes from the first-hit pass, the colour from the chains: where the pass saw
+        // only the world, the colour is made 0 too (a sliver of geometry the chains found in
+        // such a pixel is lost: a bias confined to silhouettes, shrinking as the pass's
+        // samples grow with the mutations)
+        layers[0].1.clear_uncovered(&alpha);
+        layers.push(("Alpha".into(), alpha));
+    }
     stats.elapsed = control.elapsed();
     RenderOutput { layers, stats }
 }
@@ -497,9 +505,11 @@ fn very_direct_target(mutations: u64, pixels: usize) -> u32 {
 }
 
 /// Camera-visible emission, first-surface albedo and normal by plain Monte Carlo, jittered
-/// samples per pixel accumulated progressively: sums of [very direct, albedo, normal], RGB.
+/// samples per pixel accumulated progressively: sums of [very direct, albedo, normal], RGB;
+/// and, with a transparent film, of the camera rays' transparency (alpha = 1 − its mean).
 struct FirstHits {
     sums: [Vec<f64>; 3],
+    transparent: Vec<f64>,
     spp: u32,
     w: usize,
     h: usize,
@@ -507,7 +517,7 @@ struct FirstHits {
 
 impl FirstHits {
     fn new(w: usize, h: usize) -> FirstHits {
-        FirstHits { sums: std::array::from_fn(|_| vec![0.0; w * h * 3]), spp: 0, w, h }
+        FirstHits { sums: std::array::from_fn(|_| vec![0.0; w * h * 3]), transparent: Vec::new(), spp: 0, w, h }
     }
 
     /// Adds samples up to `target` per pixel, eight at a time (each pixel's eight traced as
@@ -519,11 +529,13 @@ impl FirstHits {
                 break;
             }
             let (from, n) = (self.spp, (target - self.spp).min(8));
-            let per_pixel: Vec<[Spectrum; 3]> = (0..h)
+            let film_transparent = scene.camera.film_transparent;
+            let per_pixel: Vec<([Spectrum; 3], f32)> = (0..h)
                 .into_par_iter()
                 .flat_map_iter(|y| {
                     (0..w).map(move |x| {
                         let mut acc = [Spectrum::ZERO; 3];
+                        let mut transparent = 0.0f32;
                         let mut rays = [CameraRay::default(); 8];
                         for (k, ray) in rays.iter_mut().enumerate().take(n as usize) {
                             let mut smp = super::pt::pixel_sampler(seed ^ 0xD1, y * w + x, from + k as u32);
@@ -536,16 +548,25 @@ impl FirstHits {
                             acc[0] += f.very_direct;
                             acc[1] += f.albedo;
                             acc[2] += f.normal;
+                            if film_transparent {
+                                transparent += camera_transparency(scene, ray, hit);
+                            }
                         }
-                        acc
+                        (acc, transparent)
                     })
                 })
                 .collect();
             for (k, sum) in self.sums.iter_mut().enumerate() {
-                for (i, p) in per_pixel.iter().enumerate() {
+                for (i, (p, _)) in per_pixel.iter().enumerate() {
                     sum[3 * i] += p[k].x as f64;
                     sum[3 * i + 1] += p[k].y as f64;
                     sum[3 * i + 2] += p[k].z as f64;
+                }
+            }
+            if film_transparent {
+                self.transparent.resize(w * h, 0.0);
+                for (t, (_, v)) in self.transparent.iter_mut().zip(&per_pixel) {
+                    *t += *v as f64;
                 }
             }
             self.spp += n;
@@ -556,6 +577,13 @@ impl FirstHits {
     fn mean(&self, k: usize) -> Vec<f64> {
         let n = self.spp.max(1) as f64;
         self.sums[k].iter().map(|v| v / n).collect()
+    }
+
+    /// The alpha layer of a transparent film (one channel), None otherwise.
+    fn alpha(&self) -> Option<Image> {
+        let n = self.spp.max(1) as f64;
+        let data = self.transparent.iter().map(|t| (1.0 - t / n) as f32).collect::<Vec<_>>();
+        (!data.is_empty()).then_some(Image { width: self.w, height: self.h, channels: 1, data })
     }
 
     /// The very-direct image gdpssmlt adds after reconstruction; zero for pssmlt, whose

@@ -56,7 +56,7 @@ fn render_row(
             let primary = Primary { lens: *lens, ray: rays[k], hit: hits[k] };
             // PT needs no recorded vertices or events: nothing is recorded on its hot path.
             let c = trace_path_from(scene, &settings.path, primary, sampler, None);
-            row.add(*x, c.radiance, c.very_direct, c.albedo, c.normal);
+            row.add(*x, &c);
         }
     }
     control.work_done.fetch_add(w as u64 * (to - from) as u64, Ordering::Relaxed);
@@ -86,13 +86,17 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl)
         }
     }
     let (spp_min, spp_max) = film.sample_count_range();
+    let mut layers = vec![
+        ("Combined".into(), film.color()),
+        ("Denoising Albedo".into(), film.albedo()),
+        ("Denoising Normal".into(), film.normal()),
+        ("Very Direct".into(), film.direct()),
+    ];
+    if scene.camera.film_transparent {
+        layers.push(("Alpha".into(), film.alpha()));
+    }
     RenderOutput {
-        layers: vec![
-            ("Combined".into(), film.color()),
-            ("Denoising Albedo".into(), film.albedo()),
-            ("Denoising Normal".into(), film.normal()),
-            ("Very Direct".into(), film.direct()),
-        ],
+        layers,
         stats: RenderStats {
             method: "pt",
             elapsed: control.elapsed(),
@@ -129,7 +133,7 @@ mod tests {
                     let mut sampler = pixel_sampler(settings.seed, y * w + x, s);
                     let raster = scene.camera.pixel_raster(x as f32, y as f32, sampler.next_2d());
                     let c = trace_path(&scene, &settings.path, raster, &mut sampler, None);
-                    single.add(x, c.radiance, c.very_direct, c.albedo, c.normal);
+                    single.add(x, &c);
                 }
             }
             assert_eq!(packets.count, single.count);

@@ -34,6 +34,8 @@ pub struct Camera {
     focus_distance: f32,
     /// Where a pixel's samples fall (pixel_filter.rs).
     pub filter: crate::pixel_filter::PixelFilter,
+    /// The world seen by camera rays is left out of the image (CameraDesc::film_transparent).
+    pub film_transparent: bool,
 }
 
 fn mat_from_rows(m: &[[f32; 4]; 4]) -> Mat4 {
@@ -168,6 +170,7 @@ impl Camera {
             aperture_radius,
             focus_distance,
             filter,
+            film_transparent: d.film_transparent,
         })
     }
 

@@ -213,6 +213,11 @@ pub struct CameraDesc {
     /// width in pixels (Cycles' default 1.5).
     pub pixel_filter: String,
     pub filter_width: f32,
+    /// Film transparent (Blender's Film > Transparent): the world seen by camera rays —
+    /// directly or through transparent surfaces — is left out of the image and the render
+    /// has an "Alpha" layer (1 − the share of such rays, as Cycles); the world still lights
+    /// the scene.
+    pub film_transparent: bool,
 }
 
 impl Default for CameraDesc {
@@ -239,6 +244,7 @@ impl Default for CameraDesc {
             window: None,
             pixel_filter: "BLACKMAN_HARRIS".into(),
             filter_width: 1.5,
+            film_transparent: false,
         }
     }
 }

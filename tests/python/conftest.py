@@ -20,7 +20,7 @@ def read_exr(path, channel="RGB"):
         ch = f.channels()
         key = channel if channel in ch else ("RGBA" if channel == "RGB" and "RGBA" in ch else channel)
         px = np.asarray(ch[key].pixels, dtype=np.float32)
-    return px[..., :3] if px.ndim == 3 and key == "RGBA" else px
+    return px[..., :3] if px.ndim == 3 and key == "RGBA" and channel == "RGB" else px
 
 
 def block_means(img, b):

@@ -19,19 +19,20 @@ from make_test_scenes import keep_lights  # noqa: E402  (the checked-in scenes' 
 SCENES = ROOT / "tests" / "scenes"
 
 
-def render_to_exr(bpy, scene, path, denoise=False):
-    """F12 into a 32-bit EXR. Denoising is off unless asked: the statistical comparisons
-    here need the raw, unbiased estimate (as Cycles' own are rendered without its denoiser)."""
+def render_to_exr(bpy, scene, path, denoise=False, rgba=False):
+    """F12 into a 32-bit EXR (RGB, or RGBA with `rgba`). Denoising is off unless asked: the
+    statistical comparisons here need the raw, unbiased estimate (as Cycles' own are rendered
+    without its denoiser)."""
     if hasattr(scene, "gdmlt"):
         scene.gdmlt.use_denoising = denoise
     img = scene.render.image_settings
     img.file_format = "OPEN_EXR"
     img.color_depth = "32"
-    img.color_mode = "RGB"
+    img.color_mode = "RGBA" if rgba else "RGB"
     scene.render.filepath = str(path)
     scene.render.use_file_extension = False
     bpy.ops.render.render(write_still=True)
-    return read_exr(path)
+    return read_exr(path, "RGBA" if rgba else "RGB")
 
 
 def test_demo_blend_matches_builtin_scene(bpy_mod, tmp_out):
@@ -169,7 +170,7 @@ def test_camera_projection_matches_blender(bpy_mod, case):
         assert abs(got[0] - expect[0]) < 1e-2 and abs(got[1] - expect[1]) < 1e-2, (got, expect)
 
 
-def assert_agrees_with_cycles(bpy, build, tmp_out, tag, spp=(256, 512), block=6, slack=0.005):
+def assert_agrees_with_cycles(bpy, build, tmp_out, tag, spp=(256, 512), block=6, slack=0.005, rgba=False):
     """Renders `build(bpy, engine, spp, seed)` twice per renderer (seeds 1, 2). The rms block
     difference of the two-seed means must be within 2× the noise measured from the seed
     differences of both renderers, and the image means within 4σ of that noise plus `slack`
@@ -178,7 +179,8 @@ def assert_agrees_with_cycles(bpy, build, tmp_out, tag, spp=(256, 512), block=6,
     for engine, n in zip(("CYCLES", "GDMLT"), spp):
         for seed in (1, 2):
             scene = build(bpy, engine, n, seed)
-            imgs[engine, seed] = block_means(render_to_exr(bpy, scene, tmp_out / f"{tag}{engine}{seed}.exr"), block)
+            exr = render_to_exr(bpy, scene, tmp_out / f"{tag}{engine}{seed}.exr", rgba=rgba)
+            imgs[engine, seed] = block_means(exr, block)
     c = (imgs["CYCLES", 1] + imgs["CYCLES", 2]) / 2
     g = (imgs["GDMLT", 1] + imgs["GDMLT", 2]) / 2
     var = (np.mean((imgs["CYCLES", 1] - imgs["CYCLES", 2]) ** 2) + np.mean((imgs["GDMLT", 1] - imgs["GDMLT", 2]) ** 2)) / 4
@@ -378,6 +380,25 @@ def test_spot_sun_world_and_all_lights_together_agree_with_cycles(bpy_mod, tmp_o
         return open_scene(bpy, "lights", engine, spp // 2, seed, keep=keep)
 
     assert_agrees_with_cycles(bpy_mod, build, tmp_out, kind, block=5)
+
+
+@pytest.mark.parametrize("method", ["PT", "GDPSSMLT"])
+def test_transparent_film_agrees_with_cycles(bpy_mod, tmp_out, method):
+    """Issue 17: Film > Transparent was ignored (alpha 1, the world in the image). With it, the
+    world seen by the camera leaves the colour and becomes alpha, as in Cycles: RGBA block
+    means agree with Cycles' (colour premultiplied, as Blender writes EXRs), and the sky is
+    transparent while the ground is opaque."""
+    def build(bpy, engine, spp, seed):
+        scene = open_scene(bpy, "lights", engine, spp, seed, keep={"Area", "World"})
+        scene.render.film_transparent = True
+        if engine == "GDMLT":
+            scene.gdmlt.method = method
+        return scene
+
+    c, g = assert_agrees_with_cycles(bpy_mod, build, tmp_out, f"transparent{method}", rgba=True)
+    alpha = g[..., 3]
+    assert alpha.min() < 0.05 and alpha.max() > 0.95, (alpha.min(), alpha.max())
+    assert np.abs(alpha - c[..., 3]).max() < 0.05
 
 
 def test_light_colour_temperature_agrees_with_cycles_and_survives_usd(bpy_mod, tmp_out):

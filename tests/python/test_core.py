@@ -250,3 +250,35 @@ def test_builtin_scene_dicts_carry_every_material_feature():
     # and the dicts build: the same scene as the core's own (the image of a lit, finite render)
     img = gdmlt.render(gdmlt.Scene(veil), spp=4, seed=1)["layers"]["Combined"]
     assert np.isfinite(img).all() and img.mean() > 0
+
+
+@pytest.mark.parametrize("method", gdmlt.METHODS)
+def test_transparent_film_writes_rgba_exr_and_straight_alpha_png(tmp_path, method):
+    """Issue 17: a render with a transparent film has an "Alpha" layer; the CLI's writer puts
+    it into Combined's A channel (EXR, colour premultiplied) and the PNG stores straight alpha
+    (colour divided by alpha, as Blender saves it). The Cornell box without its back wall:
+    the world behind the opening is transparent, the walls opaque."""
+    from PIL import Image
+
+    from gdmlt.cli import write_layers
+
+    desc = gdmlt.builtin_scene("cornell", 24, 24)
+    desc["meshes"] = [m for m in desc["meshes"] if m["name"] != "BackWall"]
+    desc["world"] = (0.3, 0.5, 0.9)
+    desc["camera"]["film_transparent"] = True
+    layers = gdmlt.render(gdmlt.Scene(desc), method=method, spp=16, seed=1)["layers"]
+    alpha = layers["Alpha"]
+    assert alpha.shape == (24, 24, 1) and alpha.min() < 0.01 and alpha.max() > 0.99
+    write_layers(tmp_path / "t.exr", layers, png=True)
+    rgba = read_exr(tmp_path / "t.exr", "RGBA")
+    assert rgba.shape == (24, 24, 4)
+    np.testing.assert_array_equal(rgba[..., 3], alpha[..., 0])
+    png = np.asarray(Image.open(tmp_path / "t.png"))
+    assert png.shape == (24, 24, 4)
+    np.testing.assert_array_equal(png[..., 3], np.round(np.clip(alpha[..., 0], 0, 1) * 255).astype(np.uint8))
+    # where the camera sees the world only, the colour is transparent black, not the sky
+    sky = alpha[..., 0] < 1e-6
+    assert sky.sum() > 20 and np.abs(rgba[sky][:, :3]).max() < 1e-6
+    opaque = desc.copy()
+    opaque["camera"] = dict(desc["camera"], film_transparent=False)
+    assert "Alpha" not in gdmlt.render(gdmlt.Scene(opaque), method="pt", spp=1)["layers"]
