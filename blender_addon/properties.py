@@ -32,6 +32,18 @@ class GDMLTRenderSettings(bpy.types.PropertyGroup):
                               description="Stop after this many seconds (0 = no limit); whichever of samples and time comes first")
     max_bounces: IntProperty(name="Max Bounces", default=8, min=0, max=1024,
                              description="Total maximum number of bounces, as in Cycles (0 = direct light only)")
+    diffuse_bounces: IntProperty(name="Diffuse", default=1024, min=0, max=1024,
+                                 description="Maximum number of diffuse reflection bounces, as in Cycles "
+                                             "(1024: only the total limits them)")
+    glossy_bounces: IntProperty(name="Glossy", default=1024, min=0, max=1024,
+                                description="Maximum number of glossy reflection bounces, as in Cycles "
+                                            "(1024: only the total limits them)")
+    transmission_bounces: IntProperty(name="Transmission", default=1024, min=0, max=1024,
+                                      description="Maximum number of transmission bounces (through glass), as in "
+                                                  "Cycles (1024: only the total limits them)")
+    transparent_max_bounces: IntProperty(name="Transparent", default=16, min=0, max=1024,
+                                         description="Maximum number of transparent surfaces a path crosses, as "
+                                                     "Cycles' Transparent Max Bounces (crossings are not bounces)")
     use_nee: BoolProperty(name="Next Event Estimation", default=True,
                           description="Sample lights directly with shadow rays (off: lights are found only by hitting them, the paper's naive mode)")
     seed: IntProperty(name="Seed", default=0, min=0, description="Random seed; the same seed and settings give the same image")

@@ -49,7 +49,12 @@ class GDMLT_PT_light_paths(GDMLTRenderPanel, bpy.types.Panel):
         layout = self.layout
         layout.use_property_split = True
         layout.use_property_decorate = False
-        layout.prop(s, "max_bounces")
+        col = layout.column(align=True)
+        col.prop(s, "max_bounces", text="Max Bounces Total")
+        col.prop(s, "diffuse_bounces")
+        col.prop(s, "glossy_bounces")
+        col.prop(s, "transmission_bounces")
+        col.prop(s, "transparent_max_bounces")
         layout.prop(s, "use_nee")
 
 

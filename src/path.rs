@@ -11,6 +11,7 @@
 //! is direct lighting (light sampled at, or hit after, the first surface).
 
 use crate::accel::TriHit;
+use crate::bsdf::Scatter;
 use crate::math::{is_finite_spectrum, power_heuristic, Frame, Spectrum};
 use crate::sampler::Sampler;
 use crate::scene::{CameraRay, Scene, SurfaceInteraction};
@@ -19,21 +20,48 @@ use glam::{Vec2, Vec3};
 /// Russian roulette starts after this many scattering events.
 pub const RR_START_DEPTH: u32 = 3;
 /// Crossings of transparent surfaces (pass-through lobe) do not count as bounces; a path
-/// ends after this many, as Cycles' "Transparent Max Bounces".
+/// ends after this many by default, as Cycles' "Transparent Max Bounces"
+/// (`PathSettings::transparent_bounces`).
 pub const MAX_TRANSPARENT_BOUNCES: u32 = 16;
 /// Primary samples used per path vertex (see the module comment).
 pub const SAMPLES_PER_VERTEX: usize = 7;
 
+/// Path length limits, with Cycles' meaning: a path may scatter `max_bounces` times in all
+/// and at most `diffuse_bounces` / `glossy_bounces` / `transmission_bounces` times of each
+/// kind (bsdf::Scatter); the vertex after the last allowed scattering still adds direct light,
+/// the one after that only the emission its ray hits (so 0 = direct light only). Crossings
+/// of transparent surfaces count separately, up to `transparent_bounces`.
 #[derive(Clone, Copy, Debug)]
 pub struct PathSettings {
     pub max_bounces: u32,
     /// Next-event estimation with MIS; off = the paper's naive mode (lights only by hitting).
     pub nee: bool,
+    pub diffuse_bounces: u32,
+    pub glossy_bounces: u32,
+    pub transmission_bounces: u32,
+    pub transparent_bounces: u32,
+}
+
+/// A per-kind limit that never binds before the total does.
+pub const NO_KIND_LIMIT: u32 = 1024;
+
+impl PathSettings {
+    /// Total limit `max_bounces`, no per-kind limit, NEE on or off.
+    pub fn new(max_bounces: u32, nee: bool) -> PathSettings {
+        PathSettings { max_bounces, nee, ..Default::default() }
+    }
 }
 
 impl Default for PathSettings {
     fn default() -> Self {
-        PathSettings { max_bounces: 8, nee: true }
+        PathSettings {
+            max_bounces: 8,
+            nee: true,
+            diffuse_bounces: NO_KIND_LIMIT,
+            glossy_bounces: NO_KIND_LIMIT,
+            transmission_bounces: NO_KIND_LIMIT,
+            transparent_bounces: MAX_TRANSPARENT_BOUNCES,
+        }
     }
 }
 
@@ -179,6 +207,8 @@ pub fn trace_path_from<S: Sampler>(
     let mut beta = Spectrum::ONE;
     let mut depth = 0u32; // scattering events so far (bounces; pass-through crossings excluded)
     let mut transparent = 0u32; // pass-through crossings so far
+    let mut by_kind = [0u32; 3]; // scattering events so far: diffuse, glossy, transmission
+    let kind_limit = [cfg.diffuse_bounces, cfg.glossy_bounces, cfg.transmission_bounces];
     let mut nvert = 0u32; // surface vertices so far (the index of the next one)
     let mut prev_p = o;
     let mut prev_pdf = 0.0f32; // pdf of the BSDF sample that produced `d` (0: camera ray)
@@ -309,7 +339,7 @@ pub fn trace_path_from<S: Sampler>(
         let u_lobe = sampler.next_1d();
         let u_bsdf = sampler.next_2d();
         let u_rr = sampler.next_1d();
-        if depth > cfg.max_bounces {
+        if depth > cfg.max_bounces || by_kind.iter().zip(&kind_limit).any(|(n, max)| n > max) {
             break;
         }
         let wo = si.frame.to_local(wo_world);
@@ -373,6 +403,12 @@ pub fn trace_path_from<S: Sampler>(
             transparent += 1;
         } else {
             depth += 1;
+            match bs.scatter {
+                Scatter::Diffuse => by_kind[0] += 1,
+                Scatter::Glossy => by_kind[1] += 1,
+                Scatter::Transmission => by_kind[2] += 1,
+                Scatter::Transparent => {}
+            }
         }
         let q = if depth >= RR_START_DEPTH && !pass_through { beta.max_element().min(1.0) } else { 1.0 };
         if let Some(v) = record.as_deref_mut().and_then(|p| p.vertices.last_mut()) {
@@ -389,7 +425,7 @@ pub fn trace_path_from<S: Sampler>(
             }
             beta /= q;
         }
-        if !is_finite_spectrum(beta) || beta.max_element() <= 0.0 || transparent > MAX_TRANSPARENT_BOUNCES {
+        if !is_finite_spectrum(beta) || beta.max_element() <= 0.0 || transparent > cfg.transparent_bounces {
             break;
         }
         if pass_through {
@@ -451,10 +487,10 @@ pub fn first_hit(scene: &Scene, cam: &CameraRay, hit: Option<TriHit>) -> FirstHi
 /// world straight through transparent surfaces (the product of their pass-through
 /// throughputs; 0 at an opaque surface): 1 − alpha of a transparent film, without the noise
 /// of choosing pass-through or not (the path's own `transparent` has the same mean).
-pub fn camera_transparency(scene: &Scene, cam: &CameraRay, hit: Option<TriHit>) -> f32 {
+pub fn camera_transparency(scene: &Scene, cam: &CameraRay, hit: Option<TriHit>, max_crossings: u32) -> f32 {
     let mut t = Spectrum::ONE;
     let mut hit = hit;
-    for _ in 0..=MAX_TRANSPARENT_BOUNCES {
+    for _ in 0..=max_crossings {
         let Some(h) = hit else {
             return (t.x + t.y + t.z) / 3.0;
         };
@@ -493,7 +529,7 @@ mod tests {
             (Scene::build(&crate::scene::builtin::cornell_veil(16, 16)).unwrap(), true),
             (Scene::build(&crate::scene::builtin::cornell_veil(16, 16)).unwrap(), false),
         ] {
-            let cfg = PathSettings { max_bounces: 4, nee };
+            let cfg = PathSettings::new(4, nee);
             let mut path = Path::default();
             let (mut a, mut b) = (0.0f64, 0.0f64);
             let n = 200_000;
@@ -536,7 +572,7 @@ mod tests {
         quad.corner_uvs = [0, 1, 2, 0, 2, 3].iter().map(|&k| uv[k]).collect();
         let scene = Scene::build(&desc).unwrap();
         for nee in [false, true] {
-            let cfg = PathSettings { max_bounces: 4, nee };
+            let cfg = PathSettings::new(4, nee);
             let mut path = Path::default();
             let mut events = 0;
             for i in 0..40_000u64 {

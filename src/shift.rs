@@ -697,7 +697,7 @@ mod tests {
         use crate::path::{trace_path, PathSettings};
         use crate::sampler::{IndependentSampler, Sampler};
         let scene = Scene::build(&crate::scene::builtin::cornell_spheres(24, 24)).unwrap();
-        let cfg = PathSettings { max_bounces: 5, nee: true };
+        let cfg = PathSettings::new(5, true);
         let mut base = Path::default();
         let mut nonzero = 0;
         for i in 0..3000u64 {
@@ -740,7 +740,7 @@ mod tests {
         {
             let scene = Scene::build(&desc).unwrap();
             for nee in [false, true] {
-                let cfg = PathSettings { max_bounces: 8, nee };
+                let cfg = PathSettings::new(8, nee);
                 let mut base = Path::default();
                 let (mut sum_b, mut sum_o, mut n, mut equal) = (0.0f64, 0.0f64, 0, 0);
                 for i in 0..50_000u64 {
@@ -774,7 +774,7 @@ mod tests {
         use crate::path::{trace_path, PathSettings};
         use crate::sampler::{IndependentSampler, Sampler};
         let scene = Scene::build(&crate::scene::builtin::cornell_spheres(16, 16)).unwrap();
-        let cfg = PathSettings { max_bounces: 4, nee: true };
+        let cfg = PathSettings::new(4, true);
         let mut base = Path::default();
         let mut compared = 0;
         for i in 0..200_000u64 {
@@ -817,7 +817,7 @@ mod tests {
         use crate::path::{trace_path, PathSettings};
         use crate::sampler::{IndependentSampler, Sampler};
         let scene = Scene::build(&crate::scene::builtin::cornell_spheres(32, 32)).unwrap();
-        let cfg = PathSettings { max_bounces: 6, nee: true };
+        let cfg = PathSettings::new(6, true);
         let mut base = Path::default();
         let (mut compared, mut through_specular) = (0, 0);
         for i in 0..4000u64 {
@@ -881,7 +881,7 @@ mod tests {
         ] {
             let pick = |v: Spectrum| -> f64 { channel.map_or(crate::math::luminance(v), |c| v[c]) as f64 };
             let scene = &scenes[si];
-            let cfg = PathSettings { max_bounces: 6, nee };
+            let cfg = PathSettings::new(6, nee);
             let mut base = Path::default();
             // per pixel: [Σ pt, Σ pt², Σ base, Σ base², Σ offset, Σ offset²]
             let mut acc = vec![[0.0f64; 6]; w];

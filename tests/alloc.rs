@@ -36,7 +36,7 @@ fn allocations(scene: &Scene, method: Method, spp: u32) -> usize {
     let settings = RenderSettings {
         method,
         spp,
-        path: PathSettings { max_bounces: 6, nee: true },
+        path: PathSettings::new(6, true),
         seed: 3,
         threads: 1,
         reconstruction: Norm::L2,

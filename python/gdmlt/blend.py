@@ -9,7 +9,9 @@ PROPERTY_OF = {"method": "method", "spp": "samples", "time_limit": "time_limit",
                "nee": "use_nee", "seed": "seed", "threads": "threads",
                "reconstruction": "reconstruction", "alpha_rec": "alpha_reconstruction",
                "alpha_target": "alpha_target", "large_step_probability": "large_step_probability",
-               "chains": "chains", "denoise": "use_denoising"}
+               "chains": "chains", "denoise": "use_denoising", "diffuse_bounces": "diffuse_bounces",
+               "glossy_bounces": "glossy_bounces", "transmission_bounces": "transmission_bounces",
+               "transparent_bounces": "transparent_max_bounces"}
 
 
 def import_bpy():
@@ -85,7 +87,10 @@ def export_usd(path: Path, out: Path, frame=None) -> dict:
                 "max_bounces": int(g.max_bounces), "nee": bool(g.use_nee), "seed": int(g.seed),
                 "reconstruction": g.reconstruction.lower(), "alpha_rec": float(g.alpha_reconstruction),
                 "alpha_target": float(g.alpha_target), "large_step_probability": float(g.large_step_probability),
-                "chains": int(g.chains), "denoise": bool(g.use_denoising), "width": max(1, int(r.resolution_x * pct)),
+                "chains": int(g.chains), "denoise": bool(g.use_denoising),
+                "diffuse_bounces": int(g.diffuse_bounces), "glossy_bounces": int(g.glossy_bounces),
+                "transmission_bounces": int(g.transmission_bounces),
+                "transparent_bounces": int(g.transparent_max_bounces), "width": max(1, int(r.resolution_x * pct)),
                 "height": max(1, int(r.resolution_y * pct))}
     if scene.camera is not None:
         settings["camera"] = scene.camera.name

@@ -97,6 +97,10 @@ def build_parser():
     r.add_argument("--spp", type=_positive_int, help="samples (PT methods) or mutations (Metropolis methods) per pixel (default: the file's, else 64)")
     r.add_argument("--time", type=_nonneg_float, dest="time_limit", help="time limit in seconds, 0 = none; halts on whichever of --spp and --time comes first")
     r.add_argument("--max-bounces", type=_bounces, help="maximum bounces as in Cycles (0 = direct light; default 8)")
+    for kind, default in (("diffuse", 1024), ("glossy", 1024), ("transmission", 1024), ("transparent", 16)):
+        r.add_argument(f"--{kind}-bounces", type=_bounces,
+                       help=f"maximum {kind} bounces as in Cycles (default {default}"
+                            + (": only the total limits them)" if default == 1024 else ")"))
     nee = r.add_mutually_exclusive_group()
     nee.add_argument("--nee", dest="nee", action="store_true", default=None, help="next-event estimation with MIS (default)")
     nee.add_argument("--no-nee", dest="nee", action="store_false", help="naive path tracing: lights found only by hitting them")
@@ -141,13 +145,18 @@ def build_parser():
     return p
 
 
+# Path length limits per kind of scattering besides the total (Cycles' Light Paths panel).
+BOUNCE_KINDS = ("diffuse", "glossy", "transmission", "transparent")
+
+
 def _settings(args):
     return {k: v for k, v in {
         "method": args.method, "spp": args.spp, "time_limit": args.time_limit, "max_bounces": args.max_bounces,
         "nee": args.nee, "seed": args.seed, "threads": args.threads,
         "reconstruction": args.reconstruction, "alpha_rec": args.alpha_rec,
         "alpha_target": args.alpha_target, "large_step_probability": args.large_step_probability,
-        "chains": args.chains}.items() if v is not None}
+        "chains": args.chains, **{f"{k}_bounces": getattr(args, f"{k}_bounces") for k in BOUNCE_KINDS}}.items()
+        if v is not None}
 
 
 def _blend_settings(args):
@@ -187,6 +196,7 @@ def _flag(s):
 # which no CLI parser saw. The core validates again (gdmlt.render raises ValueError).
 SETTING_PARSERS = {"method": _choice(*RENDER_METHODS), "spp": _positive_int, "time_limit": _nonneg_float,
                    "max_bounces": _bounces, "nee": _flag, "seed": _seed, "threads": _threads,
+                   **{f"{k}_bounces": _bounces for k in BOUNCE_KINDS},
                    "reconstruction": _choice("l1", "l2"), "alpha_rec": _pos_float, "alpha_target": _pos_float,
                    "large_step_probability": _nonneg_float, "chains": _chains, "denoise": _flag,
                    "width": _side, "height": _side}
@@ -214,7 +224,8 @@ def render_settings(args) -> tuple:
     as in Cycles."""
     opts = {"method": "auto", "spp": 64, "time_limit": 0.0, "max_bounces": 8, "nee": True, "seed": 0, "threads": 0,
             "reconstruction": "l1", "alpha_rec": 0.2, "alpha_target": 1.0, "large_step_probability": 0.3,
-            "chains": 0}
+            "chains": 0, "diffuse_bounces": 1024, "glossy_bounces": 1024, "transmission_bounces": 1024,
+            "transparent_bounces": 16}
     if Path(args.scene).suffix.lower() in USD_SUFFIXES:
         from .usd import stored_settings
 

@@ -10,7 +10,7 @@
 
 use super::albedo::{ggx_albedo, ggx_albedo_average};
 use super::microfacet::{reflect, Ggx};
-use super::{BsdfSample, LobeKind, SPECULAR_ROUGHNESS_THRESHOLD};
+use super::{BsdfSample, LobeKind, Scatter, SPECULAR_ROUGHNESS_THRESHOLD};
 use crate::math::Spectrum;
 use glam::{Vec2, Vec3};
 
@@ -88,6 +88,7 @@ impl Conductor {
                 pdf: 1.0,
                 lobe: LobeKind::Specular,
                 eta: 1.0,
+                scatter: Scatter::Glossy,
             });
         }
         let g = Ggx::from_roughness(self.roughness);
@@ -102,7 +103,7 @@ impl Conductor {
         }
         // weight = F·G2/G1(wo) (the VNDF estimator)
         let weight = schlick(self.f0, wo.dot(h)) * (g.g2(wo, wi) / g.g1(wo)) * self.energy_scale(wo.z);
-        Some(BsdfSample { wi, weight, pdf, lobe: LobeKind::Diffuse, eta: 1.0 })
+        Some(BsdfSample { wi, weight, pdf, lobe: LobeKind::Diffuse, eta: 1.0, scatter: Scatter::Glossy })
     }
 }
 

@@ -8,7 +8,7 @@
 //! factor η² that makes it so; the smooth interface's refraction weight is (1 − F)/(1 − F) = 1.
 
 use super::microfacet::{fresnel_dielectric, reflect, refract, Ggx};
-use super::{BsdfSample, LobeKind, SPECULAR_ROUGHNESS_THRESHOLD};
+use super::{BsdfSample, LobeKind, Scatter, SPECULAR_ROUGHNESS_THRESHOLD};
 use crate::math::Spectrum;
 use glam::{Vec2, Vec3};
 
@@ -99,10 +99,24 @@ impl Dielectric {
             let f = fresnel_dielectric(wo.z, self.eta);
             if u_lobe < f {
                 let wi = Vec3::new(-wo.x, -wo.y, wo.z);
-                return Some(BsdfSample { wi, weight: self.tint, pdf: f, lobe: LobeKind::Specular, eta: 1.0 });
+                return Some(BsdfSample {
+                    wi,
+                    weight: self.tint,
+                    pdf: f,
+                    lobe: LobeKind::Specular,
+                    eta: 1.0,
+                    scatter: Scatter::Glossy,
+                });
             }
             let wi = refract(wo, Vec3::Z, self.eta)?;
-            return Some(BsdfSample { wi, weight: self.tint, pdf: 1.0 - f, lobe: LobeKind::Specular, eta: self.eta });
+            return Some(BsdfSample {
+                wi,
+                weight: self.tint,
+                pdf: 1.0 - f,
+                lobe: LobeKind::Specular,
+                eta: self.eta,
+                scatter: Scatter::Transmission,
+            });
         }
         let h = Ggx::from_roughness(self.roughness).sample_visible(wo, u);
         let f = fresnel_dielectric(wo.dot(h), self.eta);
@@ -114,7 +128,8 @@ impl Dielectric {
         if !(pdf > 0.0) {
             return None;
         }
-        Some(BsdfSample { wi, weight: self.eval(wo, wi) / pdf, pdf, lobe: LobeKind::Diffuse, eta })
+        let scatter = if eta == 1.0 { Scatter::Glossy } else { Scatter::Transmission };
+        Some(BsdfSample { wi, weight: self.eval(wo, wi) / pdf, pdf, lobe: LobeKind::Diffuse, eta, scatter })
     }
 
     /// The delta lobes of a smooth interface in direction `refraction` or reflection:

@@ -7,7 +7,7 @@
 //! Cycles' `bsdf_diffuse_sample` does). Refusing such `wo` darkened smooth-shaded low-poly
 //! meshes by 5–50% against Cycles.
 
-use super::{BsdfSample, LobeKind};
+use super::{BsdfSample, LobeKind, Scatter};
 use crate::math::{cosine_hemisphere_pdf, square_to_cosine_hemisphere, Spectrum};
 use glam::{Vec2, Vec3};
 use std::f32::consts::FRAC_1_PI;
@@ -39,7 +39,7 @@ impl Lambert {
             return None;
         }
         // f·cos/pdf = (albedo/π)·cos / (cos/π) = albedo
-        Some(BsdfSample { wi, weight: self.albedo, pdf, lobe: LobeKind::Diffuse, eta: 1.0 })
+        Some(BsdfSample { wi, weight: self.albedo, pdf, lobe: LobeKind::Diffuse, eta: 1.0, scatter: Scatter::Diffuse })
     }
 }
 

@@ -8,7 +8,7 @@
 
 use super::albedo::specular_albedo;
 use super::microfacet::{fresnel_dielectric, reflect, Ggx};
-use super::{BsdfSample, Lambert, LobeKind, SPECULAR_ROUGHNESS_THRESHOLD};
+use super::{BsdfSample, Lambert, LobeKind, Scatter, SPECULAR_ROUGHNESS_THRESHOLD};
 use crate::math::{luminance, Spectrum};
 use glam::{Vec2, Vec3};
 
@@ -127,6 +127,7 @@ impl Layered {
                 pdf: ps,
                 lobe: LobeKind::Specular,
                 eta: 1.0,
+                scatter: Scatter::Glossy,
             });
         }
         let wi = if u_lobe < ps {
@@ -138,7 +139,8 @@ impl Layered {
         if wi.z <= 0.0 || !(pdf > 0.0) {
             return None;
         }
-        Some(BsdfSample { wi, weight: f / pdf, pdf, lobe: LobeKind::Diffuse, eta: 1.0 })
+        let scatter = if u_lobe < ps { Scatter::Glossy } else { Scatter::Diffuse };
+        Some(BsdfSample { wi, weight: f / pdf, pdf, lobe: LobeKind::Diffuse, eta: 1.0, scatter })
     }
 
     /// The smooth layer's mirror lobe: (s·F as a discrete measure, its probability, wi).

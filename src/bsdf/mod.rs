@@ -33,6 +33,16 @@ pub enum LobeKind {
     Specular,
 }
 
+/// What kind of scattering a BSDF sample is, for the per-kind bounce limits (Cycles' labels:
+/// diffuse and glossy reflection, transmission through glass, transparent pass-through).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Scatter {
+    Diffuse,
+    Glossy,
+    Transmission,
+    Transparent,
+}
+
 /// The result of importance-sampling a BSDF.
 #[derive(Clone, Copy, Debug)]
 pub struct BsdfSample {
@@ -45,6 +55,7 @@ pub struct BsdfSample {
     pub lobe: LobeKind,
     /// Relative IOR crossed (1 for reflection).
     pub eta: f32,
+    pub scatter: Scatter,
 }
 
 impl BsdfSample {
@@ -157,7 +168,14 @@ impl Bsdf {
                 } else {
                     // straight through: f = τ·tint as a discrete measure, probability τ
                     let wi = -wo;
-                    return Some(BsdfSample { wi, weight: *pass_tint, pdf: *pass, lobe: LobeKind::Specular, eta: 1.0 });
+                    return Some(BsdfSample {
+                        wi,
+                        weight: *pass_tint,
+                        pdf: *pass,
+                        lobe: LobeKind::Specular,
+                        eta: 1.0,
+                        scatter: Scatter::Transparent,
+                    });
                 };
                 let mut bs = match k {
                     0 => diffuse.sample(wo, u_rest.min(0.999_999), u)?,

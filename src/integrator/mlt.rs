@@ -404,7 +404,7 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl,
     // Very-direct light of gdpssmlt by plain Monte Carlo (first, so previews include it; then
     // topped up as the chains advance), and the denoising albedo and normal of every
     // Metropolis render.
-    let mut first = FirstHits::new(w, h);
+    let mut first = FirstHits::new(w, h, settings.path.transparent_bounces);
     first.add(scene, settings.seed, VERY_DIRECT_SPP.0, control);
     let mut direct = first.very_direct(gradient);
 
@@ -510,14 +510,23 @@ fn very_direct_target(mutations: u64, pixels: usize) -> u32 {
 struct FirstHits {
     sums: [Vec<f64>; 3],
     transparent: Vec<f64>,
+    /// Transparent surfaces a camera ray may cross (PathSettings::transparent_bounces).
+    crossings: u32,
     spp: u32,
     w: usize,
     h: usize,
 }
 
 impl FirstHits {
-    fn new(w: usize, h: usize) -> FirstHits {
-        FirstHits { sums: std::array::from_fn(|_| vec![0.0; w * h * 3]), transparent: Vec::new(), spp: 0, w, h }
+    fn new(w: usize, h: usize, crossings: u32) -> FirstHits {
+        FirstHits {
+            sums: std::array::from_fn(|_| vec![0.0; w * h * 3]),
+            transparent: Vec::new(),
+            crossings,
+            spp: 0,
+            w,
+            h,
+        }
     }
 
     /// Adds samples up to `target` per pixel, eight at a time (each pixel's eight traced as
@@ -529,7 +538,7 @@ impl FirstHits {
                 break;
             }
             let (from, n) = (self.spp, (target - self.spp).min(8));
-            let film_transparent = scene.camera.film_transparent;
+            let (film_transparent, crossings) = (scene.camera.film_transparent, self.crossings);
             let per_pixel: Vec<([Spectrum; 3], f32)> = (0..h)
                 .into_par_iter()
                 .flat_map_iter(|y| {
@@ -549,7 +558,7 @@ impl FirstHits {
                             acc[1] += f.albedo;
                             acc[2] += f.normal;
                             if film_transparent {
-                                transparent += camera_transparency(scene, ray, hit);
+                                transparent += camera_transparency(scene, ray, hit, crossings);
                             }
                         }
                         (acc, transparent)
@@ -647,7 +656,7 @@ mod tests {
         let scene = Scene::build(&crate::scene::builtin::cornell_spheres(9, 7)).unwrap();
         let settings = RenderSettings { seed: 3, ..Default::default() };
         let (w, h) = (9, 7);
-        let mut first = FirstHits::new(w, h);
+        let mut first = FirstHits::new(w, h, settings.path.transparent_bounces);
         first.add(&scene, settings.seed, 5, &RenderControl::new(0.0)); // a first pass of 5,
         first.add(&scene, settings.seed, 21, &RenderControl::new(0.0)); // topped up to 21
         let spp = first.spp;

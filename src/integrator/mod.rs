@@ -108,8 +108,17 @@ impl RenderSettings {
         if !self.time_limit.is_finite() || self.time_limit < 0.0 {
             return Err(RenderError::Settings("time limit must be a finite number of seconds ≥ 0".into()));
         }
-        if self.path.max_bounces > 1024 {
-            return Err(RenderError::Settings("max bounces must be at most 1024".into()));
+        let p = &self.path;
+        for (what, n) in [
+            ("max bounces", p.max_bounces),
+            ("diffuse bounces", p.diffuse_bounces),
+            ("glossy bounces", p.glossy_bounces),
+            ("transmission bounces", p.transmission_bounces),
+            ("transparent bounces", p.transparent_bounces),
+        ] {
+            if n > 1024 {
+                return Err(RenderError::Settings(format!("{what} must be at most 1024")));
+            }
         }
         if !(self.alpha_rec.is_finite() && self.alpha_rec > 0.0) {
             return Err(RenderError::Settings("reconstruction alpha must be a finite number > 0".into()));
