@@ -114,7 +114,8 @@ class GDMLTRenderEngine(bpy.types.RenderEngine):
                         threads=render_threads(scene), reconstruction=s.reconstruction.lower(), alpha_rec=s.alpha_reconstruction,
                         alpha_target=s.alpha_target, large_step_probability=s.large_step_probability, chains=s.chains,
                         diffuse_bounces=s.diffuse_bounces, glossy_bounces=s.glossy_bounces,
-                        transmission_bounces=s.transmission_bounces, transparent_bounces=s.transparent_max_bounces)
+                        transmission_bounces=s.transmission_bounces, transparent_bounces=s.transparent_max_bounces,
+                        clamp_direct=s.clamp_direct, clamp_indirect=s.clamp_indirect)
         chosen = None
         if s.method == "AUTO":
             from gdmlt.auto import plan

@@ -44,6 +44,14 @@ class GDMLTRenderSettings(bpy.types.PropertyGroup):
     transparent_max_bounces: IntProperty(name="Transparent", default=16, min=0, max=1024,
                                          description="Maximum number of transparent surfaces a path crosses, as "
                                                      "Cycles' Transparent Max Bounces (crossings are not bounces)")
+    clamp_direct: FloatProperty(name="Direct Light", default=0.0, min=0.0,
+                                description="Clamp Direct, as in Cycles: limit a light sample's contribution "
+                                            "before any bounce (0 = off). Biased; not applied by the "
+                                            "gradient-domain methods")
+    clamp_indirect: FloatProperty(name="Indirect Light", default=0.0, min=0.0,
+                                  description="Clamp Indirect, as in Cycles: limit a light sample's contribution "
+                                              "after a bounce (0 = off; Cycles' default is 10). Biased; not "
+                                              "applied by the gradient-domain methods")
     use_nee: BoolProperty(name="Next Event Estimation", default=True,
                           description="Sample lights directly with shadow rays (off: lights are found only by hitting them, the paper's naive mode)")
     seed: IntProperty(name="Seed", default=0, min=0, description="Random seed; the same seed and settings give the same image")

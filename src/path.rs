@@ -40,6 +40,13 @@ pub struct PathSettings {
     pub glossy_bounces: u32,
     pub transmission_bounces: u32,
     pub transparent_bounces: u32,
+    /// Cycles' Clamp Direct / Clamp Indirect (0 = off): a light contribution whose RGB sum
+    /// exceeds 3 × the limit is scaled down to it (Cycles' scale: the sum of three channels) — direct for light reaching the camera ray or
+    /// sampled from its first vertex, indirect after a bounce (Cycles' rule: light found by
+    /// the first vertex's BSDF sample is already indirect). Biased, as in Cycles; `pt` and
+    /// `pssmlt` apply it (the gradient-domain methods do not: see integrator::render).
+    pub clamp_direct: f32,
+    pub clamp_indirect: f32,
 }
 
 /// A per-kind limit that never binds before the total does.
@@ -61,6 +68,8 @@ impl Default for PathSettings {
             glossy_bounces: NO_KIND_LIMIT,
             transmission_bounces: NO_KIND_LIMIT,
             transparent_bounces: MAX_TRANSPARENT_BOUNCES,
+            clamp_direct: 0.0,
+            clamp_indirect: 0.0,
         }
     }
 }
@@ -220,6 +229,16 @@ pub fn trace_path_from<S: Sampler>(
     let mut pass_tint = Spectrum::ONE;
     let mut last_vertex = CAMERA_VERTEX; // index of the last vertex that scattered
     let use_nee = cfg.nee && scene.has_lights();
+    // Cycles' sample clamping of a light contribution added after `bounces` scatterings
+    let clamp = |c: Spectrum, bounces: u32| -> Spectrum {
+        let limit = 3.0 * if bounces == 0 { cfg.clamp_direct } else { cfg.clamp_indirect };
+        let sum = c.x.abs() + c.y.abs() + c.z.abs();
+        if limit > 0.0 && sum > limit {
+            c * (limit / sum)
+        } else {
+            c
+        }
+    };
 
     loop {
         let hit = match pending_hit.take() {
@@ -285,7 +304,7 @@ pub fn trace_path_from<S: Sampler>(
             crossed += le * mis(pdf_light);
             push(&mut record, li, z, inf, le, pdf_light);
         });
-        add(&mut out, beta * crossed, camera_ray);
+        add(&mut out, clamp(beta * crossed, depth), camera_ray);
 
         let Some(hit) = hit else {
             if camera_visibility && scene.camera.film_transparent {
@@ -296,7 +315,7 @@ pub fn trace_path_from<S: Sampler>(
             }
             let (le, pdf_light) = scene.world_eval(prev_p, d);
             if le.max_element() > 0.0 {
-                add(&mut out, beta * le * mis(pdf_light), camera_ray);
+                add(&mut out, clamp(beta * le * mis(pdf_light), depth), camera_ray);
                 push(&mut record, scene.env_light(), d, true, le, pdf_light);
             }
             break;
@@ -304,7 +323,7 @@ pub fn trace_path_from<S: Sampler>(
         let si: SurfaceInteraction = scene.interaction(&hit, d);
         let wo_world = -d;
         if let Some((le, pdf_light)) = scene.surface_emission(&si, prev_p, d) {
-            add(&mut out, beta * le * mis(pdf_light), camera_ray);
+            add(&mut out, clamp(beta * le * mis(pdf_light), depth), camera_ray);
             let li = scene.triangle_light(si.prim).unwrap_or(u32::MAX);
             push(&mut record, li, si.p, false, le, pdf_light);
         }
@@ -366,7 +385,7 @@ pub fn trace_path_from<S: Sampler>(
                     let radiance = ls.radiance * tr;
                     let pdf_b = if ls.is_delta { 0.0 } else { bsdf.pdf(wo, wi) };
                     let w = if ls.is_delta { 1.0 } else { power_heuristic(ls.pdf, pdf_b) };
-                    add(&mut out, beta * f * radiance * (w / ls.pdf), false);
+                    add(&mut out, clamp(beta * f * radiance * (w / ls.pdf), depth), false);
                     let numerator = beta * f * radiance;
                     if let (Some(p), true) = (record.as_deref_mut(), numerator.max_element() > 0.0) {
                         let at_infinity = !ls.dist.is_finite();

@@ -83,7 +83,8 @@ def choose(desc: dict, settings: dict, cancelled=lambda: False) -> dict:
     t_each = max(MIN_PILOT_RENDER, PILOT_FRACTION * limit / (2 * len(candidates))) if limit else 0.1
     common = {k: settings[k] for k in ("max_bounces", "nee", "threads", "reconstruction", "alpha_rec",
                                        "large_step_probability", "alpha_target", "diffuse_bounces", "glossy_bounces",
-                                       "transmission_bounces", "transparent_bounces") if k in settings}
+                                       "transmission_bounces", "transparent_bounces", "clamp_direct",
+                                       "clamp_indirect") if k in settings}
     seed = int(settings.get("seed", 0))
     t0 = time.perf_counter()
     eff, pt_rate = {}, None

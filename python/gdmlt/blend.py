@@ -11,7 +11,8 @@ PROPERTY_OF = {"method": "method", "spp": "samples", "time_limit": "time_limit",
                "alpha_target": "alpha_target", "large_step_probability": "large_step_probability",
                "chains": "chains", "denoise": "use_denoising", "diffuse_bounces": "diffuse_bounces",
                "glossy_bounces": "glossy_bounces", "transmission_bounces": "transmission_bounces",
-               "transparent_bounces": "transparent_max_bounces"}
+               "transparent_bounces": "transparent_max_bounces", "clamp_direct": "clamp_direct",
+               "clamp_indirect": "clamp_indirect"}
 
 
 def import_bpy():
@@ -90,7 +91,8 @@ def export_usd(path: Path, out: Path, frame=None) -> dict:
                 "chains": int(g.chains), "denoise": bool(g.use_denoising),
                 "diffuse_bounces": int(g.diffuse_bounces), "glossy_bounces": int(g.glossy_bounces),
                 "transmission_bounces": int(g.transmission_bounces),
-                "transparent_bounces": int(g.transparent_max_bounces), "width": max(1, int(r.resolution_x * pct)),
+                "transparent_bounces": int(g.transparent_max_bounces), "clamp_direct": float(g.clamp_direct),
+                "clamp_indirect": float(g.clamp_indirect), "width": max(1, int(r.resolution_x * pct)),
                 "height": max(1, int(r.resolution_y * pct))}
     if scene.camera is not None:
         settings["camera"] = scene.camera.name

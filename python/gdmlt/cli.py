@@ -101,6 +101,10 @@ def build_parser():
         r.add_argument(f"--{kind}-bounces", type=_bounces,
                        help=f"maximum {kind} bounces as in Cycles (default {default}"
                             + (": only the total limits them)" if default == 1024 else ")"))
+    for kind in ("direct", "indirect"):
+        r.add_argument(f"--clamp-{kind}", type=_nonneg_float, dest=f"clamp_{kind}",
+                       help=f"Cycles' Clamp {kind.title()}: limit a light sample's contribution (default 0 = off; "
+                            "biased; pt and pssmlt only)")
     nee = r.add_mutually_exclusive_group()
     nee.add_argument("--nee", dest="nee", action="store_true", default=None, help="next-event estimation with MIS (default)")
     nee.add_argument("--no-nee", dest="nee", action="store_false", help="naive path tracing: lights found only by hitting them")
@@ -155,7 +159,8 @@ def _settings(args):
         "nee": args.nee, "seed": args.seed, "threads": args.threads,
         "reconstruction": args.reconstruction, "alpha_rec": args.alpha_rec,
         "alpha_target": args.alpha_target, "large_step_probability": args.large_step_probability,
-        "chains": args.chains, **{f"{k}_bounces": getattr(args, f"{k}_bounces") for k in BOUNCE_KINDS}}.items()
+        "chains": args.chains, "clamp_direct": args.clamp_direct, "clamp_indirect": args.clamp_indirect,
+        **{f"{k}_bounces": getattr(args, f"{k}_bounces") for k in BOUNCE_KINDS}}.items()
         if v is not None}
 
 
@@ -197,6 +202,7 @@ def _flag(s):
 SETTING_PARSERS = {"method": _choice(*RENDER_METHODS), "spp": _positive_int, "time_limit": _nonneg_float,
                    "max_bounces": _bounces, "nee": _flag, "seed": _seed, "threads": _threads,
                    **{f"{k}_bounces": _bounces for k in BOUNCE_KINDS},
+                   "clamp_direct": _nonneg_float, "clamp_indirect": _nonneg_float,
                    "reconstruction": _choice("l1", "l2"), "alpha_rec": _pos_float, "alpha_target": _pos_float,
                    "large_step_probability": _nonneg_float, "chains": _chains, "denoise": _flag,
                    "width": _side, "height": _side}
@@ -225,7 +231,7 @@ def render_settings(args) -> tuple:
     opts = {"method": "auto", "spp": 64, "time_limit": 0.0, "max_bounces": 8, "nee": True, "seed": 0, "threads": 0,
             "reconstruction": "l1", "alpha_rec": 0.2, "alpha_target": 1.0, "large_step_probability": 0.3,
             "chains": 0, "diffuse_bounces": 1024, "glossy_bounces": 1024, "transmission_bounces": 1024,
-            "transparent_bounces": 16}
+            "transparent_bounces": 16, "clamp_direct": 0.0, "clamp_indirect": 0.0}
     if Path(args.scene).suffix.lower() in USD_SUFFIXES:
         from .usd import stored_settings
 

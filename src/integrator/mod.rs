@@ -120,6 +120,11 @@ impl RenderSettings {
                 return Err(RenderError::Settings(format!("{what} must be at most 1024")));
             }
         }
+        for (what, v) in [("clamp direct", p.clamp_direct), ("clamp indirect", p.clamp_indirect)] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(RenderError::Settings(format!("{what} must be a finite number ≥ 0 (0 = off)")));
+            }
+        }
         if !(self.alpha_rec.is_finite() && self.alpha_rec > 0.0) {
             return Err(RenderError::Settings("reconstruction alpha must be a finite number > 0".into()));
         }
@@ -258,6 +263,20 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl)
     }
     let pool = builder.build().map_err(|e| RenderError::Settings(format!("thread pool: {e}")))?;
     let mut warnings = scene.report.warnings.clone();
+    let clamped = settings.path.clamp_direct > 0.0 || settings.path.clamp_indirect > 0.0;
+    let mut unclamped = settings.clone();
+    let settings = if clamped && matches!(settings.method, Method::Gdpt | Method::Gdpssmlt) {
+        // the shift mapping evaluates unclamped contributions: a clamped primal and very-direct
+        // image beside unclamped gradients would not reconstruct one image
+        warnings.push(format!(
+            "clamping (direct/indirect) is not applied by {}: its gradients are unclamped; pt and pssmlt clamp",
+            settings.method.name()
+        ));
+        (unclamped.path.clamp_direct, unclamped.path.clamp_indirect) = (0.0, 0.0);
+        &unclamped
+    } else {
+        settings
+    };
     if !settings.path.nee {
         let delta = scene.delta_lights();
         if !delta.is_empty() {

@@ -370,6 +370,36 @@ def test_bounces_per_kind_agree_with_cycles(bpy_mod, tmp_out, method):
     assert full.mean() > 1.02 * g.mean(), (full.mean(), g.mean())
 
 
+@pytest.mark.parametrize("method", ["PT", "PSSMLT"])
+def test_clamping_agrees_with_cycles(bpy_mod, tmp_out, method):
+    """Issue 17: Clamp Direct 0.3 / Indirect 0.02 set alike in Cycles and GDMLT (area and point
+    light scene). Clamping is biased and its result depends on how each renderer samples its
+    lights, so the images cannot agree to the noise; what must agree is what clamping does:
+    the light it removes (unclamped − clamped image mean) within 15% of Cycles', block by
+    block within 15% of the removal's rms. Fails where clamping is ignored (removal 0) or
+    uses another scale (without Cycles' 3× on the limit of the RGB sum GDMLT removed 0.365 of
+    0.41 where Cycles removes 0.29: the test failed)."""
+    imgs = {}
+    for engine, n in (("CYCLES", 256), ("GDMLT", 512)):
+        for clamp in (True, False):
+            scene = open_scene(bpy_mod, "lights", engine, n, 1, keep={"Area", "Point"})
+            if engine == "CYCLES" and clamp:
+                scene.cycles.sample_clamp_direct, scene.cycles.sample_clamp_indirect = 0.3, 0.02
+            if engine == "GDMLT":
+                scene.gdmlt.method = method
+                if clamp:
+                    scene.gdmlt.clamp_direct, scene.gdmlt.clamp_indirect = 0.3, 0.02
+            exr = render_to_exr(bpy_mod, scene, tmp_out / f"clamp{method}{engine}{clamp}.exr")
+            imgs[engine, clamp] = block_means(exr, 6)
+    removed = {e: imgs[e, False] - imgs[e, True] for e in ("CYCLES", "GDMLT")}
+    c, g = removed["CYCLES"], removed["GDMLT"]
+    print(f"clamping removes {c.mean():.4g} (Cycles) and {g.mean():.4g} (GDMLT {method}) of "
+          f"{imgs['CYCLES', False].mean():.4g}; rms difference {np.sqrt(np.mean((c - g) ** 2)):.4g}")
+    assert c.mean() > 0.05 * imgs["CYCLES", False].mean()
+    assert abs(g.mean() - c.mean()) < 0.15 * c.mean()
+    assert np.sqrt(np.mean((c - g) ** 2)) < 0.15 * np.sqrt(np.mean(c ** 2))
+
+
 @pytest.mark.parametrize("method", ["PT", "GDPSSMLT"])
 def test_long_render_shows_intermediate_images(bpy_mod, tmp_out, method):
     """A render that runs for a while updates the result before it ends (the first
