@@ -10,6 +10,9 @@ from . import export
 
 # Statistics of the last finished render in this process (the CLI prints them).
 last_stats = {}
+# The last render's warnings (export, scene, render), kept for the Render Properties'
+# "Last Render" panel: the status bar shows a warning only for a moment.
+last_warnings = []
 
 # The one table of extra passes: (name, channels, chan_id, type). Written when the core
 # returns a layer of that name (gradient-domain methods write the GD passes).
@@ -107,8 +110,17 @@ class GDMLTRenderEngine(bpy.types.RenderEngine):
         ntri = sum(len(m["indices"]) for m in desc["meshes"])
         self.update_stats("GDMLT", f"Building BVH ({ntri:,} triangles)")
         core_scene = gdmlt.Scene(desc)
+        shown = []
+
+        def warn(w):
+            if w not in shown:
+                shown.append(w)
+                self.report({"WARNING"}, f"GDMLT: {w}")
+
+        global last_warnings
+        last_warnings = shown  # filled as the render goes on
         for w in warnings + list(core_scene.warnings):
-            self.report({"WARNING"}, f"GDMLT: {w}")
+            warn(w)
         export_time = time.perf_counter() - t0
         settings = dict(spp=s.samples, time_limit=s.time_limit, max_bounces=s.max_bounces, nee=s.use_nee, seed=s.seed,
                         threads=render_threads(scene), reconstruction=s.reconstruction.lower(), alpha_rec=s.alpha_reconstruction,
@@ -170,7 +182,7 @@ class GDMLTRenderEngine(bpy.types.RenderEngine):
                 from gdmlt.oidn import denoise_or_warn
 
                 self.update_stats("GDMLT", "Denoising")
-                layers = denoise_or_warn(layers, lambda m: self.report({"WARNING"}, f"GDMLT: {m}"),
+                layers = denoise_or_warn(layers, warn,
                                          threads=settings["threads"])
                 denoised = "Noisy Image" in layers
             from gdmlt.outputs import with_alpha
@@ -185,10 +197,9 @@ class GDMLTRenderEngine(bpy.types.RenderEngine):
         global last_stats
         last_stats = dict(st, export_time=export_time, previews=previews, denoised=denoised, auto=chosen)
         for w_ in st["warnings"]:
-            if w_ not in core_scene.warnings:
-                self.report({"WARNING"}, f"GDMLT: {w_}")
+            warn(w_)
         if st["invalid_samples"]:
-            self.report({"WARNING"}, f"GDMLT: {st['invalid_samples']} samples were NaN/Inf and were dropped")
+            warn(f"{st['invalid_samples']} samples were NaN/Inf and were dropped")
         extra = f" | acceptance {st['acceptance'] * 100:.0f}%" if st.get("chains") else ""
         self.update_stats("GDMLT", f"{label} | {st['spp_max']} per pixel | render {st['elapsed']:.2f} s, "
                           f"export {export_time:.2f} s{extra}" + (" | denoised" if denoised else "") + (" | cancelled" if st["cancelled"] else ""))

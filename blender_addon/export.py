@@ -10,6 +10,8 @@ happens in the core. Everything unsupported is reported as a warning with a fall
 import numpy as np
 
 GEOMETRY_TYPES = {"MESH", "CURVE", "SURFACE", "META", "FONT", "CURVES", "POINTCLOUD", "VOLUME"}
+# Object types GDMLT cannot render yet: left out of the scene with a warning naming the object.
+NOT_RENDERED = {"CURVES": "hair curves", "POINTCLOUD": "point clouds", "VOLUME": "volumes"}
 
 DEFAULT_MATERIAL = {"name": "(default)", "base_color": (0.8, 0.8, 0.8), "emission": (0.0, 0.0, 0.0),
                     "roughness": 0.5, "metallic": 0.0, "transmission": 0.0, "ior": 1.5}
@@ -201,6 +203,7 @@ def material_params(mat, warnings, textures=None):
         c = tuple(mat.diffuse_color)[:3]
         out["base_color"] = c
         return out
+    _warn_unrendered_outputs(node_out, warnings, what)
     surface = node_out.inputs.get("Surface")
     if surface is None or not surface.is_linked:
         out["base_color"] = (0.0, 0.0, 0.0)  # Cycles renders an unconnected surface black
@@ -556,11 +559,12 @@ def _world(scene, warnings, textures):
     node_out = tree.get_output_node("CYCLES") if tree is not None else None
     if node_out is None:
         return tuple(world.color[:3]), None
+    what = f"world '{world.name}'"
+    _warn_unrendered_outputs(node_out, warnings, what)
     surface = node_out.inputs.get("Surface")
     if surface is None or not surface.is_linked:
         return black
     node = surface.links[0].from_node
-    what = f"world '{world.name}'"
     if node.type != "BACKGROUND":
         warnings.append(f"{what}: node '{node.name}' ({node.type}) is not supported; world is black")
         return black
@@ -573,6 +577,14 @@ def _world(scene, warnings, textures):
             return (strength, strength, strength), tex
     col = _input_value(node, "Color", warnings, what, (0.05, 0.05, 0.05, 1))[:3]
     return tuple(c * strength for c in col), None
+
+
+def _warn_unrendered_outputs(node_out, warnings, what):
+    """A warning for each linked output socket GDMLT does not render (volumes, displacement)."""
+    for socket in ("Volume", "Displacement"):
+        s = node_out.inputs.get(socket)
+        if s is not None and s.is_linked:
+            warnings.append(f"{what}: its {socket} output is not rendered yet (left out)")
 
 
 def camera_dict(scene, cam_ob):
@@ -652,6 +664,9 @@ def export_scene(depsgraph, test_break=lambda: False):
             continue
         if ob.type not in GEOMETRY_TYPES:
             continue
+        if ob.type in NOT_RENDERED:
+            warnings.append(f"object '{ob.name}': {NOT_RENDERED[ob.type]} are not rendered yet; it is left out")
+            continue
         key = (ob.name, ob.data.name if ob.data is not None else "") if inst.is_instance else None
         arrays = cache.get(key) if key else None
         if arrays is None:
@@ -683,6 +698,8 @@ def export_scene(depsgraph, test_break=lambda: False):
                        "normals": np.ascontiguousarray(nrm), "material_ids": mat_ids, "uvs": uvs})
     cam_ob = scene.camera.evaluated_get(depsgraph)
     world, world_texture = _world(scene, warnings, textures)
+    if scene.render.use_motion_blur:
+        warnings.append("motion blur is not rendered yet: the frame is rendered at its shutter's start")
     desc = {"meshes": meshes, "materials": materials, "textures": textures.items, "lights": lights,
             "camera": camera_dict(scene, cam_ob), "world": world, "world_texture": world_texture}
     # the same warning once

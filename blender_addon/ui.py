@@ -89,7 +89,44 @@ class GDMLT_PT_film(GDMLTRenderPanel, bpy.types.Panel):
         layout.prop(context.scene.render, "film_transparent", text="Transparent")
 
 
-CLASSES = (GDMLT_PT_sampling, GDMLT_PT_light_paths, GDMLT_PT_film, GDMLT_PT_performance)
+def wrapped(text: str, width: int = 72) -> list:
+    """`text` in lines of at most `width` characters, broken at spaces (a panel label does not
+    wrap)."""
+    lines, line = [], ""
+    for word in text.split():
+        if line and len(line) + 1 + len(word) > width:
+            lines.append(line)
+            line = word
+        else:
+            line = f"{line} {word}" if line else word
+    return lines + ([line] if line else [])
+
+
+class GDMLT_PT_last_render(GDMLTRenderPanel, bpy.types.Panel):
+    """The last render's warnings (material, node, object or light named), kept until the
+    next render."""
+    bl_label = "Last Render"
+
+    def draw(self, context):
+        from . import engine
+
+        layout = self.layout
+        if not engine.last_stats and not engine.last_warnings:
+            layout.label(text="No render yet")
+            return
+        st = engine.last_stats
+        if st:
+            layout.label(text=f"{st.get('method', '?')}: {st.get('spp_max', 0)} per pixel, "
+                              f"{st.get('elapsed', 0.0):.1f} s", icon="INFO")
+        if not engine.last_warnings:
+            layout.label(text="No warnings", icon="CHECKMARK")
+        for w in engine.last_warnings:
+            col = layout.column(align=True)
+            for k, line in enumerate(wrapped(w)):
+                col.label(text=line, icon="ERROR" if k == 0 else "BLANK1")
+
+
+CLASSES = (GDMLT_PT_sampling, GDMLT_PT_light_paths, GDMLT_PT_film, GDMLT_PT_performance, GDMLT_PT_last_render)
 
 # Blender's own panels (dimensions, output, colour management, camera, light, world data,
 # material slots and surface, world surface, spot shape, depth of field, object visibility)

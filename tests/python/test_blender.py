@@ -84,6 +84,41 @@ def test_unsupported_node_warns_and_falls_back(bpy_mod, tmp_out, capfd):
     assert "not supported" in err.out + err.err
 
 
+def test_what_gdmlt_leaves_out_is_named_and_kept_in_the_last_render_panel(bpy_mod, tmp_out):
+    """Issue 17: hair curves, point clouds, volume objects, a material's Volume output and
+    motion blur were dropped silently, and the warnings that existed flashed in the status
+    bar and were gone. Each is now a warning naming the object, material or setting, and the
+    last render's warnings stay in the Render Properties' "Last Render" panel (its lines
+    wrapped to fit) until the next render, which replaces them."""
+    bpy = bpy_mod
+    from gdmlt_blender import engine, ui
+
+    bpy.ops.wm.open_mainfile(filepath=str(ROOT / "examples" / "cornell.blend"))
+    scene = bpy.context.scene
+    scene.render.resolution_x = scene.render.resolution_y = 16
+    scene.gdmlt.samples, scene.gdmlt.method = 1, "PT"
+    for kind, data in (("Hair", bpy.data.hair_curves.new("Hair")), ("Cloud", bpy.data.pointclouds.new("Cloud")),
+                       ("Smoke", bpy.data.volumes.new("Smoke"))):
+        scene.collection.objects.link(bpy.data.objects.new(kind, data))
+    nt = bpy.data.materials["Red"].node_tree
+    vol = nt.nodes.new("ShaderNodeVolumePrincipled")
+    nt.links.new(vol.outputs[0], nt.get_output_node("CYCLES").inputs["Volume"])
+    scene.render.use_motion_blur = True
+    render_to_exr(bpy, scene, tmp_out / "dropped.exr")
+    text = "\n".join(engine.last_warnings)
+    for needle in ("object 'Hair': hair curves", "object 'Cloud': point clouds", "object 'Smoke': volumes",
+                   "material 'Red': its Volume output", "motion blur"):
+        assert needle in text, (needle, engine.last_warnings)
+    assert ui.GDMLT_PT_last_render.poll(bpy.context)
+    lines = [line for w in engine.last_warnings for line in ui.wrapped(w)]
+    assert all(len(line) <= 72 for line in lines) and " ".join(lines).split() == text.split()
+    # the next render's warnings replace them
+    scene.render.use_motion_blur = False
+    render_to_exr(bpy, scene, tmp_out / "dropped2.exr")
+    assert not any("motion blur" in w for w in engine.last_warnings)
+    assert any("object 'Hair'" in w for w in engine.last_warnings)
+
+
 def test_rgb_and_value_nodes_feed_their_constants(bpy_mod):
     """RGB and Value nodes linked into shader inputs give their constants, converted between
     colour and value sockets as Cycles does (luminance one way, grey the other), without a
