@@ -204,6 +204,10 @@ def merge(partials, alpha_rec=None, reconstruction=None) -> dict:
         merged["Combined"] = gdmlt.reconstruct(
             np.ascontiguousarray(merged["GD Primal"] - direct), merged["GD Gradient X"], merged["GD Gradient Y"],
             direct, alpha=alpha_rec or partials[0]["alpha_rec"], norm=reconstruction or partials[0]["reconstruction"])
+    if "Alpha" in merged:
+        # as the core does for one render: where every camera sample saw the (transparent)
+        # world, the colour is 0 — the reconstruction must not spread light there
+        merged["Combined"][merged["Alpha"][..., 0] <= 0.0] = 0.0
     return merged
 
 

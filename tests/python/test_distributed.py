@@ -38,6 +38,22 @@ def test_one_partial_merged_alone_is_the_plain_render(cornell, method, tmp_path)
     assert np.allclose(merged["Combined"], plain, rtol=1e-4, atol=1e-5)
 
 
+@pytest.mark.parametrize("method", ["pt", "gdpt", "gdpssmlt"])
+def test_partials_of_a_transparent_film_merge_to_the_plain_render_with_its_alpha(cornell, method, tmp_path):
+    """A transparent film's Alpha layer is carried by partials and merged; one partial merged
+    alone is the plain render, alpha and colour (the reconstruction of the merged gradients
+    leaves the world's pixels at 0, as the core does)."""
+    desc = dict(cornell, meshes=[m for m in cornell["meshes"] if m["name"] != "BackWall"], world=(0.3, 0.5, 0.9),
+                camera=dict(cornell["camera"], film_transparent=True))
+    settings = {"method": method, "spp": 8, "max_bounces": 4, "seed": 5, "reconstruction": "l1"}
+    dist.save_partial(tmp_path / "p.npz", dist.render_partial(desc, 0, 1, settings))
+    merged = dist.merge([dist.load_partial(tmp_path / "p.npz")])
+    plain = gdmlt.render(gdmlt.Scene(desc), **settings)["layers"]
+    np.testing.assert_array_equal(merged["Alpha"], plain["Alpha"])
+    assert (plain["Alpha"] <= 0).sum() > 20
+    assert np.allclose(merged["Combined"], plain["Combined"], rtol=1e-4, atol=1e-5)
+
+
 @pytest.mark.parametrize("method, spp", [("pt", 16), ("gdpt", 16), ("gdpssmlt", 32)])
 def test_merged_partials_converge_like_one_render_of_the_summed_budget(cornell, reference, method, spp):
     """4 partials merged: the error of the merged image against a PT reference (4×4 blocks)
