@@ -23,6 +23,12 @@ RECON_ITEMS = [
 ]
 
 
+def _kind_bounces(name, what):
+    """A per-kind bounce limit of the Light Paths panel (Cycles' meaning)."""
+    return IntProperty(name=name, default=1024, min=0, max=1024,
+                       description=f"Maximum number of {what} bounces, as in Cycles (1024: only the total limits them)")
+
+
 class GDMLTRenderSettings(bpy.types.PropertyGroup):
     method: EnumProperty(name="Method", items=METHOD_ITEMS, default="AUTO",
                          description="Light transport algorithm")
@@ -32,15 +38,9 @@ class GDMLTRenderSettings(bpy.types.PropertyGroup):
                               description="Stop after this many seconds (0 = no limit); whichever of samples and time comes first")
     max_bounces: IntProperty(name="Max Bounces", default=8, min=0, max=1024,
                              description="Total maximum number of bounces, as in Cycles (0 = direct light only)")
-    diffuse_bounces: IntProperty(name="Diffuse", default=1024, min=0, max=1024,
-                                 description="Maximum number of diffuse reflection bounces, as in Cycles "
-                                             "(1024: only the total limits them)")
-    glossy_bounces: IntProperty(name="Glossy", default=1024, min=0, max=1024,
-                                description="Maximum number of glossy reflection bounces, as in Cycles "
-                                            "(1024: only the total limits them)")
-    transmission_bounces: IntProperty(name="Transmission", default=1024, min=0, max=1024,
-                                      description="Maximum number of transmission bounces (through glass), as in "
-                                                  "Cycles (1024: only the total limits them)")
+    diffuse_bounces: _kind_bounces("Diffuse", "diffuse reflection")
+    glossy_bounces: _kind_bounces("Glossy", "glossy reflection")
+    transmission_bounces: _kind_bounces("Transmission", "transmission (through glass)")
     transparent_max_bounces: IntProperty(name="Transparent", default=16, min=0, max=1024,
                                          description="Maximum number of transparent surfaces a path crosses, as "
                                                      "Cycles' Transparent Max Bounces (crossings are not bounces)")

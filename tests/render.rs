@@ -5,7 +5,7 @@ use gdmlt::film::Image;
 use gdmlt::integrator::{render, Method, RenderControl, RenderOutput, RenderSettings};
 use gdmlt::path::PathSettings;
 use gdmlt::reconstruct::{gradients, reconstruct_rgb, Norm};
-use gdmlt::scene::builtin::{cornell_box, furnace_sphere};
+use gdmlt::scene::builtin::{cornell_box, cornell_veil, furnace_sphere};
 use gdmlt::scene::{Scene, SceneDesc};
 
 fn run(desc: &SceneDesc, spp: u32, nee: bool, max_bounces: u32, seed: u64, threads: usize) -> Image {
@@ -610,14 +610,9 @@ fn open_box_transparent_film(w: u32, h: u32) -> SceneDesc {
     let mut d = cornell_box(w, h);
     d.meshes.retain(|m| m.name != "BackWall");
     d.world = [0.3, 0.5, 0.9];
-    d.materials.push(gdmlt::scene::MaterialDesc {
-        name: "Veil".into(),
-        base_color: [0.8; 3],
-        roughness: 1.0,
-        transparency: 0.6,
-        transparent_color: [1.0, 0.7, 0.4],
-        ..Default::default()
-    });
+    // the built-in veil's material (transparency 0.6, tint (1, 0.7, 0.4))
+    let veil_material = cornell_veil(w, h).materials.into_iter().find(|m| m.name == "Veil").unwrap();
+    d.materials.push(veil_material);
     let m = d.materials.len() as u32 - 1;
     let mut veil = cornell_box(w, h).meshes.into_iter().find(|m| m.name == "BackWall").unwrap();
     veil.name = "Veil".into();
