@@ -36,10 +36,27 @@ METHOD_PASSES = {
 }
 
 
+# Blender's data passes GDMLT writes when the View Layer asks for them: (view layer toggle,
+# pass name, channels, channel ids, type) — the names and channels Cycles registers.
+DATA_PASSES = (
+    ("use_pass_z", "Depth", 1, "Z", "VALUE"),
+    ("use_pass_normal", "Normal", 3, "XYZ", "VECTOR"),
+    ("use_pass_position", "Position", 3, "XYZ", "VECTOR"),
+)
+
+
+def data_passes_of(view_layer) -> list:
+    """The DATA_PASSES rows the view layer has switched on."""
+    return [row for row in DATA_PASSES if getattr(view_layer, row[0], False)]
+
+
 def _to_blender_rows(img, channels):
     """Core image (H, W, C), top row first → flat float32 buffer, bottom row first."""
     h, w = img.shape[:2]
     out = np.empty((h, w, channels), np.float32)
+    if channels == 1:
+        out[..., 0] = img[::-1, :, 0]
+        return out
     out[..., :3] = img[::-1, :, :3]
     if channels == 4:
         out[..., 3] = img[::-1, :, 3] if img.shape[2] >= 4 else 1.0
@@ -77,6 +94,8 @@ class GDMLTRenderEngine(bpy.types.RenderEngine):
     def update_render_passes(self, scene=None, renderlayer=None):
         self.register_pass(scene, renderlayer, "Combined", 4, "RGBA", "COLOR")
         for name, channels, chan_id, kind in PASSES:
+            self.register_pass(scene, renderlayer, name, channels, chan_id, kind)
+        for _, name, channels, chan_id, kind in data_passes_of(renderlayer):
             self.register_pass(scene, renderlayer, name, channels, chan_id, kind)
 
     def esc_pressed(self) -> bool:
@@ -156,12 +175,17 @@ class GDMLTRenderEngine(bpy.types.RenderEngine):
         for name, channels, chan_id, _ in PASSES:
             if name in wanted:
                 self.add_pass(name, channels, chan_id, layer=layer_name)
+        data = data_passes_of(depsgraph.view_layer)
+        for _, name, channels, chan_id, _ in data:
+            self.add_pass(name, channels, chan_id, layer=layer_name)
+        # Depth and Position come from the core's data pass; Normal is the denoising normal
+        settings["data_passes"] = any(row[1] in ("Depth", "Position") for row in data)
         # with a render region the core renders only that window (w × h): Blender's render
         # result is then that region, with its origin at the region's corner
         result = self.begin_result(0, 0, w, h, layer=layer_name)
         try:
             passes = result.layers[0].passes
-            channels_of = dict([("Combined", 4)] + [(p[0], p[1]) for p in PASSES])
+            channels_of = dict([("Combined", 4)] + [(p[0], p[1]) for p in PASSES] + [(p[1], p[2]) for p in data])
             previews = 0
 
             def write(name, img):
@@ -187,6 +211,8 @@ class GDMLTRenderEngine(bpy.types.RenderEngine):
                 denoised = "Noisy Image" in layers
             from gdmlt.outputs import with_alpha
 
+            if "Denoising Normal" in layers:
+                layers = dict(layers, Normal=layers["Denoising Normal"])
             for name, img in layers.items():
                 if name in channels_of:
                     # Combined carries the transparent film's alpha in its A channel

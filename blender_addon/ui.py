@@ -126,7 +126,32 @@ class GDMLT_PT_last_render(GDMLTRenderPanel, bpy.types.Panel):
                 col.label(text=line, icon="ERROR" if k == 0 else "BLANK1")
 
 
-CLASSES = (GDMLT_PT_sampling, GDMLT_PT_light_paths, GDMLT_PT_film, GDMLT_PT_performance, GDMLT_PT_last_render)
+class GDMLT_PT_passes(bpy.types.Panel):
+    """View Layer > Passes: the data passes GDMLT writes besides its method's own (Combined,
+    the gradient-domain and Metropolis passes, the denoising guides, Noisy Image)."""
+    bl_label = "Passes"
+    bl_space_type = "PROPERTIES"
+    bl_region_type = "WINDOW"
+    bl_context = "view_layer"
+    COMPAT_ENGINES = {"GDMLT"}
+
+    @classmethod
+    def poll(cls, context):
+        return context.engine in cls.COMPAT_ENGINES
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        vl = context.view_layer
+        col = layout.column(heading="Data", align=True)
+        col.prop(vl, "use_pass_z")
+        col.prop(vl, "use_pass_normal")
+        col.prop(vl, "use_pass_position")
+
+
+CLASSES = (GDMLT_PT_sampling, GDMLT_PT_light_paths, GDMLT_PT_film, GDMLT_PT_performance, GDMLT_PT_last_render,
+           GDMLT_PT_passes)
 
 # Blender's own panels (dimensions, output, colour management, camera, light, world data,
 # material slots and surface, world surface, spot shape, depth of field, object visibility)

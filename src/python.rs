@@ -573,7 +573,7 @@ fn numpy_to_image(obj: &Bound<'_, PyAny>) -> PyResult<Image> {
 /// Renders a scene. `progress(fraction, elapsed_seconds)` is called about every 50 ms from
 /// the calling thread; if it returns True the render stops and keeps what it has.
 #[pyfunction]
-#[pyo3(signature = (scene, method="pt", spp=16, time_limit=0.0, max_bounces=8, nee=true, seed=0, threads=0, reconstruction="l1", alpha_rec=0.2, large_step_probability=0.3, alpha_target=1.0, chains=0, progress=None, preview=None, diffuse_bounces=1024, glossy_bounces=1024, transmission_bounces=1024, transparent_bounces=16, clamp_direct=0.0, clamp_indirect=0.0))]
+#[pyo3(signature = (scene, method="pt", spp=16, time_limit=0.0, max_bounces=8, nee=true, seed=0, threads=0, reconstruction="l1", alpha_rec=0.2, large_step_probability=0.3, alpha_target=1.0, chains=0, progress=None, preview=None, diffuse_bounces=1024, glossy_bounces=1024, transmission_bounces=1024, transparent_bounces=16, clamp_direct=0.0, clamp_indirect=0.0, data_passes=false))]
 #[allow(clippy::too_many_arguments)]
 fn render<'py>(
     py: Python<'py>,
@@ -598,6 +598,7 @@ fn render<'py>(
     transparent_bounces: u32,
     clamp_direct: f32,
     clamp_indirect: f32,
+    data_passes: bool,
 ) -> PyResult<Bound<'py, PyDict>> {
     let method = Method::parse(method).map_err(|e| verr(e.to_string()))?;
     let reconstruction = crate::reconstruct::Norm::parse(reconstruction)
@@ -623,6 +624,7 @@ fn render<'py>(
         large_step_probability,
         alpha_target,
         chains,
+        data_passes,
         ..RenderSettings::default()
     };
     settings.validate().map_err(|e| verr(e.to_string()))?;

@@ -5,6 +5,7 @@
 pub mod gdpt;
 pub mod memory;
 pub mod mlt;
+pub mod passes;
 pub mod pt;
 
 use crate::error::RenderError;
@@ -68,6 +69,8 @@ pub struct RenderSettings {
     pub chains: u32,
     /// Metropolis methods: how chains pick their start among the bootstrap samples.
     pub chain_start: ChainStart,
+    /// Add the Depth and Position passes (passes.rs).
+    pub data_passes: bool,
 }
 
 /// Where Metropolis chains start.
@@ -96,6 +99,7 @@ impl Default for RenderSettings {
             alpha_target: 1.0,
             chains: 0,
             chain_start: ChainStart::Proportional,
+            data_passes: false,
         }
     }
 }
@@ -292,6 +296,9 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl)
         Method::Pssmlt => Ok(mlt::render(scene, settings, control, false)),
         Method::Gdpssmlt => Ok(mlt::render(scene, settings, control, true)),
     })?;
+    if settings.data_passes {
+        out.layers.extend(pool.install(|| passes::data_passes(scene, settings.seed)));
+    }
     out.stats.warnings.splice(0..0, warnings);
     out.stats.cancelled = control.is_cancelled();
     Ok(out)

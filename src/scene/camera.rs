@@ -174,6 +174,13 @@ impl Camera {
         })
     }
 
+    /// Depth of world point `p` as Cycles' Depth pass has it: its distance along the camera's
+    /// viewing axis (camera-space z; not the ray length).
+    pub fn axial_depth(&self, p: Vec3) -> f32 {
+        let forward = -self.to_world.z_axis.truncate(); // a Blender camera looks down its −Z
+        (p - self.to_world.w_axis.truncate()).dot(forward)
+    }
+
     /// The raster position of pixel (x, y)'s sample `u` ∈ [0, 1)²: the pixel centre plus the
     /// filter's offset on each axis (every integrator takes its camera samples here).
     #[inline]

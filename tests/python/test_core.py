@@ -282,3 +282,17 @@ def test_transparent_film_writes_rgba_exr_and_straight_alpha_png(tmp_path, metho
     opaque = desc.copy()
     opaque["camera"] = dict(desc["camera"], film_transparent=False)
     assert "Alpha" not in gdmlt.render(gdmlt.Scene(opaque), method="pt", spp=1)["layers"]
+
+
+@pytest.mark.parametrize("method", gdmlt.METHODS)
+def test_data_passes_are_the_same_for_every_method(method):
+    """`data_passes=True` adds Depth (1 channel, 1e10 where nothing is hit) and Position: the
+    first camera sample's, so the same whatever the method; without it they are absent."""
+    scene = gdmlt.Scene(gdmlt.builtin_scene("cornell", 12, 12))
+    layers = gdmlt.render(scene, method=method, spp=4, seed=2, data_passes=True)["layers"]
+    ref = gdmlt.render(scene, method="pt", spp=1, seed=2, data_passes=True)["layers"]
+    assert layers["Depth"].shape == (12, 12, 1) and layers["Position"].shape == (12, 12, 3)
+    np.testing.assert_array_equal(layers["Depth"], ref["Depth"])
+    np.testing.assert_array_equal(layers["Position"], ref["Position"])
+    assert (layers["Depth"] == 1e10).any() and (layers["Depth"] < 10).any()
+    assert "Depth" not in gdmlt.render(scene, method=method, spp=1)["layers"]
