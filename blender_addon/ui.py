@@ -126,18 +126,11 @@ class GDMLT_PT_last_render(GDMLTRenderPanel, bpy.types.Panel):
                 col.label(text=line, icon="ERROR" if k == 0 else "BLANK1")
 
 
-class GDMLT_PT_passes(bpy.types.Panel):
+class GDMLT_PT_passes(GDMLTRenderPanel, bpy.types.Panel):
     """View Layer > Passes: the data passes GDMLT writes besides its method's own (Combined,
     the gradient-domain and Metropolis passes, the denoising guides, Noisy Image)."""
     bl_label = "Passes"
-    bl_space_type = "PROPERTIES"
-    bl_region_type = "WINDOW"
     bl_context = "view_layer"
-    COMPAT_ENGINES = {"GDMLT"}
-
-    @classmethod
-    def poll(cls, context):
-        return context.engine in cls.COMPAT_ENGINES
 
     def draw(self, context):
         layout = self.layout
