@@ -7,6 +7,7 @@ Usage: python tools/build_addon.py [--wheel PATH] [--out-dir dist]"""
 
 import argparse
 import importlib.util
+import os
 import re
 import shutil
 import subprocess
@@ -32,9 +33,26 @@ def build_wheel(out: Path) -> Path:
     out.mkdir(parents=True, exist_ok=True)
     for old in out.glob("gdmlt-*.whl"):
         old.unlink()
-    local = Path(sys.executable).parent / "maturin"  # the venv's, when not on PATH
+    venv_bin = Path(sys.executable).parent
+    local = venv_bin / "maturin"  # the venv's, when not on PATH
     maturin = str(local) if local.exists() else "maturin"
-    subprocess.run([maturin, "build", "--release", "--quiet", "--out", str(out)], cwd=ROOT, check=True)
+    # Linked by zig (PyPI's ziglang, found through the venv's python) against glibc 2.28, the
+    # manylinux_2_28 baseline Blender's own wheels target, not against this machine's newer
+    # glibc: render nodes on RHEL/Rocky 8 or Ubuntu 20.04 can load the core.
+    # The x86-64-v3 core `make build` puts beside the portable one is linked against this
+    # machine's glibc: it stays out of the extension (set aside while maturin packs the
+    # package folder), which carries the portable core only.
+    env = dict(os.environ, PATH=f"{venv_bin}{os.pathsep}{os.environ.get('PATH', '')}")
+    v3 = ROOT / "python" / "gdmlt" / "_core_v3.abi3.so"
+    aside = v3.with_name(v3.name + ".aside")
+    if v3.exists():
+        v3.replace(aside)
+    try:
+        subprocess.run([maturin, "build", "--release", "--quiet", "--zig", "--compatibility", "manylinux_2_28",
+                        "--out", str(out)], cwd=ROOT, check=True, env=env)
+    finally:
+        if aside.exists():
+            aside.replace(v3)
     wheels = sorted(out.glob("gdmlt-*.whl"))
     if len(wheels) != 1:
         raise SystemExit(f"build_addon: expected one wheel in {out}, found {wheels}")

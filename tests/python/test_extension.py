@@ -63,6 +63,25 @@ def extension_zip(tmp_path_factory):
     return zips[0]
 
 
+def test_the_bundled_core_loads_on_glibc_2_28_render_nodes(extension_zip):
+    """Issue 17: the core needed GLIBC 2.34 (this machine's build), so RHEL/Rocky 8 and
+    Ubuntu 20.04 farm nodes could not load it. The extension's wheel is a manylinux_2_28
+    build: no symbol of its libraries asks for a glibc newer than 2.28."""
+    import io
+    import re
+
+    with zipfile.ZipFile(extension_zip) as z:
+        names = [n for n in z.namelist() if n.rsplit("/", 1)[-1].startswith("gdmlt-") and n.endswith(".whl")]
+        assert len(names) == 1 and "manylinux_2_28_x86_64" in names[0], names
+        wheel = z.read(names[0])
+    with zipfile.ZipFile(io.BytesIO(wheel)) as w:
+        libs = [n for n in w.namelist() if n.endswith(".so")]
+        assert libs
+        for lib in libs:
+            needed = {(int(a), int(b)) for a, b in re.findall(rb"GLIBC_(\d+)\.(\d+)", w.read(lib))}
+            assert needed and max(needed) <= (2, 28), (lib, sorted(needed)[-3:])
+
+
 def test_zip_bundles_the_core_wheel_and_manifest(extension_zip):
     with zipfile.ZipFile(extension_zip) as z:
         names = z.namelist()
