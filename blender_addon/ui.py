@@ -14,15 +14,21 @@ class GDMLTRenderPanel:
     def poll(cls, context):
         return context.engine in cls.COMPAT_ENGINES
 
+    def split_layout(self):
+        """The panel's layout as Cycles lays its panels out: labels on the left, no
+        keyframe dots."""
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        return layout
+
 
 class GDMLT_PT_sampling(GDMLTRenderPanel, bpy.types.Panel):
     bl_label = "Sampling"
 
     def draw(self, context):
         s = context.scene.gdmlt
-        layout = self.layout
-        layout.use_property_split = True
-        layout.use_property_decorate = False
+        layout = self.split_layout()
         layout.prop(s, "method")
         col = layout.column(align=True)
         col.prop(s, "samples")
@@ -46,9 +52,7 @@ class GDMLT_PT_light_paths(GDMLTRenderPanel, bpy.types.Panel):
 
     def draw(self, context):
         s = context.scene.gdmlt
-        layout = self.layout
-        layout.use_property_split = True
-        layout.use_property_decorate = False
+        layout = self.split_layout()
         col = layout.column(align=True)
         col.prop(s, "max_bounces", text="Max Bounces Total")
         col.prop(s, "diffuse_bounces")
@@ -66,9 +70,7 @@ class GDMLT_PT_performance(GDMLTRenderPanel, bpy.types.Panel):
     bl_options = {"DEFAULT_CLOSED"}
 
     def draw(self, context):
-        layout = self.layout
-        layout.use_property_split = True
-        layout.prop(context.scene.gdmlt, "threads")
+        self.split_layout().prop(context.scene.gdmlt, "threads")
 
 
 class GDMLT_PT_film(GDMLTRenderPanel, bpy.types.Panel):
@@ -77,9 +79,7 @@ class GDMLT_PT_film(GDMLTRenderPanel, bpy.types.Panel):
 
     def draw(self, context):
         s = context.scene.gdmlt
-        layout = self.layout
-        layout.use_property_split = True
-        layout.use_property_decorate = False
+        layout = self.split_layout()
         col = layout.column(align=True)
         col.prop(s, "pixel_filter_type")
         if s.pixel_filter_type != "BOX":
@@ -133,14 +133,12 @@ class GDMLT_PT_passes(GDMLTRenderPanel, bpy.types.Panel):
     bl_context = "view_layer"
 
     def draw(self, context):
-        layout = self.layout
-        layout.use_property_split = True
-        layout.use_property_decorate = False
-        vl = context.view_layer
+        layout = self.split_layout()
+        from .engine import DATA_PASSES
+
         col = layout.column(heading="Data", align=True)
-        col.prop(vl, "use_pass_z")
-        col.prop(vl, "use_pass_normal")
-        col.prop(vl, "use_pass_position")
+        for toggle, *_ in DATA_PASSES:  # the passes the engine writes when they are on
+            col.prop(context.view_layer, toggle)
 
 
 CLASSES = (GDMLT_PT_sampling, GDMLT_PT_light_paths, GDMLT_PT_film, GDMLT_PT_performance, GDMLT_PT_last_render,
