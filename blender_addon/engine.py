@@ -141,12 +141,11 @@ class GDMLTRenderEngine(bpy.types.RenderEngine):
         for w in warnings + list(core_scene.warnings):
             warn(w)
         export_time = time.perf_counter() - t0
-        settings = dict(spp=s.samples, time_limit=s.time_limit, max_bounces=s.max_bounces, nee=s.use_nee, seed=s.seed,
-                        threads=render_threads(scene), reconstruction=s.reconstruction.lower(), alpha_rec=s.alpha_reconstruction,
-                        alpha_target=s.alpha_target, large_step_probability=s.large_step_probability, chains=s.chains,
-                        diffuse_bounces=s.diffuse_bounces, glossy_bounces=s.glossy_bounces,
-                        transmission_bounces=s.transmission_bounces, transparent_bounces=s.transparent_max_bounces,
-                        clamp_direct=s.clamp_direct, clamp_indirect=s.clamp_indirect)
+        from gdmlt.blend import settings_of
+
+        settings = settings_of(s)  # gdmlt.render's keyword arguments, but for these three:
+        del settings["method"], settings["denoise"]  # chosen below / applied after the render
+        settings["threads"] = render_threads(scene)
         chosen = None
         if s.method == "AUTO":
             from gdmlt.auto import plan

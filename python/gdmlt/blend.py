@@ -15,6 +15,17 @@ PROPERTY_OF = {"method": "method", "spp": "samples", "time_limit": "time_limit",
                "clamp_indirect": "clamp_indirect"}
 
 
+def settings_of(props) -> dict:
+    """The render settings a scene's GDMLT properties (`scene.gdmlt`) hold, keyed as
+    gdmlt.render and the CLI name them (PROPERTY_OF): the one reading of those properties for
+    the engine and for `gdmlt export`."""
+    out = {}
+    for key, prop in PROPERTY_OF.items():
+        value = getattr(props, prop)
+        out[key] = value.lower() if key in ("method", "reconstruction") else value
+    return out
+
+
 def import_bpy():
     """Import bpy with Blender's user config kept out of the home directory."""
     os.environ.setdefault("BLENDER_USER_RESOURCES", str(Path(tempfile.gettempdir()) / "gdmlt-blender-user"))
@@ -84,16 +95,9 @@ def export_usd(path: Path, out: Path, frame=None) -> dict:
     g = scene.gdmlt
     r = scene.render
     pct = r.resolution_percentage / 100.0
-    settings = {"method": g.method.lower(), "spp": int(g.samples), "time_limit": float(g.time_limit),
-                "max_bounces": int(g.max_bounces), "nee": bool(g.use_nee), "seed": int(g.seed),
-                "reconstruction": g.reconstruction.lower(), "alpha_rec": float(g.alpha_reconstruction),
-                "alpha_target": float(g.alpha_target), "large_step_probability": float(g.large_step_probability),
-                "chains": int(g.chains), "denoise": bool(g.use_denoising),
-                "diffuse_bounces": int(g.diffuse_bounces), "glossy_bounces": int(g.glossy_bounces),
-                "transmission_bounces": int(g.transmission_bounces),
-                "transparent_bounces": int(g.transparent_max_bounces), "clamp_direct": float(g.clamp_direct),
-                "clamp_indirect": float(g.clamp_indirect), "width": max(1, int(r.resolution_x * pct)),
-                "height": max(1, int(r.resolution_y * pct))}
+    settings = settings_of(g)
+    del settings["threads"]  # a property of the machine that exports, not of the scene
+    settings.update(width=max(1, int(r.resolution_x * pct)), height=max(1, int(r.resolution_y * pct)))
     if scene.camera is not None:
         settings["camera"] = scene.camera.name
     from pxr import Sdf
