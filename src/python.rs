@@ -438,9 +438,16 @@ fn parse_scene(d: &Bound<'_, PyDict>) -> PyResult<SceneDesc> {
 type Hits<'py> = (Bound<'py, PyArray1<f32>>, Bound<'py, PyArray1<i64>>);
 
 /// A scene ready to render (BVH built). Construct from the dict layout of gdmlt.scene.
-#[pyclass(frozen, module = "gdmlt._core")]
+#[pyclass(module = "gdmlt._core")]
 struct Scene {
     inner: Arc<scene::Scene>,
+}
+
+impl Scene {
+    /// The scene to change in place: not while a render still holds it.
+    fn exclusive(&mut self) -> PyResult<&mut scene::Scene> {
+        Arc::get_mut(&mut self.inner).ok_or_else(|| PyRuntimeError::new_err("the scene is in use by a render"))
+    }
 }
 
 #[pymethods]
@@ -535,6 +542,23 @@ impl Scene {
         })?;
         let (t, p): (Vec<f32>, Vec<i64>) = res.into_iter().unzip();
         Ok((PyArray1::from_vec(py, t), PyArray1::from_vec(py, p)))
+    }
+
+    /// Looks through another camera (a camera dict of the scene layout), nothing else
+    /// rebuilt: for the viewport, whose view moves while the scene stays.
+    fn set_camera(&mut self, camera: &Bound<'_, PyDict>) -> PyResult<()> {
+        let camera = scene::Camera::new(&parse_camera(camera)?).map_err(|e| verr(e.to_string()))?;
+        self.exclusive()?.camera = camera;
+        Ok(())
+    }
+    /// Takes the materials, textures, lights and world of `desc` (a scene dict; its meshes
+    /// are not read) and keeps the triangles, BVH and camera: for edits that move no
+    /// geometry. The meshes the scene was built from must still be the scene's, with the
+    /// same material ids (the caller's check); an id past the new materials is an error.
+    fn update_shading(&mut self, py: Python<'_>, desc: &Bound<'_, PyDict>) -> PyResult<()> {
+        let d = parse_scene(desc)?;
+        let scene = self.exclusive()?;
+        py.detach(|| scene.update_shading(&d)).map_err(|e| verr(e.to_string()))
     }
 
     #[getter]
@@ -643,8 +667,15 @@ fn render<'py>(
                     integrator::render(&sc.inner, &settings, &control)
                 }))
             });
+            // the worker is polled every millisecond (a viewport pass may take a few), the
+            // callbacks every 50 ms
+            let mut last_call = std::time::Instant::now();
             while !worker.is_finished() {
-                std::thread::sleep(Duration::from_millis(50));
+                std::thread::sleep(Duration::from_millis(1));
+                if last_call.elapsed() < Duration::from_millis(50) {
+                    continue;
+                }
+                last_call = std::time::Instant::now();
                 if let Some(cb) = &preview {
                     let t = control.elapsed();
                     if t >= next_preview {

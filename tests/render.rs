@@ -763,3 +763,37 @@ fn clamping_follows_cycles_direct_and_indirect_rule() {
     assert!(gd.stats.warnings.iter().any(|w| w.contains("clamping")), "{:?}", gd.stats.warnings);
     assert_eq!(img(&gd), img(&run_path(&desc, Method::Gdpt, 4, PathSettings::new(8, true), 5)));
 }
+
+/// The viewport's shading update (`Scene::update_shading`: new materials, lights and world,
+/// the same triangles and BVH) renders exactly what a scene built afresh from the new
+/// description renders, for every method — from a scene whose materials were all different,
+/// with no light object and a black world (so nothing of the old lighting may remain).
+#[test]
+fn shading_update_renders_as_a_fresh_build() {
+    use gdmlt::scene::builtin::cornell_mixed_lights;
+    let new = cornell_mixed_lights(12, 12);
+    let mut old = new.clone();
+    old.lights.clear();
+    old.world = [0.0; 3];
+    for m in &mut old.materials {
+        m.base_color = [0.9, 0.1, 0.1];
+        m.emission = [0.0; 3];
+    }
+    old.materials[0].emission = [2.0, 2.0, 2.0]; // another emitter than the new one
+    let mut updated = Scene::build(&old).unwrap();
+    updated.update_shading(&new).unwrap();
+    let fresh = Scene::build(&new).unwrap();
+    for method in [Method::Pt, Method::Gdpt, Method::Pssmlt, Method::Gdpssmlt] {
+        let settings = RenderSettings { method, spp: 4, seed: 3, threads: 2, ..Default::default() };
+        let a = render(&updated, &settings, &RenderControl::new(0.0)).unwrap();
+        let b = render(&fresh, &settings, &RenderControl::new(0.0)).unwrap();
+        let (a, b) = (a.layer("Combined").unwrap(), b.layer("Combined").unwrap());
+        assert!(a.data.iter().any(|&v| v > 0.0), "{method:?}: a black image");
+        assert_eq!(a.data, b.data, "{method:?}: the updated scene renders another image");
+    }
+    // the material ids of the kept triangles must exist among the new materials
+    let mut fewer = new.clone();
+    fewer.materials.truncate(1);
+    let err = Scene::build(&new).unwrap().update_shading(&fewer).unwrap_err().to_string();
+    assert!(err.contains("uses material"), "{err}");
+}

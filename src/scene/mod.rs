@@ -1,6 +1,7 @@
 //! The renderable scene: triangles in a BVH, materials, lights (analytic and emissive
 //! triangles), camera and world. `Scene::build` is the one place a scene is made.
 
+mod build;
 pub mod builtin;
 pub mod camera;
 pub mod desc;
@@ -21,6 +22,7 @@ use crate::accel::{Accel, RayPacket, TriHit};
 use crate::bsdf::Bsdf;
 use crate::error::SceneError;
 use crate::math::{ray_epsilon, square_to_triangle, Frame, Spectrum};
+use build::{Lighting, Shading, Triangles};
 use environment::Environment;
 use glam::{Vec2, Vec3};
 
@@ -97,104 +99,18 @@ pub struct Scene {
 }
 
 impl Scene {
+    /// Builds a scene from its description, in four steps: the camera; the shading inputs
+    /// (textures, materials); the triangles (validated, degenerate ones skipped) and their
+    /// BVH; the lighting (lights, emissive triangles, the world, light selection).
     pub fn build(desc: &SceneDesc) -> Result<Scene, SceneError> {
         let camera = Camera::new(&desc.camera)?;
         let mut report = SceneReport::default();
-        let textures: Vec<Texture> = desc.textures.iter().map(Texture::from_desc).collect::<Result<_, _>>()?;
-        let mut materials: Vec<Material> =
-            desc.materials.iter().map(|m| Material::from_desc(m, textures.len())).collect::<Result<_, _>>()?;
-        if materials.is_empty() {
-            materials.push(Material::from_desc(&MaterialDesc::default(), 0)?);
-        }
-        if desc.world.iter().any(|x| !x.is_finite() || *x < 0.0) {
-            return Err(SceneError::World("background colour × strength must be finite and ≥ 0".into()));
-        }
-        let mut positions = Vec::new();
-        let mut normals = Vec::new();
-        let mut uvs = Vec::new();
-        let mut tri_material = Vec::new();
-        for m in &desc.meshes {
-            let bad = |what: String| SceneError::Mesh { mesh: m.name.clone(), what };
-            if m.indices.is_empty() || m.positions.is_empty() {
-                return Err(bad("is empty (no triangles)".into()));
-            }
-            if let Some((i, _)) = m.positions.iter().enumerate().find(|(_, p)| p.iter().any(|x| !x.is_finite())) {
-                return Err(bad(format!("vertex {i} has a NaN or Inf coordinate")));
-            }
-            if !m.corner_normals.is_empty() && m.corner_normals.len() != 3 * m.indices.len() {
-                return Err(bad(format!(
-                    "{} corner normals for {} triangles (need 3 per triangle)",
-                    m.corner_normals.len(),
-                    m.indices.len()
-                )));
-            }
-            if !m.corner_uvs.is_empty() && m.corner_uvs.len() != 3 * m.indices.len() {
-                return Err(bad(format!(
-                    "{} corner UVs for {} triangles (need 3 per triangle)",
-                    m.corner_uvs.len(),
-                    m.indices.len()
-                )));
-            }
-            if m.corner_uvs.iter().flatten().any(|x| !x.is_finite()) {
-                return Err(bad("has a NaN or Inf texture coordinate".into()));
-            }
-            if !m.material_ids.is_empty() && m.material_ids.len() != m.indices.len() {
-                return Err(bad(format!("{} material ids for {} triangles", m.material_ids.len(), m.indices.len())));
-            }
-            let nv = m.positions.len() as u32;
-            for (t, tri) in m.indices.iter().enumerate() {
-                if let Some(&i) = tri.iter().find(|&&i| i >= nv) {
-                    return Err(bad(format!("triangle {t} uses vertex {i} but the mesh has {nv} vertices")));
-                }
-                let mat = m.material_ids.get(t).copied().unwrap_or(0);
-                if mat as usize >= materials.len() {
-                    return Err(bad(format!("triangle {t} uses material {mat} but there are {}", materials.len())));
-                }
-                let v = tri.map(|i| Vec3::from_array(m.positions[i as usize]));
-                let cross = (v[1] - v[0]).cross(v[2] - v[0]);
-                if !cross.is_finite() || !cross.length_squared().is_finite() {
-                    // finite vertices whose edges' product overflows f32 (a 1e30 scale): not a
-                    // zero-area triangle, a scene too large for single precision
-                    return Err(bad(format!(
-                        "triangle {t} is too large for single precision (vertices up to {:.3e}): scale the scene down",
-                        v.iter().flat_map(|p| p.to_array()).fold(0.0f32, |a, x| a.max(x.abs()))
-                    )));
-                }
-                if !(cross.length_squared() > 0.0) {
-                    report.degenerate_triangles += 1;
-                    continue; // zero area: can be neither hit nor sampled
-                }
-                let n = if m.corner_normals.is_empty() {
-                    None
-                } else {
-                    let ns = [0, 1, 2].map(|k| Vec3::from_array(m.corner_normals[3 * t + k]));
-                    if ns.iter().all(|n| n.is_finite() && n.length_squared() > 1e-12) {
-                        Some(ns.map(|n| n.normalize()))
-                    } else {
-                        None // broken normals: fall back to flat shading
-                    }
-                };
-                positions.push(v);
-                normals.push(n);
-                uvs.push(
-                    (!m.corner_uvs.is_empty()).then(|| [0, 1, 2].map(|k| Vec2::from_array(m.corner_uvs[3 * t + k]))),
-                );
-                tri_material.push(mat);
-            }
-        }
-        if report.degenerate_triangles > 0 {
-            report
-                .warnings
-                .push(format!("{} degenerate (zero-area) triangles were skipped", report.degenerate_triangles));
-        }
-        let geo_normals: Vec<Vec3> = positions.iter().map(|v| (v[1] - v[0]).cross(v[2] - v[0]).normalize()).collect();
-        let areas: Vec<f32> = positions.iter().map(|v| 0.5 * (v[1] - v[0]).cross(v[2] - v[0]).length()).collect();
-        report.triangles = positions.len();
-
+        let shading = Shading::new(desc)?;
+        let tris = Triangles::from_meshes(&desc.meshes, shading.materials.len(), &mut report)?;
         // Bounds (geometry, lights and camera) for sun power estimates and epsilons.
         let mut lo = Vec3::splat(f32::INFINITY);
         let mut hi = Vec3::splat(f32::NEG_INFINITY);
-        for v in positions.iter().flatten() {
+        for v in tris.positions.iter().flatten() {
             lo = lo.min(*v);
             hi = hi.max(*v);
         }
@@ -202,108 +118,72 @@ impl Scene {
         hi = hi.max(camera.position());
         let bounds_center = (lo + hi) * 0.5;
         let bounds_radius = ((hi - lo).length() * 0.5).max(1e-3);
-
-        let mut lights: Vec<Light> = desc.lights.iter().map(Light::from_desc).collect::<Result<_, _>>()?;
-        let mut tri_light = vec![u32::MAX; positions.len()];
-        for (t, &m) in tri_material.iter().enumerate() {
-            let mat = &materials[m as usize];
-            if mat.is_emissive() {
-                tri_light[t] = lights.len() as u32;
-                lights.push(Light {
-                    name: mat.name.clone(),
-                    shape: LightShape::Triangle { prim: t as u32 },
-                    emission: mat.emission,
-                    visible_camera: true,
-                });
-                report.emissive_triangles += 1;
-            }
-        }
-        let world_tex = match desc.world_texture {
-            Some(t) if t as usize >= textures.len() => {
-                return Err(SceneError::World(format!("uses texture {t} but the scene has {}", textures.len())))
-            }
-            Some(t) => Some((t, &textures[t as usize])),
-            None => None,
-        };
-        let rotation = match desc.world_rotation {
-            None => glam::Mat3::IDENTITY,
-            Some(r) => {
-                let m = glam::Mat3::from_cols_array_2d(&r).transpose(); // rows given
-                                                                        // a rotation: orthonormal with determinant 1 (else the pdf would be wrong)
-                let ortho = (m * m.transpose() - glam::Mat3::IDENTITY).to_cols_array().iter().all(|x| x.abs() < 1e-3);
-                if !ortho || (m.determinant() - 1.0).abs() > 1e-3 {
-                    return Err(SceneError::World("world rotation must be a rotation matrix".into()));
-                }
-                m
-            }
-        };
-        let env = Environment::new(Vec3::from_array(desc.world), world_tex, rotation);
-        // a textured emitter: its image's mean brightness scales the selection weight (the
-        // mean of each emission image once, not once per emissive triangle)
-        let emission_scale: Vec<f32> = materials
-            .iter()
-            .map(|m| m.emission_texture.map_or(1.0, |t| crate::math::luminance(textures[t as usize].mean()).max(1e-6)))
-            .collect();
-        // the world: π × its mean radiance, the irradiance it gives an open surface. A world
-        // of one colour is not light-sampled at all: BSDF sampling alone finds it with less
-        // variance than any mix with uniform light samples (measured, pt at 1 s, 48²: world
-        // alone relMSE 1.2e-5 → 8.6e-6, world + a lamp 1.8e-5 → 6.7e-6); an HDRI is.
-        let world =
-            if env.is_black() || env.texture.is_none() { 0.0 } else { std::f32::consts::PI * env.mean_radiance() };
-        let selector = light_select::LightSelector::new(
-            &lights,
-            &tri_material,
-            &positions,
-            &areas,
-            &emission_scale,
-            world,
-            bounds_center,
-        );
-        let hittable_lights = lights
-            .iter()
-            .enumerate()
-            .filter(|(_, l)| !l.is_delta() && !matches!(l.shape, LightShape::Triangle { .. }))
-            .map(|(i, _)| i as u32)
-            .collect();
-        if selector.is_empty() && env.is_black() {
-            report.warnings.push(
-                "the scene has no light: no emitting material, no light object and a black world; the image is black"
-                    .into(),
-            );
-        }
-        let accel = if positions.is_empty() { None } else { Some(Accel::build(&positions)) };
-        // What the scene does not need is decided here, once: no transparent material → shadow
-        // rays are any-hit occlusion tests; single-lobe materials → their BSDF alone, not the
-        // Principled mixture. `general_paths` takes the general paths anyway (for the
-        // skipbench benchmark, which measures what these decisions save).
-        let shortcuts = !desc.general_paths;
-        if !shortcuts {
-            materials.iter_mut().for_each(|m| m.general = true);
-        }
-        let has_transparency = !shortcuts || materials.iter().any(|m| m.is_transparent());
-        let has_normal_maps = materials.iter().any(|m| m.normal_texture.is_some());
-        Ok(Scene {
-            positions,
-            normals,
-            uvs,
-            geo_normals,
-            areas,
-            tri_material,
-            materials,
-            textures,
-            lights,
-            selector,
-            tri_light,
-            hittable_lights,
+        let lighting = Lighting::new(desc, &shading, &tris, bounds_center)?;
+        report.emissive_triangles = lighting.emissive_triangles;
+        report.warnings.extend(lighting.warning.clone());
+        let accel = if tris.positions.is_empty() { None } else { Some(Accel::build(&tris.positions)) };
+        let mut scene = Scene {
+            geo_normals: tris.positions.iter().map(|v| (v[1] - v[0]).cross(v[2] - v[0]).normalize()).collect(),
+            areas: tris.areas,
+            positions: tris.positions,
+            normals: tris.normals,
+            uvs: tris.uvs,
+            tri_material: tris.material,
+            materials: Vec::new(),
+            textures: Vec::new(),
+            has_transparency: false,
+            has_normal_maps: false,
+            lights: Vec::new(),
+            selector: lighting.selector,
+            tri_light: Vec::new(),
+            hittable_lights: Vec::new(),
             camera,
-            env,
+            env: lighting.env,
             accel,
-            has_transparency,
-            has_normal_maps,
             bounds_center,
             bounds_radius,
             report,
-        })
+        };
+        scene.lights = lighting.lights;
+        scene.tri_light = lighting.tri_light;
+        scene.hittable_lights = lighting.hittable_lights;
+        scene.set_shading(shading);
+        Ok(scene)
+    }
+
+    /// Replaces the materials, textures, lights and world of a built scene with those of
+    /// `desc`, keeping its triangles, BVH and camera: for edits that do not move geometry
+    /// (the viewport's material, light and world changes). `desc`'s meshes must be the
+    /// ones the scene was built from (the caller checks); their material ids are checked
+    /// against the new materials.
+    pub fn update_shading(&mut self, desc: &SceneDesc) -> Result<(), SceneError> {
+        let shading = Shading::new(desc)?;
+        let tris = Triangles {
+            positions: std::mem::take(&mut self.positions),
+            areas: std::mem::take(&mut self.areas),
+            material: std::mem::take(&mut self.tri_material),
+            normals: Vec::new(),
+            uvs: Vec::new(),
+        };
+        let lighting = match tris.material.iter().max() {
+            Some(&m) if m as usize >= shading.materials.len() => Err(SceneError::Mesh {
+                mesh: "(viewport update)".into(),
+                what: format!("uses material {m} but there are {}", shading.materials.len()),
+            }),
+            _ => Lighting::new(desc, &shading, &tris, self.bounds_center),
+        };
+        (self.positions, self.areas, self.tri_material) = (tris.positions, tris.areas, tris.material);
+        let lighting = lighting?;
+        self.report.emissive_triangles = lighting.emissive_triangles;
+        (self.lights, self.selector, self.tri_light) = (lighting.lights, lighting.selector, lighting.tri_light);
+        (self.hittable_lights, self.env) = (lighting.hittable_lights, lighting.env);
+        self.set_shading(shading);
+        Ok(())
+    }
+
+    fn set_shading(&mut self, shading: Shading) {
+        (self.materials, self.textures) = (shading.materials, shading.textures);
+        (self.has_transparency, self.has_normal_maps) = (shading.has_transparency, shading.has_normal_maps);
     }
 
     pub fn num_triangles(&self) -> usize {
