@@ -1,12 +1,14 @@
 """The GDMLT RenderEngine: export the evaluated depsgraph, render in the Rust core with
-progress and Esc, write the image into the render result."""
+progress and Esc, write the image into the render result (F12, and the small previews of
+materials, lights and worlds); draw progressive path-traced passes in the 3D View's
+Rendered shading (viewport.py)."""
 
 import time
 
 import bpy
 import numpy as np
 
-from . import export
+from . import export, viewport
 
 # Statistics of the last finished render in this process (the CLI prints them).
 last_stats = {}
@@ -81,15 +83,25 @@ def remaining_time(fraction: float, elapsed: float) -> str:
     return "" if left is None else f" | {left:.1f} s left"
 
 
+# Material, light and world preview thumbnails: path-traced, this many samples per pixel.
+PREVIEW_SAMPLES = 16
+
+
 class GDMLTRenderEngine(bpy.types.RenderEngine):
     bl_idname = "GDMLT"
     bl_label = "GDMLT"
-    bl_use_preview = False
+    bl_use_preview = True  # material/light/world thumbnails
+    bl_use_eevee_viewport = True  # Material Preview shading uses EEVEE, as for Cycles
     bl_use_postprocess = True
     # Blender's own shader nodes (the Shader Editor, the Material tab's slot list and Surface
     # panel, the World's Surface panel) show only for engines without custom nodes: GDMLT
     # reads the Cycles/EEVEE node trees, so it has none of its own.
     bl_use_shading_nodes_custom = False
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.viewport = None  # the viewport's ViewportSession (Rendered shading only)
+        self._viewport_error = None
 
     def update_render_passes(self, scene=None, renderlayer=None):
         self.register_pass(scene, renderlayer, "Combined", 4, "RGBA", "COLOR")
@@ -134,10 +146,12 @@ class GDMLTRenderEngine(bpy.types.RenderEngine):
         def warn(w):
             if w not in shown:
                 shown.append(w)
-                self.report({"WARNING"}, f"GDMLT: {w}")
+                if not self.is_preview:
+                    self.report({"WARNING"}, f"GDMLT: {w}")
 
         global last_warnings
-        last_warnings = shown  # filled as the render goes on
+        if not self.is_preview:  # thumbnails keep the Last Render panel's warnings
+            last_warnings = shown  # filled as the render goes on
         for w in warnings + list(core_scene.warnings):
             warn(w)
         export_time = time.perf_counter() - t0
@@ -147,7 +161,11 @@ class GDMLTRenderEngine(bpy.types.RenderEngine):
         del settings["method"], settings["denoise"]  # chosen below / applied after the render
         settings["threads"] = render_threads(scene)
         chosen = None
-        if s.method == "AUTO":
+        denoise = s.use_denoising
+        if self.is_preview:  # a material, light or world thumbnail: quick and plain
+            settings.update(method="pt", spp=PREVIEW_SAMPLES, time_limit=0.0)
+            denoise = False
+        elif s.method == "AUTO":
             from gdmlt.auto import plan
 
             self.update_stats("GDMLT", "Automatic method: measuring each method on this scene")
@@ -170,7 +188,7 @@ class GDMLTRenderEngine(bpy.types.RenderEngine):
 
         w, h = core_scene.size
         layer_name = depsgraph.view_layer.name
-        wanted = METHOD_PASSES.get(method.upper(), set()) | ({"Noisy Image"} if s.use_denoising else set())
+        wanted = METHOD_PASSES.get(method.upper(), set()) | ({"Noisy Image"} if denoise else set())
         for name, channels, chan_id, _ in PASSES:
             if name in wanted:
                 self.add_pass(name, channels, chan_id, layer=layer_name)
@@ -201,7 +219,7 @@ class GDMLTRenderEngine(bpy.types.RenderEngine):
             res = gdmlt.render(core_scene, method=method, **settings, progress=progress, preview=preview)
             layers = res["layers"]
             denoised = False
-            if s.use_denoising and not res["stats"]["cancelled"]:
+            if denoise and not res["stats"]["cancelled"]:
                 from gdmlt.oidn import denoise_or_warn
 
                 self.update_stats("GDMLT", "Denoising")
@@ -220,7 +238,8 @@ class GDMLTRenderEngine(bpy.types.RenderEngine):
             self.end_result(result)
         st = res["stats"]
         global last_stats
-        last_stats = dict(st, export_time=export_time, previews=previews, denoised=denoised, auto=chosen)
+        if not self.is_preview:
+            last_stats = dict(st, export_time=export_time, previews=previews, denoised=denoised, auto=chosen)
         for w_ in st["warnings"]:
             warn(w_)
         if st["invalid_samples"]:
@@ -228,3 +247,61 @@ class GDMLTRenderEngine(bpy.types.RenderEngine):
         extra = f" | acceptance {st['acceptance'] * 100:.0f}%" if st.get("chains") else ""
         self.update_stats("GDMLT", f"{label} | {st['spp_max']} per pixel | render {st['elapsed']:.2f} s, "
                           f"export {export_time:.2f} s{extra}" + (" | denoised" if denoised else "") + (" | cancelled" if st["cancelled"] else ""))
+
+    # ---- viewport (Rendered shading) ----
+
+    def view_update(self, context, depsgraph):
+        """Blender calls this on the viewport's first draw and after every depsgraph change:
+        re-export and let the session rebuild what differs (viewport.scene_change)."""
+        if self.viewport is None:
+            self.viewport = viewport.ViewportSession()
+        try:
+            desc, _ = export.export_scene(depsgraph, need_camera=False)
+            self.viewport.update(desc)
+            self._viewport_error = None
+        except Exception as e:  # noqa: BLE001 - shown in the status bar; the viewport stays up
+            self._report_viewport_error(e)
+
+    def _report_viewport_error(self, e):
+        if str(e) != self._viewport_error:
+            self._viewport_error = str(e)
+            self.report({"ERROR"}, f"GDMLT viewport: {e}")
+
+    def view_draw(self, context, depsgraph):
+        """Renders the next pass (viewport.ViewportSession.step) and draws the image so far
+        through Blender's display transform; asks for another draw until the Viewport
+        samples are reached."""
+        import gpu
+        from gpu_extras.presets import draw_texture_2d
+
+        session, region, scene = self.viewport, context.region, depsgraph.scene
+        if session is None or session.desc is None:
+            return
+        s = scene.gdmlt
+        pixel_size = scene.render.preview_pixel_size
+        pixel_size = int(context.preferences.system.pixel_size) if pixel_size == "AUTO" else int(pixel_size)
+        try:
+            session.look_through(viewport.view_camera(context.region_data, region.width, region.height,
+                                                      scene, pixel_size))
+            if not session.finished(s.preview_samples):
+                from gdmlt.blend import settings_of
+
+                session.step(viewport.pass_settings(settings_of(s), render_threads(scene)), seed=s.seed)
+        except Exception as e:  # noqa: BLE001
+            self._report_viewport_error(e)
+            return
+        img = session.last
+        if img is None:
+            return
+        h, w = img.shape[:2]
+        pixels = gpu.types.Buffer("FLOAT", w * h * 4, _to_blender_rows(img, 4).ravel())
+        texture = gpu.types.GPUTexture((w, h), format="RGBA16F", data=pixels)
+        gpu.state.blend_set("ALPHA_PREMULT")
+        self.bind_display_space_shader(scene)
+        draw_texture_2d(texture, (0, 0), region.width, region.height)
+        self.unbind_display_space_shader()
+        gpu.state.blend_set("NONE")
+        if not session.finished(s.preview_samples):
+            self.tag_redraw()
+        self.update_stats("GDMLT", f"Viewport | {session.samples} samples")
+

@@ -641,12 +641,13 @@ def render_region(scene):
     return x0, y0, x1 - x0, y1 - y0
 
 
-def export_scene(depsgraph, test_break=lambda: False):
+def export_scene(depsgraph, test_break=lambda: False, need_camera=True):
     """Returns (scene dict, warnings). Raises ExportCancelled if test_break() turns true,
-    ValueError for a scene that cannot be rendered (no camera, unsupported camera)."""
+    ValueError for a scene that cannot be rendered (no camera, unsupported camera). Without
+    `need_camera` (the viewport, which looks through its own) the dict has no camera."""
     scene = depsgraph.scene
     warnings = []
-    if scene.camera is None:
+    if scene.camera is None and need_camera:
         raise ValueError("the scene has no active camera")
     materials = [dict(DEFAULT_MATERIAL)]
     textures = Textures()
@@ -696,12 +697,13 @@ def export_scene(depsgraph, test_break=lambda: False):
         meshes.append({"name": name, "positions": np.ascontiguousarray(pos),
                        "indices": np.ascontiguousarray(tris, dtype=np.uint32),
                        "normals": np.ascontiguousarray(nrm), "material_ids": mat_ids, "uvs": uvs})
-    cam_ob = scene.camera.evaluated_get(depsgraph)
     world, world_texture = _world(scene, warnings, textures)
     if scene.render.use_motion_blur:
         warnings.append("motion blur is not rendered yet: the frame is rendered at its shutter's start")
     desc = {"meshes": meshes, "materials": materials, "textures": textures.items, "lights": lights,
-            "camera": camera_dict(scene, cam_ob), "world": world, "world_texture": world_texture}
+            "world": world, "world_texture": world_texture}
+    if need_camera:
+        desc["camera"] = camera_dict(scene, scene.camera.evaluated_get(depsgraph))
     # the same warning once
     seen = set()
     warnings = [w for w in warnings if not (w in seen or seen.add(w))]

@@ -34,6 +34,9 @@ class GDMLTRenderSettings(bpy.types.PropertyGroup):
                          description="Light transport algorithm")
     samples: IntProperty(name="Samples", default=64, min=1, soft_max=4096,
                          description="Samples per pixel (mutations per pixel for Metropolis methods)")
+    preview_samples: IntProperty(name="Viewport", default=1024, min=0, soft_max=4096,
+                                 description="Samples per pixel of the viewport's Rendered shading, one path-traced "
+                                             "sample per pass (0 = unlimited)")
     time_limit: FloatProperty(name="Time Limit", default=0.0, min=0.0, subtype="TIME_ABSOLUTE", unit="TIME_ABSOLUTE",
                               description="Stop after this many seconds (0 = no limit); whichever of samples and time comes first")
     max_bounces: IntProperty(name="Max Bounces", default=8, min=0, max=1024,

@@ -31,8 +31,9 @@ class GDMLT_PT_sampling(GDMLTRenderPanel, bpy.types.Panel):
         layout = self.split_layout()
         layout.prop(s, "method")
         col = layout.column(align=True)
-        col.prop(s, "samples")
+        col.prop(s, "samples", text="Render Samples")
         col.prop(s, "time_limit")
+        layout.prop(s, "preview_samples", text="Viewport Samples")
         layout.prop(s, "seed")
         layout.prop(s, "use_denoising")
         if s.method in {"AUTO", "GDPT", "GDPSSMLT"}:
