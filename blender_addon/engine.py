@@ -44,7 +44,12 @@ DATA_PASSES = (
     ("use_pass_z", "Depth", 1, "Z", "VALUE"),
     ("use_pass_normal", "Normal", 3, "XYZ", "VECTOR"),
     ("use_pass_position", "Position", 3, "XYZ", "VECTOR"),
+    ("use_pass_object_index", "Object Index", 1, "X", "VALUE"),
+    ("use_pass_material_index", "Material Index", 1, "X", "VALUE"),
 )
+# The data passes the core's first-hit pass writes (data_passes=True); Normal is the
+# denoising normal.
+CORE_DATA_PASSES = ("Depth", "Position", "Object Index", "Material Index")
 
 
 def data_passes_of(view_layer) -> list:
@@ -195,8 +200,8 @@ class GDMLTRenderEngine(bpy.types.RenderEngine):
         data = data_passes_of(depsgraph.view_layer)
         for _, name, channels, chan_id, _ in data:
             self.add_pass(name, channels, chan_id, layer=layer_name)
-        # Depth and Position come from the core's data pass; Normal is the denoising normal
-        settings["data_passes"] = any(row[1] in ("Depth", "Position") for row in data)
+        # Depth, Position and the indices come from the core's data pass; Normal is the denoising normal
+        settings["data_passes"] = any(row[1] in CORE_DATA_PASSES for row in data)
         # with a render region the core renders only that window (w × h): Blender's render
         # result is then that region, with its origin at the region's corner
         result = self.begin_result(0, 0, w, h, layer=layer_name)

@@ -197,6 +197,8 @@ def material_params(mat, warnings, textures=None):
         return dict(DEFAULT_MATERIAL)
     what = f"material '{mat.name}'"
     out = dict(DEFAULT_MATERIAL, name=mat.name)
+    if mat.pass_index:
+        out["pass_index"] = mat.pass_index  # the IndexMA pass
     tree = mat.node_tree
     node_out = tree.get_output_node("CYCLES") if tree is not None else None
     if node_out is None:
@@ -697,6 +699,8 @@ def export_scene(depsgraph, test_break=lambda: False, need_camera=True):
         meshes.append({"name": name, "positions": np.ascontiguousarray(pos),
                        "indices": np.ascontiguousarray(tris, dtype=np.uint32),
                        "normals": np.ascontiguousarray(nrm), "material_ids": mat_ids, "uvs": uvs})
+        if ob.pass_index:
+            meshes[-1]["pass_index"] = ob.pass_index  # the IndexOB pass
     world, world_texture = _world(scene, warnings, textures)
     if scene.render.use_motion_blur:
         warnings.append("motion blur is not rendered yet: the frame is rendered at its shutter's start")

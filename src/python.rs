@@ -94,7 +94,8 @@ fn parse_mesh(d: &Bound<'_, PyDict>) -> PyResult<MeshDesc> {
         }
         _ => vec![],
     };
-    Ok(MeshDesc { name, positions, indices, corner_normals, material_ids, corner_uvs })
+    let pass_index = get_or(d, "pass_index", 0, &ctx)?;
+    Ok(MeshDesc { name, positions, indices, corner_normals, material_ids, corner_uvs, pass_index })
 }
 
 fn parse_material(d: &Bound<'_, PyDict>) -> PyResult<MaterialDesc> {
@@ -123,6 +124,7 @@ fn parse_material(d: &Bound<'_, PyDict>) -> PyResult<MaterialDesc> {
         specular: get_or(d, "specular", def.specular, &ctx)?,
         transparency: get_or(d, "transparency", def.transparency, &ctx)?,
         transparent_color: rgb(d, "transparent_color", def.transparent_color, &ctx)?,
+        pass_index: get_or(d, "pass_index", 0, &ctx)?,
         name,
     })
 }
@@ -266,7 +268,7 @@ fn parse_camera(d: &Bound<'_, PyDict>) -> PyResult<CameraDesc> {
 // the dict, with the closest known key, instead of being ignored silently.
 const SCENE_KEYS: &[&str] =
     &["camera", "lights", "materials", "meshes", "textures", "world", "world_rotation", "world_texture"];
-const MESH_KEYS: &[&str] = &["indices", "material_ids", "name", "normals", "positions", "uvs"];
+const MESH_KEYS: &[&str] = &["indices", "material_ids", "name", "normals", "pass_index", "positions", "uvs"];
 const MATERIAL_KEYS: &[&str] = &[
     "alpha_texture",
     "base_color",
@@ -283,6 +285,7 @@ const MATERIAL_KEYS: &[&str] = &[
     "name",
     "normal_strength",
     "normal_texture",
+    "pass_index",
     "roughness",
     "roughness_texture",
     "specular",
@@ -763,6 +766,7 @@ fn builtin_scene<'py>(py: Python<'py>, name: &str, width: u32, height: u32) -> P
         let idx: Vec<u32> = m.indices.iter().flatten().copied().collect();
         md.set_item("indices", PyArray1::from_vec(py, idx).reshape([m.indices.len(), 3])?)?;
         md.set_item("material_ids", PyArray1::from_slice(py, &m.material_ids))?;
+        md.set_item("pass_index", m.pass_index)?;
         if !m.corner_normals.is_empty() {
             let n: Vec<f32> = m.corner_normals.iter().flatten().copied().collect();
             md.set_item("normals", PyArray1::from_vec(py, n).reshape([m.corner_normals.len(), 3])?)?;
@@ -796,6 +800,7 @@ fn builtin_scene<'py>(py: Python<'py>, name: &str, width: u32, height: u32) -> P
             md.set_item(key, v)?;
         }
         md.set_item("multiscatter", m.multiscatter)?;
+        md.set_item("pass_index", m.pass_index)?;
         for (key, value) in [
             ("base_color_texture", m.base_color_texture),
             ("roughness_texture", m.roughness_texture),

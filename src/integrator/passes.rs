@@ -1,6 +1,7 @@
 //! Data passes, as Cycles writes them: Depth (the camera-space z of what a pixel's first
 //! camera sample hits; 1e10 where it sees nothing, the value Blender's compositor reads as
-//! "far") and Position (its world position; 0 where nothing) — from the first sample only,
+//! "far"), Position (its world position; 0 where nothing), Object Index and Material Index (the Pass
+//! Index of its object and of its material; 0 where nothing) — from the first sample only,
 //! not anti-aliased, as in Cycles. The same for every method: one camera ray per pixel,
 //! the ray of pt's sample 0.
 
@@ -13,10 +14,18 @@ use rayon::prelude::*;
 /// Depth where a camera ray hits nothing (Blender's value for the background).
 pub const NO_DEPTH: f32 = 1e10;
 
-/// The "Depth" (1 channel) and "Position" (RGB = xyz) layers.
+/// What the first camera ray of a pixel sees.
+struct FirstHit {
+    depth: f32,
+    position: [f32; 3],
+    object_index: f32,
+    material_index: f32,
+}
+
+/// The "Depth", "Object Index", "Material Index" (1 channel) and "Position" (RGB = xyz) layers.
 pub fn data_passes(scene: &Scene, seed: u64) -> Vec<(String, Image)> {
     let (w, h) = (scene.camera.width as usize, scene.camera.height as usize);
-    let px: Vec<(f32, [f32; 3])> = (0..w * h)
+    let px: Vec<FirstHit> = (0..w * h)
         .into_par_iter()
         .with_min_len(256)
         .map(|i| {
@@ -27,15 +36,26 @@ pub fn data_passes(scene: &Scene, seed: u64) -> Vec<(String, Image)> {
             match scene.intersect(ray.origin, ray.dir, ray.tmin, ray.tmax) {
                 Some(hit) => {
                     let p = ray.origin + ray.dir * hit.t;
-                    (scene.camera.axial_depth(p), p.to_array())
+                    let (ob, ma) = scene.pass_indices(hit.prim);
+                    FirstHit {
+                        depth: scene.camera.axial_depth(p),
+                        position: p.to_array(),
+                        object_index: ob as f32,
+                        material_index: ma as f32,
+                    }
                 }
-                None => (NO_DEPTH, [0.0; 3]),
+                None => FirstHit { depth: NO_DEPTH, position: [0.0; 3], object_index: 0.0, material_index: 0.0 },
             }
         })
         .collect();
-    let depth = Image { width: w, height: h, channels: 1, data: px.iter().map(|p| p.0).collect() };
-    let position = Image { width: w, height: h, channels: 3, data: px.iter().flat_map(|p| p.1).collect() };
-    vec![("Depth".into(), depth), ("Position".into(), position)]
+    let value = |f: fn(&FirstHit) -> f32| Image { width: w, height: h, channels: 1, data: px.iter().map(f).collect() };
+    let position = Image { width: w, height: h, channels: 3, data: px.iter().flat_map(|p| p.position).collect() };
+    vec![
+        ("Depth".into(), value(|p| p.depth)),
+        ("Position".into(), position),
+        ("Object Index".into(), value(|p| p.object_index)),
+        ("Material Index".into(), value(|p| p.material_index)),
+    ]
 }
 
 #[cfg(test)]
@@ -70,5 +90,36 @@ mod tests {
         let open = data_passes(&Scene::build(&desc).unwrap(), 3);
         let far = open[0].1.data.iter().filter(|&&d| d == NO_DEPTH).count();
         assert!(far > 256 - seen + 10, "{far} pixels see out");
+    }
+
+    /// Object Index and Material Index carry the Pass Index of the object and material the first camera
+    /// ray hits: the left wall (object 7, material Red = 3) where the position is on it, the
+    /// right wall (object 0: its own index; material Green = 5), 0 where nothing is hit.
+    #[test]
+    fn object_and_material_index_of_the_first_camera_ray() {
+        let mut desc = cornell_box(24, 24);
+        desc.meshes.iter_mut().find(|m| m.name == "LeftWall").unwrap().pass_index = 7;
+        desc.materials[1].pass_index = 3; // Red: the left wall
+        desc.materials[2].pass_index = 5; // Green: the right wall
+        let layers = data_passes(&Scene::build(&desc).unwrap(), 1);
+        let get = |name: &str| &layers.iter().find(|(n, _)| n == name).unwrap().1;
+        let (depth, pos, ob, ma) = (get("Depth"), get("Position"), get("Object Index"), get("Material Index"));
+        let (mut left, mut right) = (0, 0);
+        for i in 0..24 * 24 {
+            let x = pos.data[3 * i];
+            let expect = if depth.data[i] == NO_DEPTH {
+                (0.0, 0.0)
+            } else if (x + 1.0).abs() < 1e-4 {
+                left += 1;
+                (7.0, 3.0)
+            } else if (x - 1.0).abs() < 1e-4 {
+                right += 1;
+                (0.0, 5.0)
+            } else {
+                (0.0, 0.0) // white surfaces (the light's material has index 0 too)
+            };
+            assert_eq!((ob.data[i], ma.data[i]), expect, "pixel {i} at x = {x}");
+        }
+        assert!(left > 20 && right > 20, "{left} and {right} pixels see the side walls");
     }
 }

@@ -16,6 +16,8 @@ pub(super) struct Shading {
     pub has_transparency: bool,
     /// Some material has a normal map.
     pub has_normal_maps: bool,
+    /// Each material's Pass Index (the IndexMA pass).
+    pub pass_index: Vec<u32>,
 }
 
 impl Shading {
@@ -36,7 +38,8 @@ impl Shading {
         }
         let has_transparency = !shortcuts || materials.iter().any(|m| m.is_transparent());
         let has_normal_maps = materials.iter().any(|m| m.normal_texture.is_some());
-        Ok(Shading { textures, materials, has_transparency, has_normal_maps })
+        let pass_index = desc.materials.iter().map(|m| m.pass_index).collect();
+        Ok(Shading { textures, materials, has_transparency, has_normal_maps, pass_index })
     }
 }
 
@@ -49,6 +52,8 @@ pub(super) struct Triangles {
     pub normals: Vec<Option<[Vec3; 3]>>,
     /// Corner texture coordinates; `None` without a UV map.
     pub uvs: Vec<Option<[Vec2; 3]>>,
+    /// The Pass Index of each triangle's object; empty when every object's is 0.
+    pub pass_index: Vec<u32>,
 }
 
 impl Triangles {
@@ -63,9 +68,14 @@ impl Triangles {
             material: Vec::new(),
             normals: Vec::new(),
             uvs: Vec::new(),
+            pass_index: Vec::new(),
         };
+        let pass_indices = meshes.iter().any(|m| m.pass_index != 0);
         for m in meshes {
             t.add_mesh(m, num_materials, report)?;
+            if pass_indices {
+                t.pass_index.resize(t.positions.len(), m.pass_index);
+            }
         }
         if report.degenerate_triangles > 0 {
             report

@@ -17,6 +17,8 @@ pub struct MeshDesc {
     /// Optional per-corner texture coordinates (3 per triangle, in triangle order; Blender's
     /// active render UV map); empty = all (0, 0).
     pub corner_uvs: Vec<[f32; 2]>,
+    /// The object's Pass Index (Blender's IndexOB pass).
+    pub pass_index: u32,
 }
 
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -95,6 +97,8 @@ pub struct MaterialDesc {
     pub transparency: f32,
     /// Tint of the light that passes through (white for alpha).
     pub transparent_color: [f32; 3],
+    /// The material's Pass Index (Blender's IndexMA pass).
+    pub pass_index: u32,
 }
 
 impl Default for MaterialDesc {
@@ -122,6 +126,7 @@ impl Default for MaterialDesc {
             multiscatter: false,
             transparency: 0.0,
             transparent_color: [1.0; 3],
+            pass_index: 0,
         }
     }
 }

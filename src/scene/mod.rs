@@ -74,6 +74,10 @@ pub struct Scene {
     geo_normals: Vec<Vec3>,
     areas: Vec<f32>,
     tri_material: Vec<u32>,
+    /// Object Pass Index per triangle (empty: all 0) and material Pass Index per material
+    /// (the IndexOB and IndexMA passes).
+    tri_pass_index: Vec<u32>,
+    material_pass_index: Vec<u32>,
     pub materials: Vec<Material>,
     pub textures: Vec<Texture>,
     pub lights: Vec<Light>,
@@ -129,6 +133,8 @@ impl Scene {
             normals: tris.normals,
             uvs: tris.uvs,
             tri_material: tris.material,
+            tri_pass_index: tris.pass_index,
+            material_pass_index: Vec::new(),
             materials: Vec::new(),
             textures: Vec::new(),
             has_transparency: false,
@@ -164,6 +170,7 @@ impl Scene {
             material: std::mem::take(&mut self.tri_material),
             normals: Vec::new(),
             uvs: Vec::new(),
+            pass_index: Vec::new(),
         };
         let lighting = match tris.material.iter().max() {
             Some(&m) if m as usize >= shading.materials.len() => Err(SceneError::Mesh {
@@ -183,7 +190,17 @@ impl Scene {
 
     fn set_shading(&mut self, shading: Shading) {
         (self.materials, self.textures) = (shading.materials, shading.textures);
+        self.material_pass_index = shading.pass_index;
         (self.has_transparency, self.has_normal_maps) = (shading.has_transparency, shading.has_normal_maps);
+    }
+
+    /// The Pass Indices (object, material) of a triangle: Blender's IndexOB and IndexMA.
+    pub fn pass_indices(&self, prim: u32) -> (u32, u32) {
+        let material = self.tri_material[prim as usize] as usize;
+        (
+            self.tri_pass_index.get(prim as usize).copied().unwrap_or(0),
+            self.material_pass_index.get(material).copied().unwrap_or(0),
+        )
     }
 
     pub fn num_triangles(&self) -> usize {

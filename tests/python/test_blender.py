@@ -528,6 +528,35 @@ def test_depth_normal_and_position_passes_agree_with_cycles(bpy_mod, tmp_out, me
     assert np.median(np.abs(g["Normal"] - c["Normal"])) < 0.02
 
 
+@pytest.mark.parametrize("method", ["PT", "GDPT"])
+def test_object_and_material_index_passes_agree_with_cycles(bpy_mod, tmp_out, method):
+    """Issue 17: the View Layer's Object Index and Material Index passes (IndexOB, IndexMA:
+    the Pass Index of what a pixel's first sample hits, 0 for the world) were not written.
+    They are, and equal Cycles' on every pixel but silhouettes (one jittered sample each)."""
+    bpy = bpy_mod
+    got = {}
+    for engine in ("CYCLES", "GDMLT"):
+        scene = open_scene(bpy, "lights", engine, 4, 1, keep={"Area"})
+        if engine == "GDMLT":
+            scene.gdmlt.method = method
+            scene.gdmlt.use_denoising = False
+        meshes = sorted((o for o in scene.objects if o.type == "MESH"), key=lambda o: o.name)
+        for k, ob in enumerate(meshes):
+            ob.pass_index = k + 1
+        for k, mat in enumerate(sorted(bpy.data.materials, key=lambda m: m.name)):
+            mat.pass_index = 10 * (k + 1)
+        vl = bpy.context.view_layer
+        vl.use_pass_object_index = vl.use_pass_material_index = True
+        got[engine] = _multilayer_passes(bpy, scene, tmp_out / f"index{method}{engine}.exr")
+    c, g = got["CYCLES"], got["GDMLT"]
+    for name in ("Object Index", "Material Index"):
+        assert name in g and name in c, (name, sorted(g), sorted(c))
+        agree = (g[name] == c[name]).mean()
+        print(f"{name}: {agree * 100:.1f}% of pixels agree with Cycles; values {np.unique(g[name])}")
+        assert agree > 0.95, (name, agree)
+        assert len(np.unique(g[name])) >= 3  # the world's 0 and at least two objects' or materials'
+
+
 @pytest.mark.parametrize("method", ["PT", "GDPSSMLT"])
 def test_long_render_shows_intermediate_images(bpy_mod, tmp_out, method):
     """A render that runs for a while updates the result before it ends (the first
