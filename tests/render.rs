@@ -371,7 +371,7 @@ fn gradients_vanish_on_a_uniformly_lit_flat_wall() {
         indices: vec![[0, 1, 2], [0, 2, 3]],
         corner_normals: vec![],
         material_ids: vec![0, 0],
-        corner_uvs: vec![],
+        ..Default::default()
     };
     desc.world = [1.0, 1.0, 1.0];
     let out = run_method(&desc, Method::Gdpt, Norm::L1, 16, true, 2, 3, 0);
