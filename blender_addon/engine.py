@@ -38,23 +38,12 @@ METHOD_PASSES = {
 }
 
 
-# Blender's data passes GDMLT writes when the View Layer asks for them: (view layer toggle,
-# pass name, channels, channel ids, type) — the names and channels Cycles registers.
-DATA_PASSES = (
-    ("use_pass_z", "Depth", 1, "Z", "VALUE"),
-    ("use_pass_normal", "Normal", 3, "XYZ", "VECTOR"),
-    ("use_pass_position", "Position", 3, "XYZ", "VECTOR"),
-    ("use_pass_object_index", "Object Index", 1, "X", "VALUE"),
-    ("use_pass_material_index", "Material Index", 1, "X", "VALUE"),
-)
-# The data passes the core's first-hit pass writes (data_passes=True); Normal is the
-# denoising normal.
-CORE_DATA_PASSES = ("Depth", "Position", "Object Index", "Material Index")
-
-
 def data_passes_of(view_layer) -> list:
-    """The DATA_PASSES rows the view layer has switched on."""
-    return [row for row in DATA_PASSES if getattr(view_layer, row[0], False)]
+    """(name, channels, channel ids, type) of each data pass the view layer has switched on
+    (gdmlt.passes: the one table of them)."""
+    from gdmlt.passes import DATA_PASSES
+
+    return [row[2:] for row in DATA_PASSES if getattr(view_layer, row[1], False)]
 
 
 def _to_blender_rows(img, channels):
@@ -112,7 +101,7 @@ class GDMLTRenderEngine(bpy.types.RenderEngine):
         self.register_pass(scene, renderlayer, "Combined", 4, "RGBA", "COLOR")
         for name, channels, chan_id, kind in PASSES:
             self.register_pass(scene, renderlayer, name, channels, chan_id, kind)
-        for _, name, channels, chan_id, kind in data_passes_of(renderlayer):
+        for name, channels, chan_id, kind in data_passes_of(renderlayer):
             self.register_pass(scene, renderlayer, name, channels, chan_id, kind)
 
     def esc_pressed(self) -> bool:
@@ -198,16 +187,17 @@ class GDMLTRenderEngine(bpy.types.RenderEngine):
             if name in wanted:
                 self.add_pass(name, channels, chan_id, layer=layer_name)
         data = data_passes_of(depsgraph.view_layer)
-        for _, name, channels, chan_id, _ in data:
+        for name, channels, chan_id, _ in data:
             self.add_pass(name, channels, chan_id, layer=layer_name)
-        # Depth, Position and the indices come from the core's data pass; Normal is the denoising normal
-        settings["data_passes"] = any(row[1] in CORE_DATA_PASSES for row in data)
+        from gdmlt.passes import needs_core_pass, select
+
+        settings["data_passes"] = needs_core_pass(row[0] for row in data)
         # with a render region the core renders only that window (w × h): Blender's render
         # result is then that region, with its origin at the region's corner
         result = self.begin_result(0, 0, w, h, layer=layer_name)
         try:
             passes = result.layers[0].passes
-            channels_of = dict([("Combined", 4)] + [(p[0], p[1]) for p in PASSES] + [(p[1], p[2]) for p in data])
+            channels_of = dict([("Combined", 4)] + [(p[0], p[1]) for p in PASSES] + [(p[0], p[1]) for p in data])
             previews = 0
 
             def write(name, img):
@@ -233,8 +223,7 @@ class GDMLTRenderEngine(bpy.types.RenderEngine):
                 denoised = "Noisy Image" in layers
             from gdmlt.outputs import with_alpha
 
-            if "Denoising Normal" in layers:
-                layers = dict(layers, Normal=layers["Denoising Normal"])
+            layers = select(layers, [row[0] for row in data])
             for name, img in layers.items():
                 if name in channels_of:
                     # Combined carries the transparent film's alpha in its A channel

@@ -135,10 +135,10 @@ class GDMLT_PT_passes(GDMLTRenderPanel, bpy.types.Panel):
 
     def draw(self, context):
         layout = self.split_layout()
-        from .engine import DATA_PASSES
+        from gdmlt.passes import DATA_PASSES
 
         col = layout.column(heading="Data", align=True)
-        for toggle, *_ in DATA_PASSES:  # the passes the engine writes when they are on
+        for _, toggle, *_ in DATA_PASSES:  # the passes the engine writes when they are on
             col.prop(context.view_layer, toggle)
 
 

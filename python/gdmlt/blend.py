@@ -1,4 +1,5 @@
-"""Rendering a .blend file through the GDMLT addon in bpy, as `blender -b file -f` would."""
+"""A .blend file through the GDMLT add-on in bpy: its scene exported as F12 would, its settings read
+once (settings_of), and `gdmlt export` to USD."""
 
 import os
 import tempfile
@@ -43,26 +44,53 @@ def scene_desc(scene: str, size=None):
     if path.suffix.lower() != ".blend":
         w, h = size or (128, 128)
         return gdmlt.builtin_scene(scene, w, h), scene, []
+    loaded = load(path, width=size[0] if size else None, height=size[1] if size else None)
+    return loaded["desc"], path.stem, loaded["warnings"]
+
+
+def load(path: Path, frame=None, width=None, height=None) -> dict:
+    """Opens a .blend and exports its active scene through the add-on, as F12 would: {"desc":
+    scene dict, "warnings": export warnings, "settings": its GDMLT render settings
+    (settings_of), "view": its colour management (gdmlt.colour), "passes": the data passes its
+    view layer has on (gdmlt.passes)}. `frame`: the frame to export (default: the file's);
+    `width`/`height`: override the resolution (at 100%)."""
+    path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"file not found: {path}")
     bpy = import_bpy()
     from .addon import enable_addon
 
-    enable_addon()
+    enable_addon()  # before loading, so the file's engine and settings resolve
     import gdmlt_blender.export as export
+
+    from . import colour, passes
 
     bpy.ops.wm.open_mainfile(filepath=str(path.resolve()))
     sc = bpy.context.scene
-    if size:
-        sc.render.resolution_x, sc.render.resolution_y = size
-        sc.render.resolution_percentage = 100
+    if frame is not None:
+        sc.frame_set(int(frame))
+    r = sc.render
+    if width:
+        r.resolution_x = width
+    if height:
+        r.resolution_y = height
+    if width or height:
+        r.resolution_percentage = 100
     desc, warnings = export.export_scene(bpy.context.evaluated_depsgraph_get())
-    return desc, path.stem, list(warnings)
+    warnings = list(warnings)
+    if r.use_compositing and _has_compositor(sc):
+        warnings.append("the scene's compositing nodes are not applied by `gdmlt render` (render with "
+                        "`blender -b file.blend -f N` to apply them)")
+    return {"desc": desc, "warnings": warnings, "settings": settings_of(sc.gdmlt), "view": colour.view_of(sc),
+            "passes": passes.of_view_layer(bpy.context.view_layer)}
 
 
-def apply_settings(scene, settings: dict):
-    for k, v in settings.items():
-        setattr(scene.gdmlt, PROPERTY_OF[k], v.upper() if k in ("method", "reconstruction") else v)
+def _has_compositor(scene) -> bool:
+    """Whether the scene composites more than its render layer into its output."""
+    tree = getattr(scene, "compositing_node_group", None) or getattr(scene, "node_tree", None)
+    if tree is None:
+        return False
+    return any(n.type not in ("R_LAYERS", "COMPOSITE", "GROUP_OUTPUT", "VIEWER") for n in tree.nodes)
 
 
 def export_usd(path: Path, out: Path, frame=None) -> dict:
@@ -104,6 +132,13 @@ def export_usd(path: Path, out: Path, frame=None) -> dict:
 
     layer = Sdf.Layer.FindOrOpen(str(out.resolve()))
     data = dict(layer.customLayerData)
+    from . import colour, passes
+
+    # the stage renders as the file does: its settings, its colour management (the PNG) and
+    # its view layer's data passes (the EXR)
+    settings["view"] = colour.view_of(scene)
+    on = set(passes.of_view_layer(bpy.context.view_layer))
+    settings["passes"] = ",".join(row[0] for row in passes.DATA_PASSES if row[2] in on)
     data["gdmlt"] = {k: v for k, v in settings.items() if k != "camera"}
     layer.customLayerData = data
     layer.Save()
@@ -159,38 +194,3 @@ def _as_exportable_principled(bpy):
         else:
             p.inputs["Base Color"].default_value = src.inputs["Color"].default_value
         tree.links.new(p.outputs[0], surface)
-
-
-def render_blend(path: Path, out: Path, settings: dict, width=None, height=None, png=True) -> dict:
-    """Opens `path`, renders its active scene with GDMLT into `out` (EXR, 32-bit float) and
-    `out.png`. Raises RuntimeError with Blender's report if the render fails."""
-    bpy = import_bpy()
-    from .addon import enable_addon
-
-    mod = enable_addon()  # before loading, so the file's engine and settings resolve
-    bpy.ops.wm.open_mainfile(filepath=str(path))
-    scene = bpy.context.scene
-    scene.render.engine = "GDMLT"
-    apply_settings(scene, settings)
-    if width:
-        scene.render.resolution_x = width
-    if height:
-        scene.render.resolution_y = height
-    if width or height:
-        scene.render.resolution_percentage = 100
-    img = scene.render.image_settings
-    img.file_format = "OPEN_EXR"
-    img.color_depth = "32"
-    img.color_mode = "RGB"
-    scene.render.filepath = str(out.resolve())
-    scene.render.use_file_extension = False
-    bpy.ops.render.render(write_still=True)
-    from .outputs import mark_png, png_beside
-
-    path = png_beside(out) if png else None
-    if path is not None:
-        img.file_format = "PNG"
-        img.color_depth = "8"
-        bpy.data.images["Render Result"].save_render(str(path.resolve()), scene=scene)
-        mark_png(path)
-    return dict(getattr(mod.engine, "last_stats", {}) or {})

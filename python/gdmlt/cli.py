@@ -6,6 +6,8 @@ import sys
 import time
 from pathlib import Path
 
+from .passes import CLI_NAMES as CLI_PASS_NAMES
+
 BUILTIN = ("cornell", "spheres", "gap", "furnace")
 METHODS = ("pt", "gdpt", "pssmlt", "gdpssmlt")
 RENDER_METHODS = ("auto",) + METHODS  # auto: gdmlt/auto.py picks one of them per scene
@@ -118,7 +120,11 @@ def build_parser():
     r.add_argument("--height", type=_side, help="image height in pixels (overrides the scene)")
     r.add_argument("--threads", type=_threads, help="render threads, 0 = all cores (default)")
     r.add_argument("--no-png", action="store_true", help="write only the EXR")
-    r.add_argument("--frame", type=float, help="USD: the time code to render (default: the stage's default time)")
+    r.add_argument("--frame", type=float, help="the frame (.blend) or time code (USD) to render (default: the "
+                                               "file's current frame, the stage's default time)")
+    r.add_argument("--passes", metavar="NAMES",
+                   help="data passes to add to the EXR, comma-separated: " + ", ".join(CLI_PASS_NAMES)
+                        + ", or all (default: those the .blend's view layer has on, or the USD stage stored)")
     r.add_argument("--camera", help="USD: path of the camera prim (default: the first camera)")
     r.add_argument("--partial", metavar="K/N",
                    help="render partial K of N (its own seed) into OUT.npz, for gdmlt merge")
@@ -162,14 +168,6 @@ def _settings(args):
         "chains": args.chains, "clamp_direct": args.clamp_direct, "clamp_indirect": args.clamp_indirect,
         **{f"{k}_bounces": getattr(args, f"{k}_bounces") for k in BOUNCE_KINDS}}.items()
         if v is not None}
-
-
-def _blend_settings(args):
-    """The settings a .blend render takes from the command line (its own for the rest)."""
-    s = _settings(args)
-    if args.denoise is not None:
-        s["denoise"] = args.denoise
-    return s
 
 
 def finish_layers(layers: dict, denoise: bool, threads=0) -> dict:
@@ -224,30 +222,29 @@ def checked_settings(stored: dict, where: str) -> dict:
     return out
 
 
-def render_settings(args) -> tuple:
-    """(gdmlt.render's settings, whether to denoise): the CLI's options over the settings a
-    USD stage stored (`gdmlt export`, read once) over the defaults; denoising defaults to on,
-    as in Cycles."""
+def render_settings(args, stored: dict) -> tuple:
+    """(gdmlt.render's settings, whether to denoise): the CLI's options over the settings the
+    scene file holds (`stored`: a .blend's scene.gdmlt, what `gdmlt export` stored in a USD
+    stage) over the defaults; denoising defaults to on, as in Cycles."""
     opts = {"method": "auto", "spp": 64, "time_limit": 0.0, "max_bounces": 8, "nee": True, "seed": 0, "threads": 0,
             "reconstruction": "l1", "alpha_rec": 0.2, "alpha_target": 1.0, "large_step_probability": 0.3,
             "chains": 0, "diffuse_bounces": 1024, "glossy_bounces": 1024, "transmission_bounces": 1024,
             "transparent_bounces": 16, "clamp_direct": 0.0, "clamp_indirect": 0.0}
-    if Path(args.scene).suffix.lower() in USD_SUFFIXES:
-        from .usd import stored_settings
-
-        stored = checked_settings(stored_settings(args.scene), f"{args.scene} (customLayerData gdmlt)")
-    else:
-        stored = {}
     opts.update({k: v for k, v in stored.items() if k in opts})
     opts.update(_settings(args))
     denoise = args.denoise if args.denoise is not None else stored.get("denoise", True)
     return opts, denoise
 
 
-def render_desc(desc, settings: dict, denoise: bool, out: Path, png: bool):
-    """Renders a scene dict with `settings` (render_settings'); writes the EXR (+ PNG)."""
+def render_desc(desc, settings: dict, denoise: bool, out: Path, png: bool, view=None, passes=()):
+    """Renders a scene dict with `settings` (render_settings'); writes the EXR with the data
+    `passes` (names, gdmlt.passes) beside the method's own, and the PNG through `view`
+    (gdmlt.colour)."""
     import gdmlt
 
+    from .passes import needs_core_pass, select
+
+    settings = dict(settings, data_passes=needs_core_pass(passes))
     if settings["method"] == "auto":
         from .auto import plan
 
@@ -274,10 +271,11 @@ def render_desc(desc, settings: dict, denoise: bool, out: Path, png: bool):
         # Ctrl-C (the core stops at the signal and returns what it has): keep the work under
         # a name that says so, never as the image the user asked for, and say so in its header
         out = out.with_name(out.stem + ".interrupted" + out.suffix)
-        write_layers(out, res["layers"], png, dict(meta, **{"gdmlt/denoised": "no"}))
+        write_layers(out, select(res["layers"], passes), png, dict(meta, **{"gdmlt/denoised": "no"}), view)
         raise Interrupted(out)
-    layers = finish_layers(res["layers"], denoise, settings["threads"])
-    write_layers(out, layers, png, dict(meta, **{"gdmlt/denoised": "yes" if "Noisy Image" in layers else "no"}))
+    layers = select(finish_layers(res["layers"], denoise, settings["threads"]), passes)
+    write_layers(out, layers, png, dict(meta, **{"gdmlt/denoised": "yes" if "Noisy Image" in layers else "no"}),
+                 view)
     return st
 
 
@@ -333,27 +331,34 @@ def main(argv=None):
 def _main(argv=None):
     parser = build_parser()
     args = parser.parse_args(argv)
-    if args.command == "merge":
-        return merge_command(args)
-    if args.command == "export":
-        out, src = Path(args.output), Path(args.scene)
-        if out.suffix.lower() not in USD_SUFFIXES:
-            parser.error(f"output must be a USD file ({', '.join(USD_SUFFIXES)}), got '{out}'")
-        if src.suffix.lower() != ".blend" or not src.is_file():
-            print(f"gdmlt: error: not a .blend file: {src}", file=sys.stderr)
-            return 1
-        from .blend import export_usd
+    command = {"merge": merge_command, "export": export_command, "render": render_command}[args.command]
+    return command(args, parser)
 
-        try:
-            stored = export_usd(src, out, frame=args.frame)
-        except RuntimeError as e:
-            print(f"gdmlt: error: {e}", file=sys.stderr)
-            return 1
-        print(f"wrote {out} ({stored['width']}×{stored['height']}, method {stored['method']}, "
-              f"{stored['spp']} per pixel)")
-        return 0
+
+def export_command(args, parser):
+    """`gdmlt export x.blend -o x.usd`: the scene and its settings to USD."""
+    out, src = Path(args.output), Path(args.scene)
+    if out.suffix.lower() not in USD_SUFFIXES:
+        parser.error(f"output must be a USD file ({', '.join(USD_SUFFIXES)}), got '{out}'")
+    if src.suffix.lower() != ".blend" or not src.is_file():
+        print(f"gdmlt: error: not a .blend file: {src}", file=sys.stderr)
+        return 1
+    from .blend import export_usd
+
+    try:
+        stored = export_usd(src, out, frame=args.frame)
+    except RuntimeError as e:
+        print(f"gdmlt: error: {e}", file=sys.stderr)
+        return 1
+    print(f"wrote {out} ({stored['width']}×{stored['height']}, method {stored['method']}, "
+          f"{stored['spp']} per pixel)")
+    return 0
+
+
+def _checked_render_args(args, parser):
+    """The render command's arguments checked before any work: the output's type, --partial's
+    K/N, the scene's kind. Returns (K, N) of --partial or None."""
     out = Path(args.output)
-    distributed = args.partial is not None or args.dask is not None
     want = ".npz" if args.partial is not None else ".exr"
     if out.suffix.lower() != want:
         parser.error(f"output must be a {want} file" + (" with --partial" if want == ".npz" else "") + f", got '{out}'")
@@ -368,51 +373,63 @@ def _main(argv=None):
         partial = (k, n)
     if args.dask is not None and args.partials < 1:
         parser.error("--partials must be at least 1")
-    t0 = time.perf_counter()
+    suffix = Path(args.scene).suffix.lower()
+    if args.scene not in BUILTIN and suffix != ".blend" and suffix not in USD_SUFFIXES:
+        parser.error(f"'{args.scene}' is neither a .blend or USD file nor a built-in scene ({', '.join(BUILTIN)})")
+    if args.passes is not None:
+        from .passes import parse_cli
+
+        try:
+            parse_cli(args.passes)
+        except ValueError as e:
+            parser.error(f"--passes: {e}")
+    return partial
+
+
+def render_command(args, parser):
+    """`gdmlt render SCENE -o x.exr`: load the scene (load_source), settle the settings (the
+    file's under the options), render — here, as one partial, or on Dask — and write."""
+    partial = _checked_render_args(args, parser)
+    out, path, t0 = Path(args.output), Path(args.scene), time.perf_counter()
+    distributed = partial is not None or args.dask is not None
     try:
         out.parent.mkdir(parents=True, exist_ok=True)
-        path = Path(args.scene)
-        if args.scene not in BUILTIN:
-            if path.suffix.lower() != ".blend" and path.suffix.lower() not in USD_SUFFIXES:
-                parser.error(f"'{args.scene}' is neither a .blend or USD file nor a built-in scene "
-                             f"({', '.join(BUILTIN)})")
-            if not path.is_file():
-                print(f"gdmlt: error: file not found: {path}", file=sys.stderr)
-                return 1
-        if path.suffix.lower() == ".blend" and not distributed:
-            from .blend import render_blend
+        if args.scene not in BUILTIN and not path.is_file():
+            print(f"gdmlt: error: file not found: {path}", file=sys.stderr)
+            return 1
+        src = load_source(args)
+        settings, denoise = render_settings(args, src["stored"])
+        from .passes import parse_cli
 
-            stats = render_blend(path, out, _blend_settings(args), width=args.width, height=args.height,
-                                 png=not args.no_png)
-        else:
-            desc = scene_desc(args)
-            settings, denoise = render_settings(args)
-            if settings["method"] == "auto" and (partial is not None or args.dask is not None):
-                if partial is not None:
-                    parser.error("--partial needs a method other than auto: each machine's pilot could pick "
-                                 "another one, and partials of different methods do not merge")
-                from .auto import plan
-
-                settings, pick = plan(desc, settings)
-                print(f"gdmlt: method auto chose {pick['method']} ({pick['why']})", file=sys.stderr)
+        wanted = parse_cli(args.passes) if args.passes is not None else src["passes"]
+        if not distributed:
+            stats = render_desc(src["desc"], settings, denoise, out, not args.no_png, src["view"], wanted)
+            return _report(args, out, stats, t0)
+        if args.passes:
+            print("gdmlt: warning: --passes: distributed renders write no data passes", file=sys.stderr)
+        if settings["method"] == "auto":
             if partial is not None:
-                from .distributed import render_partial, save_partial
+                parser.error("--partial needs a method other than auto: each machine's pilot could pick "
+                             "another one, and partials of different methods do not merge")
+            from .auto import plan
 
-                p = render_partial(desc, partial[0], partial[1], settings)
-                save_partial(out, p)
-                print(f"wrote partial {partial[0]}/{partial[1]} to {out} ({p['work']:.0f} samples)")
-                return 0
-            if args.dask is not None:
-                from .distributed import render_dask
+            settings, pick = plan(src["desc"], settings)
+            print(f"gdmlt: method auto chose {pick['method']} ({pick['why']})", file=sys.stderr)
+        if partial is not None:
+            from .distributed import render_partial, save_partial
 
-                layers, dropped = render_dask(desc, args.partials, settings,
-                                              address=args.dask or None, workers=args.workers,
-                                              log=lambda m: print(m, file=sys.stderr))
-                write_layers(out, finish_layers(layers, denoise), not args.no_png)
-                print(f"wrote {out}: {args.partials - len(dropped)} of {args.partials} partials merged "
-                      f"in {time.perf_counter() - t0:.2f} s")
-                return 0
-            stats = render_desc(desc, settings, denoise, out, not args.no_png)
+            p = render_partial(src["desc"], partial[0], partial[1], settings)
+            save_partial(out, p)
+            print(f"wrote partial {partial[0]}/{partial[1]} to {out} ({p['work']:.0f} samples)")
+            return 0
+        from .distributed import render_dask
+
+        layers, dropped = render_dask(src["desc"], args.partials, settings, address=args.dask or None,
+                                      workers=args.workers, log=lambda m: print(m, file=sys.stderr))
+        write_layers(out, finish_layers(layers, denoise), not args.no_png, view=src["view"])
+        print(f"wrote {out}: {args.partials - len(dropped)} of {args.partials} partials merged "
+              f"in {time.perf_counter() - t0:.2f} s")
+        return 0
     except Interrupted as e:
         print(f"gdmlt: interrupted: the unfinished image was written to {e.path}", file=sys.stderr)
         return 130
@@ -422,6 +439,10 @@ def _main(argv=None):
     except (ValueError, RuntimeError, FileNotFoundError, OSError) as e:
         print(f"gdmlt: error: {e}", file=sys.stderr)
         return 1
+
+
+def _report(args, out: Path, stats: dict, t0: float) -> int:
+    """The render's warnings, what was written and how long it took."""
     for w in stats.get("warnings", []):
         print(f"gdmlt: warning: {w}", file=sys.stderr)
     total = time.perf_counter() - t0
@@ -435,45 +456,63 @@ def _main(argv=None):
     return 0
 
 
-def scene_desc(args):
-    """The scene dict of a built-in name, a USD stage or a .blend file (exported through the addon)."""
+def load_source(args) -> dict:
+    """The scene to render and what its file says about rendering it: {"desc": scene dict,
+    "stored": render settings (checked as the CLI's own), "view": colour management for the
+    PNG (gdmlt.colour), "passes": data pass names (gdmlt.passes)} — of a built-in scene
+    (defaults, Standard, none), a USD stage (what `gdmlt export` stored in it) or a .blend
+    (its scene's, exported through the add-on). Prints the loader's warnings."""
     import gdmlt
 
-    if args.scene in BUILTIN:
-        return gdmlt.builtin_scene(args.scene, args.width or 256, args.height or 256)
+    from . import colour
+
+    src = {"stored": {}, "view": dict(colour.STANDARD), "passes": ()}
     path = Path(args.scene)
-    if path.suffix.lower() in USD_SUFFIXES:
-        from .usd import load
+    if args.scene in BUILTIN:
+        src["desc"], warnings = gdmlt.builtin_scene(args.scene, args.width or 256, args.height or 256), []
+    elif path.suffix.lower() in USD_SUFFIXES:
+        from .passes import parse_cli
+        from .usd import load, stored_settings
 
-        desc, warnings = load(path, frame=args.frame, width=args.width, height=args.height, camera=args.camera)
+        where = f"{args.scene} (customLayerData gdmlt)"
+        stored = stored_settings(args.scene)
+        src["stored"] = checked_settings(stored, where)
+        if "view" in stored:
+            src["view"] = colour.checked_view(stored["view"], where)
+        if "passes" in stored:
+            src["passes"] = parse_cli(str(stored["passes"]))
+        src["desc"], warnings = load(path, frame=args.frame, width=args.width, height=args.height,
+                                     camera=args.camera)
     else:
-        from .blend import scene_desc as blend_desc
+        from .blend import load
 
-        size = (args.width, args.height) if args.width and args.height else None
-        desc, _, warnings = blend_desc(str(path), size)  # (its warnings were dropped before)
+        b = load(path, frame=args.frame, width=args.width, height=args.height)
+        src.update(desc=b["desc"], view=b["view"], passes=b["passes"],
+                   stored=checked_settings(b["settings"], f"{path} (scene.gdmlt)"))
+        warnings = b["warnings"]
     for w in warnings:
         print(f"gdmlt: warning: {w}", file=sys.stderr)
-    return desc
+    return src
 
 
-def write_layers(out: Path, layers: dict, png: bool, metadata=None):
-    """The EXR (every layer; `metadata`: text attributes in its header) and the PNG beside it."""
+def write_layers(out: Path, layers: dict, png: bool, metadata=None, view=None):
+    """The EXR (every layer; `metadata`: text attributes in its header) and the PNG beside it
+    (through `view`: gdmlt.colour)."""
     import gdmlt
 
-    from .outputs import with_alpha
+    from .colour import write_png
+    from .outputs import png_beside, with_alpha
 
     combined = with_alpha(layers)
     names = [n for n in layers if n not in ("Combined", "Alpha")]
     gdmlt.write_exr(str(out), [("Combined", combined)] + [(n, layers[n]) for n in names], metadata)
-    from .outputs import png_beside
-
     path = png_beside(out) if png else None
     if path is not None:
-        gdmlt.write_png(str(path), combined)
+        write_png(path, combined, view)
 
 
 
-def merge_command(args):
+def merge_command(args, parser=None):
     from .distributed import load_partial, merge
 
     out = Path(args.output)

@@ -1029,3 +1029,102 @@ def test_pixel_filter_matches_cycles_pixel_by_pixel(bpy_mod, tmp_out):
     # the box image is the sharper one: larger neighbour differences
     sharp = {f: float(np.abs(np.diff(imgs[f], axis=1)).mean()) for f in ("BLACKMAN_HARRIS", "BOX")}
     assert sharp["BOX"] > sharp["BLACKMAN_HARRIS"], sharp
+
+
+def _exr_layers(path):
+    """{layer: array (H, W, C)} of an EXR GDMLT's CLI wrote (channels 'Layer.R' …, Combined as RGB(A))."""
+    import OpenEXR
+
+    with OpenEXR.File(str(path)) as f:
+        out = {}
+        for name, ch in f.channels().items():
+            a = np.asarray(ch.pixels, np.float32)
+            out["Combined" if name in ("RGB", "RGBA") else name.rsplit(".", 1)[0]] = a[..., None] if a.ndim == 2 else a
+    return out
+
+
+def test_command_line_writes_the_view_layers_data_passes_and_the_passes_asked_for(bpy_mod, tmp_out):
+    """Issue 17: `gdmlt render x.blend` wrote an RGB-only EXR (the view layer's passes were
+    lost) and had no --passes. Now the .blend's View Layer toggles decide its data passes, as
+    in F12, `--passes` adds them for any scene, and a USD stage that `gdmlt export` wrote
+    keeps the file's; each pass equals the one F12 writes into Blender's result."""
+    import subprocess
+
+    def cli(*args):
+        r = subprocess.run([sys.executable, "-m", "gdmlt.cli", *args], capture_output=True, text=True, cwd=ROOT)
+        assert r.returncode == 0, r.stdout + r.stderr
+        return r
+
+    bpy = bpy_mod
+    scene = open_scene(bpy, "lights", "GDMLT", 4, 2, keep={"Area"})
+    scene.render.resolution_x, scene.render.resolution_y = 40, 30
+    scene.gdmlt.method, scene.gdmlt.use_denoising = "PT", False
+    vl = bpy.context.view_layer
+    vl.use_pass_z = vl.use_pass_object_index = True
+    for k, ob in enumerate(o for o in scene.objects if o.type == "MESH"):
+        ob.pass_index = k + 1
+    blend = tmp_out / "passes.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend), copy=True)
+    f12 = _multilayer_passes(bpy, scene, tmp_out / "f12.exr")
+
+    cli("render", str(blend), "-o", str(tmp_out / "blend.exr"))
+    got = _exr_layers(tmp_out / "blend.exr")
+    assert {"Depth", "Object Index"} <= set(got) and not {"Position", "Normal", "Material Index"} & set(got), sorted(got)
+    for name in ("Depth", "Object Index"):
+        np.testing.assert_array_equal(got[name][..., 0], f12[name][..., 0])
+
+    cli("render", str(blend), "-o", str(tmp_out / "more.exr"), "--passes", "position,material-index")
+    assert {"Position", "Material Index"} <= set(_exr_layers(tmp_out / "more.exr"))
+
+    cli("render", "cornell", "-o", str(tmp_out / "builtin.exr"), "--spp", "1", "--width", "16", "--height", "12",
+        "--method", "pt", "--passes", "all")
+    assert {"Depth", "Normal", "Position", "Object Index", "Material Index"} <= set(_exr_layers(tmp_out / "builtin.exr"))
+
+    cli("export", str(blend), "-o", str(tmp_out / "passes.usdc"))
+    cli("render", str(tmp_out / "passes.usdc"), "-o", str(tmp_out / "usd.exr"))
+    usd = _exr_layers(tmp_out / "usd.exr")
+    assert {"Depth", "Object Index"} <= set(usd) and "Position" not in usd, sorted(usd)
+
+
+@pytest.mark.parametrize("view", ["AgX", "Standard"])
+def test_every_png_is_its_exr_through_the_scenes_view_transform(bpy_mod, tmp_out, view):
+    """Issue 17: the PNG of `gdmlt render x.blend` went through Blender's view transform, the
+    PNG of the same scene exported to USD (and of built-in scenes) through plain sRGB. Now one
+    rule for every PNG: its EXR through the scene's view (gdmlt.colour) — for the .blend and
+    for the stage `gdmlt export` wrote from it (it stores the view), compared with Blender's
+    own colour management of that EXR (to one 8-bit level); with exposure and gamma."""
+    import subprocess
+
+    from PIL import Image
+
+    def cli(*args):
+        r = subprocess.run([sys.executable, "-m", "gdmlt.cli", *args], capture_output=True, text=True, cwd=ROOT)
+        assert r.returncode == 0, r.stdout + r.stderr
+
+    bpy = bpy_mod
+    scene = open_scene(bpy, "lights", "GDMLT", 4, 2)
+    scene.render.resolution_x, scene.render.resolution_y = 40, 30
+    scene.gdmlt.method, scene.gdmlt.use_denoising = "PT", False
+    scene.view_settings.view_transform = view
+    scene.view_settings.exposure, scene.view_settings.gamma = 0.7, 1.2
+    blend = tmp_out / f"view{view}.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend), copy=True)
+    cli("export", str(blend), "-o", str(tmp_out / f"view{view}.usdc"))
+    for src in (blend, tmp_out / f"view{view}.usdc"):
+        out = tmp_out / f"{src.suffix[1:]}{view}.exr"
+        cli("render", str(src), "-o", str(out))
+        linear = _exr_layers(out)["Combined"]
+        # Blender's own colour management of that image, as the scene sets it, no dither
+        img = bpy.data.images.new("ref", linear.shape[1], linear.shape[0], float_buffer=True)
+        rgba = np.ones(linear.shape[:2] + (4,), np.float32)
+        rgba[..., :3] = linear[..., :3]
+        img.pixels.foreach_set(rgba[::-1].ravel())
+        bpy.context.scene.render.dither_intensity = 0.0
+        s = bpy.context.scene.render.image_settings
+        s.file_format, s.color_mode, s.color_depth = "PNG", "RGB", "8"
+        img.save_render(str(tmp_out / "ref.png"), scene=bpy.context.scene)
+        bpy.data.images.remove(img)
+        ref = np.asarray(Image.open(tmp_out / "ref.png"), np.int32)
+        got = np.asarray(Image.open(out.with_suffix(".png")), np.int32)[..., :3]
+        assert got.shape == ref.shape and ref.mean() > 20
+        assert np.abs(got - ref).max() <= 1, (src.suffix, view, np.abs(got - ref).max())
