@@ -272,8 +272,7 @@ class GDMLTRenderEngine(bpy.types.RenderEngine):
         if session is None or session.desc is None:
             return
         s = scene.gdmlt
-        pixel_size = scene.render.preview_pixel_size
-        pixel_size = int(context.preferences.system.pixel_size) if pixel_size == "AUTO" else int(pixel_size)
+        pixel_size = max(1, int(self.get_preview_pixel_size(scene)))  # Blender's Pixel Size ("Automatic": DPI)
         try:
             session.look_through(viewport.view_camera(context.region_data, region.width, region.height,
                                                       scene, pixel_size))
