@@ -189,3 +189,70 @@ def test_passes_average_progressively_up_to_the_viewport_samples(bpy_mod):
     np.testing.assert_allclose(passes[-1][..., :3], np.mean(singles, axis=0)[..., :3], rtol=1e-5, atol=1e-6)
     assert np.all(passes[-1][..., 3] == 1.0)
     assert np.isfinite(passes[-1]).all() and passes[-1][..., :3].mean() > 0.0
+
+
+def test_engine_draws_each_pass_through_blenders_display_shader(bpy_mod, monkeypatch):
+    """The engine's glue, run with stand-ins for what needs a window (Blender's `gpu`
+    module and the engine instance Blender makes): view_update exports and view_draw
+    renders a pass and draws it as an RGBA float texture over the whole region, inside
+    bind/unbind_display_space_shader, asking for another draw until Viewport Samples."""
+    import sys
+
+    bpy = bpy_mod
+    from gdmlt_blender.engine import GDMLTRenderEngine as E
+
+    bpy.ops.wm.open_mainfile(filepath=str(SCENES / "lights.blend"))
+    scene = bpy.context.scene
+    scene.gdmlt.preview_samples = 2
+    drawn, calls = [], []
+
+    class Texture:
+        def __init__(self, size, format, data):
+            self.size, self.format, self.data = size, format, np.asarray(data, np.float32)
+
+    gpu = SimpleNamespace(types=SimpleNamespace(Buffer=lambda fmt, n, data: np.array(data, np.float32).ravel()[:n],
+                                                GPUTexture=Texture),
+                          state=SimpleNamespace(blend_set=lambda mode: calls.append(("blend", mode))))
+    presets = SimpleNamespace(draw_texture_2d=lambda tex, pos, w, h: drawn.append((tex, pos, w, h)))
+    monkeypatch.setitem(sys.modules, "gpu", gpu)
+    monkeypatch.setitem(sys.modules, "gpu_extras.presets", presets)
+
+    class Engine:  # Blender makes the real instance; these are the methods it calls
+        view_update, view_draw, _report_viewport_error = E.view_update, E.view_draw, E._report_viewport_error
+        viewport, _viewport_error, is_preview = None, None, False
+
+        def report(self, kind, message):
+            raise AssertionError(message)
+
+        def get_preview_pixel_size(self, scene):
+            return 2
+
+        def bind_display_space_shader(self, scene):
+            calls.append("bind")
+
+        def unbind_display_space_shader(self):
+            calls.append("unbind")
+
+        def tag_redraw(self):
+            calls.append("redraw")
+
+        def update_stats(self, *a):
+            pass
+
+    cam = scene.camera
+    W, H = 80, 60
+    P = np.array(cam.calc_matrix_camera(bpy.context.evaluated_depsgraph_get(), x=W, y=H))
+    context = SimpleNamespace(region=SimpleNamespace(width=W, height=H),
+                              region_data=SimpleNamespace(view_matrix=np.linalg.inv(np.array(cam.matrix_world)),
+                                                          window_matrix=P, view_perspective="CAMERA"))
+    engine = Engine()
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    engine.view_update(context, depsgraph)
+    for _ in range(4):
+        engine.view_draw(context, depsgraph)
+    sizes = [d[0].size for d in drawn]
+    assert sizes == [(40, 30), (40, 30), (40, 30), (40, 30)], sizes  # the region at Pixel Size 2 (no coarse pass)
+    assert all(d[1:] == ((0, 0), W, H) for d in drawn) and all(d[0].format == "RGBA16F" for d in drawn)
+    assert engine.viewport.samples == 2 and calls.count("redraw") == 1  # stops asking at Viewport Samples
+    assert calls.count("bind") == calls.count("unbind") == 4
+    assert drawn[-1][0].data.reshape(30, 40, 4)[..., :3].mean() > 0.0
