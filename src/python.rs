@@ -20,12 +20,32 @@ fn verr(msg: impl Into<String>) -> PyErr {
     PyValueError::new_err(msg.into())
 }
 
-fn get<'py>(d: &Bound<'py, PyDict>, key: &str, ctx: &str) -> PyResult<Bound<'py, PyAny>> {
-    d.get_item(key)?.ok_or_else(|| verr(format!("{ctx}: missing '{key}'")))
+// The keys the parsers asked each dict for (by the dict's address), while a scene dict is
+// parsed: a key a dict has and no parser asked for is almost always a misspelling ("lense"),
+// reported as a warning naming the dict with the closest asked-for key. The parsers are the
+// one list of the layout's keys.
+thread_local! {
+    static KEYS_ASKED: std::cell::RefCell<std::collections::HashMap<usize, Vec<&'static str>>> =
+        std::cell::RefCell::new(std::collections::HashMap::new());
 }
 
-fn get_or<'py, T: FromPyObjectOwned<'py>>(d: &Bound<'py, PyDict>, key: &str, default: T, ctx: &str) -> PyResult<T> {
-    match d.get_item(key)? {
+/// `d[key]` if present — the one way the parsers read a dict (it notes the key as known).
+fn item<'py>(d: &Bound<'py, PyDict>, key: &'static str) -> PyResult<Option<Bound<'py, PyAny>>> {
+    KEYS_ASKED.with(|m| m.borrow_mut().entry(d.as_ptr() as usize).or_default().push(key));
+    d.get_item(key)
+}
+
+fn get<'py>(d: &Bound<'py, PyDict>, key: &'static str, ctx: &str) -> PyResult<Bound<'py, PyAny>> {
+    item(d, key)?.ok_or_else(|| verr(format!("{ctx}: missing '{key}'")))
+}
+
+fn get_or<'py, T: FromPyObjectOwned<'py>>(
+    d: &Bound<'py, PyDict>,
+    key: &'static str,
+    default: T,
+    ctx: &str,
+) -> PyResult<T> {
+    match item(d, key)? {
         Some(v) if !v.is_none() => {
             v.extract::<T>().map_err(|e| verr(format!("{ctx}: '{key}': {}", Into::<PyErr>::into(e))))
         }
@@ -62,11 +82,11 @@ fn vec3s(v: Vec<f32>) -> Vec<[f32; 3]> {
     v.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect()
 }
 
-fn rgb(d: &Bound<'_, PyDict>, key: &str, default: [f32; 3], ctx: &str) -> PyResult<[f32; 3]> {
+fn rgb(d: &Bound<'_, PyDict>, key: &'static str, default: [f32; 3], ctx: &str) -> PyResult<[f32; 3]> {
     get_or(d, key, default, ctx)
 }
 
-fn matrix(d: &Bound<'_, PyDict>, key: &str, ctx: &str) -> PyResult<[[f32; 4]; 4]> {
+fn matrix(d: &Bound<'_, PyDict>, key: &'static str, ctx: &str) -> PyResult<[[f32; 4]; 4]> {
     let v = floats(&get(d, key, ctx)?, 4, &format!("{ctx}: {key}"))?;
     if v.len() != 16 {
         return Err(verr(format!("{ctx}: {key} must be 4×4")));
@@ -80,15 +100,15 @@ fn parse_mesh(d: &Bound<'_, PyDict>) -> PyResult<MeshDesc> {
     let positions = vec3s(floats(&get(d, "positions", &ctx)?, 3, &format!("{ctx}: positions"))?);
     let idx = uints(&get(d, "indices", &ctx)?, 3, &format!("{ctx}: indices"))?;
     let indices = idx.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
-    let corner_normals = match d.get_item("normals")? {
+    let corner_normals = match item(d, "normals")? {
         Some(n) if !n.is_none() => vec3s(floats(&n, 3, &format!("{ctx}: normals"))?),
         _ => vec![],
     };
-    let material_ids = match d.get_item("material_ids")? {
+    let material_ids = match item(d, "material_ids")? {
         Some(m) if !m.is_none() => uints(&m, 1, &format!("{ctx}: material_ids"))?,
         _ => vec![],
     };
-    let corner_uvs = match d.get_item("uvs")? {
+    let corner_uvs = match item(d, "uvs")? {
         Some(u) if !u.is_none() => {
             floats(&u, 2, &format!("{ctx}: uvs"))?.chunks_exact(2).map(|c| [c[0], c[1]]).collect()
         }
@@ -263,83 +283,6 @@ fn parse_camera(d: &Bound<'_, PyDict>) -> PyResult<CameraDesc> {
     })
 }
 
-// The keys each dict of the scene layout may have (what the parse_* functions read). A key
-// outside them is almost always a misspelling ("lense"): it is reported as a warning naming
-// the dict, with the closest known key, instead of being ignored silently.
-const SCENE_KEYS: &[&str] =
-    &["camera", "lights", "materials", "meshes", "textures", "world", "world_rotation", "world_texture"];
-const MESH_KEYS: &[&str] = &["indices", "material_ids", "name", "normals", "pass_index", "positions", "uvs"];
-const MATERIAL_KEYS: &[&str] = &[
-    "alpha_texture",
-    "base_color",
-    "base_color_texture",
-    "emission",
-    "emission_texture",
-    "glass_color",
-    "glass_roughness",
-    "ior",
-    "metal_color",
-    "metal_roughness",
-    "metallic",
-    "multiscatter",
-    "name",
-    "normal_strength",
-    "normal_texture",
-    "pass_index",
-    "roughness",
-    "roughness_texture",
-    "specular",
-    "specular_ior",
-    "transmission",
-    "transparency",
-    "transparent_color",
-];
-const TEXTURE_KEYS: &[&str] =
-    &["channels", "extension", "height", "interpolation", "name", "pixels", "srgb", "transform", "width"];
-const LIGHT_KEYS: &[&str] = &[
-    "angle",
-    "direction",
-    "irradiance",
-    "matrix",
-    "name",
-    "normalize",
-    "position",
-    "power",
-    "radius",
-    "shape",
-    "size",
-    "size_y",
-    "soft_falloff",
-    "spot_blend",
-    "spot_size",
-    "type",
-    "visible_camera",
-];
-const CAMERA_KEYS: &[&str] = &[
-    "clip_end",
-    "clip_start",
-    "film_transparent",
-    "filter_width",
-    "focus_distance",
-    "fstop",
-    "lens",
-    "matrix",
-    "ortho_scale",
-    "pixel_aspect_x",
-    "pixel_aspect_y",
-    "pixel_filter",
-    "resolution_percentage",
-    "resolution_x",
-    "resolution_y",
-    "sensor_fit",
-    "sensor_height",
-    "sensor_width",
-    "shift_x",
-    "shift_y",
-    "type",
-    "window",
-];
-
 /// Edit distance (for the "did you mean" of an unknown key).
 fn edit_distance(a: &str, b: &str) -> usize {
     let b: Vec<char> = b.chars().collect();
@@ -354,8 +297,9 @@ fn edit_distance(a: &str, b: &str) -> usize {
     prev[b.len()]
 }
 
-/// Warnings for the keys of `d` that are not in `known`.
-fn unknown_keys(d: &Bound<'_, PyDict>, known: &[&str], ctx: &str, out: &mut Vec<String>) {
+/// Warnings for the keys of `d` no parser asked for (KEYS_ASKED).
+fn unknown_keys(d: &Bound<'_, PyDict>, ctx: &str, out: &mut Vec<String>) {
+    let known = KEYS_ASKED.with(|m| m.borrow().get(&(d.as_ptr() as usize)).cloned().unwrap_or_default());
     for k in d.keys() {
         let Ok(k) = k.extract::<String>() else { continue };
         if known.contains(&k.as_str()) {
@@ -369,16 +313,12 @@ fn unknown_keys(d: &Bound<'_, PyDict>, known: &[&str], ctx: &str, out: &mut Vec<
     }
 }
 
-/// Every unknown key of a scene dict, as warnings naming where it is.
+/// Every key of a scene dict that its parse (`parse_scene`, just before) did not read, as
+/// warnings naming where it is.
 fn scene_key_warnings(d: &Bound<'_, PyDict>) -> Vec<String> {
     let mut out = Vec::new();
-    unknown_keys(d, SCENE_KEYS, "scene", &mut out);
-    for (list, known, what) in [
-        ("meshes", MESH_KEYS, "mesh"),
-        ("materials", MATERIAL_KEYS, "material"),
-        ("textures", TEXTURE_KEYS, "texture"),
-        ("lights", LIGHT_KEYS, "light"),
-    ] {
+    unknown_keys(d, "scene", &mut out);
+    for (list, what) in [("meshes", "mesh"), ("materials", "material"), ("textures", "texture"), ("lights", "light")] {
         if let Ok(Some(items)) = d.get_item(list) {
             for item in items.try_iter().into_iter().flatten().flatten() {
                 if let Ok(item) = item.cast_into::<PyDict>() {
@@ -388,22 +328,24 @@ fn scene_key_warnings(d: &Bound<'_, PyDict>) -> Vec<String> {
                         .flatten()
                         .and_then(|n| n.extract().ok())
                         .unwrap_or_else(|| "?".to_string());
-                    unknown_keys(&item, known, &format!("{what} '{name}'"), &mut out);
+                    unknown_keys(&item, &format!("{what} '{name}'"), &mut out);
                 }
             }
         }
     }
     if let Ok(Some(cam)) = d.get_item("camera") {
         if let Ok(cam) = cam.cast_into::<PyDict>() {
-            unknown_keys(&cam, CAMERA_KEYS, "camera", &mut out);
+            unknown_keys(&cam, "camera", &mut out);
         }
     }
+    KEYS_ASKED.with(|m| m.borrow_mut().clear());
     out
 }
 
 fn parse_scene(d: &Bound<'_, PyDict>) -> PyResult<SceneDesc> {
-    let list = |key: &str| -> PyResult<Vec<Bound<'_, PyDict>>> {
-        match d.get_item(key)? {
+    KEYS_ASKED.with(|m| m.borrow_mut().clear()); // (addresses of dicts parsed before may be reused)
+    let list = |key: &'static str| -> PyResult<Vec<Bound<'_, PyDict>>> {
+        match item(d, key)? {
             Some(l) if !l.is_none() => l
                 .cast::<PyList>()
                 .map_err(|_| verr(format!("scene: '{key}' must be a list")))?
@@ -424,7 +366,7 @@ fn parse_scene(d: &Bound<'_, PyDict>) -> PyResult<SceneDesc> {
         world: get_or(d, "world", [0.0; 3], "scene")?,
         world_texture: get_or(d, "world_texture", None, "scene")?,
         general_paths: get_or(d, "general_paths", false, "scene")?,
-        world_rotation: match d.get_item("world_rotation")? {
+        world_rotation: match item(d, "world_rotation")? {
             Some(r) if !r.is_none() => {
                 let v = floats(&r, 3, "scene: world_rotation")?;
                 if v.len() != 9 {

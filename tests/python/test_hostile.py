@@ -200,6 +200,19 @@ def test_a_misspelt_scene_key_is_reported_not_ignored_silently():
     assert any("unknown key 'roughnes'" in w and "'roughness'" in w for w in warnings), warnings
 
 
+def test_the_known_keys_are_the_ones_the_parsers_read():
+    """Issue 19.4: the keys a scene dict may have were listed by hand beside the parsers (and
+    the list missed `general_paths`, which the scene parser reads: it was reported as
+    unknown). The known keys are now those the parsers read — for a light, those of its type:
+    a spot's cone on a point light is ignored, and said so."""
+    d = gdmlt.builtin_scene("cornell", 16, 16)
+    d["general_paths"] = True
+    d["lights"] = [{"type": "POINT", "name": "Lamp", "position": (0.0, 0.0, 0.5), "power": (10.0, 10.0, 10.0),
+                    "spot_size": 0.5}]
+    warnings = [w for w in gdmlt.Scene(d).warnings if "unknown key" in w]
+    assert warnings == ["light 'Lamp': unknown key 'spot_size' ignored"], warnings
+
+
 def test_the_exporters_write_only_keys_the_core_reads(bpy_mod):
     """Blender's export and the USD reader produce no unknown-key warnings (the check would
     otherwise cry wolf on every render)."""
