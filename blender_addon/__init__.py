@@ -9,7 +9,8 @@ why, and nothing else is registered (no engine that would fail on F12).
 
 import bpy
 
-from . import properties, engine, ui
+# properties, engine, ui (and export, which builds scene dicts with gdmlt.scenedict) are
+# imported once the core is known to load: the add-on depends on the gdmlt package, one way
 
 _registered = False
 core_error = None  # why the core could not be imported, shown in the preferences
@@ -46,6 +47,8 @@ def register():
     bpy.utils.register_class(GDMLTPreferences)
     core_error = _core_import_error()
     if core_error is None:
+        from . import engine, properties, ui
+
         properties.register()
         bpy.utils.register_class(engine.GDMLTRenderEngine)
         ui.register()
@@ -57,6 +60,8 @@ def register():
 def unregister():
     global _registered
     if core_error is None:
+        from . import engine, properties, ui
+
         ui.unregister()
         bpy.utils.unregister_class(engine.GDMLTRenderEngine)
         properties.unregister()

@@ -13,8 +13,8 @@ GEOMETRY_TYPES = {"MESH", "CURVE", "SURFACE", "META", "FONT", "CURVES", "POINTCL
 # Object types GDMLT cannot render yet: left out of the scene with a warning naming the object.
 NOT_RENDERED = {"CURVES": "hair curves", "POINTCLOUD": "point clouds", "VOLUME": "volumes"}
 
-DEFAULT_MATERIAL = {"name": "(default)", "base_color": (0.8, 0.8, 0.8), "emission": (0.0, 0.0, 0.0),
-                    "roughness": 0.5, "metallic": 0.0, "transmission": 0.0, "ior": 1.5}
+from gdmlt import scenedict  # the scene dict's one builder (the add-on registers only once gdmlt imports)
+from gdmlt.scenedict import DEFAULT_MATERIAL
 
 
 class ExportCancelled(Exception):
@@ -103,10 +103,10 @@ class Textures:
             warnings.append(f"{what}: Image Texture '{node.name}' extension {ext} is rendered as REPEAT")
             ext = "REPEAT"
         self.index[key] = len(self.items)
-        self.items.append({"name": img.name + (" (alpha)" if alpha else ""), "width": w, "height": h, "channels": 3,
-                           "pixels": np.ascontiguousarray(rgb, dtype=np.float32),
-                           "interpolation": "Closest" if node.interpolation == "Closest" else "Linear",
-                           "extension": ext, "srgb": srgb})
+        self.items.append(scenedict.texture(img.name + (" (alpha)" if alpha else ""),
+                                            np.ascontiguousarray(rgb, dtype=np.float32), w, h,
+                                            interpolation="Closest" if node.interpolation == "Closest" else "Linear",
+                                            extension=ext, srgb=srgb))
         if transform is not None:
             self.items[-1]["transform"] = transform
         return self.index[key]
@@ -532,21 +532,16 @@ def _light(ob, matrix, warnings):
         warnings.append(f"light '{name}': light node trees are ignored; colour × power is used")
     soft = bool(getattr(light, "use_soft_falloff", True))
     if light.type == "POINT":
-        return {"type": "POINT", "name": name, "position": pos, "radius": float(light.shadow_soft_size),
-                "soft_falloff": soft, "power": power, "visible_camera": visible}
+        return scenedict.point_light(name, pos, power, light.shadow_soft_size, soft, visible)
     if light.type == "SPOT":
-        return {"type": "SPOT", "name": name, "position": pos, "direction": minus_z,
-                "radius": float(light.shadow_soft_size), "spot_size": float(light.spot_size),
-                "spot_blend": float(light.spot_blend), "soft_falloff": soft, "power": power, "visible_camera": visible}
+        return scenedict.spot_light(name, pos, minus_z, power, light.shadow_soft_size, light.spot_size,
+                                    light.spot_blend, soft, visible)
     if light.type == "AREA":
-        return {"type": "AREA", "name": name, "matrix": m.astype(np.float32), "shape": light.shape,
-                "size": float(light.size), "size_y": float(light.size_y), "power": power,
-                "normalize": bool(getattr(light, "normalize", True)), "visible_camera": visible}
+        return scenedict.area_light(name, m.astype(np.float32), light.shape, light.size, light.size_y, power,
+                                    getattr(light, "normalize", True), visible)
     if light.type == "SUN":
         plus_z = tuple((-np.array(minus_z)).tolist())
-        return {"type": "SUN", "name": name, "direction": plus_z,
-                "irradiance": tuple((color * light.energy * scale).tolist()),
-                "angle": float(light.angle), "visible_camera": visible}
+        return scenedict.sun_light(name, plus_z, tuple((color * light.energy * scale).tolist()), light.angle, visible)
     warnings.append(f"light '{name}': type {light.type} is not supported and was skipped")
     return None
 
@@ -696,11 +691,8 @@ def export_scene(depsgraph, test_break=lambda: False, need_camera=True):
         nmat = np.linalg.inv(m[:3, :3]).T if abs(np.linalg.det(m[:3, :3])) > 1e-30 else m[:3, :3]
         nrm = (normals.astype(np.float64) @ nmat.T).astype(np.float32)
         name = ob.name if not inst.is_instance else f"{inst.parent.name if inst.parent else ''}/{ob.name}"
-        meshes.append({"name": name, "positions": np.ascontiguousarray(pos),
-                       "indices": np.ascontiguousarray(tris, dtype=np.uint32),
-                       "normals": np.ascontiguousarray(nrm), "material_ids": mat_ids, "uvs": uvs})
-        if ob.pass_index:
-            meshes[-1]["pass_index"] = ob.pass_index  # the IndexOB pass
+        meshes.append(scenedict.mesh(name, np.ascontiguousarray(pos), np.ascontiguousarray(tris, dtype=np.uint32),
+                                     np.ascontiguousarray(nrm), mat_ids, uvs, ob.pass_index))
     world, world_texture = _world(scene, warnings, textures)
     if scene.render.use_motion_blur:
         warnings.append("motion blur is not rendered yet: the frame is rendered at its shutter's start")

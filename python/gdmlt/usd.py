@@ -24,6 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
+from . import scenedict
 from .shading import specular_layer_ior
 
 USD_SUFFIXES = (".usd", ".usda", ".usdc", ".usdz")
@@ -80,7 +81,7 @@ class _Reader:
         self.warnings = warnings
         self.mpu = pxr.UsdGeom.GetStageMetersPerUnit(stage) or 0.01
         self.xcache = pxr.UsdGeom.XformCache(time)
-        self.materials = [{"name": "(default)", "base_color": (0.8, 0.8, 0.8)}]
+        self.materials = [scenedict.material("(default)")]
         self.material_index = {}
         self.textures = []  # scene textures: material images and the dome's
         self.texture_index = {}
@@ -100,8 +101,7 @@ class _Reader:
         if path in self.material_index:
             return self.material_index[path]
         name = usd_material.GetPrim().GetName()
-        out = {"name": name, "base_color": (0.8, 0.8, 0.8), "roughness": 0.5, "metallic": 0.0, "ior": 1.5,
-               "emission": (0.0, 0.0, 0.0)}
+        out = scenedict.material(name)
         what = f"material '{name}'"
         mtlx = usd_material.ComputeSurfaceSource("mtlx")[0]
         done = False
@@ -398,11 +398,11 @@ class _Reader:
         if alpha:  # alpha is linear, whatever the colour space
             pixels, space = np.repeat((coverage if coverage is not None else np.ones(pixels.shape[:2]))[..., None], 3, -1), "raw"
         h, w, _ = pixels.shape
-        self.textures.append({"name": file.name + (" (alpha)" if alpha else ""), "width": w, "height": h, "channels": 3,
-                              "pixels": np.ascontiguousarray(pixels[::-1].reshape(-1, 3)),  # row 0 at the bottom
-                              "interpolation": "Closest" if closest else "Linear",
-                              "extension": self._WRAP.get(str(min(wraps, key=str)), "REPEAT"),
-                              "srgb": space == "sRGB" or (space == "auto" and eight_bit)})
+        self.textures.append(scenedict.texture(file.name + (" (alpha)" if alpha else ""),
+                                               np.ascontiguousarray(pixels[::-1].reshape(-1, 3)), w, h,  # row 0 at the bottom
+                                               interpolation="Closest" if closest else "Linear",
+                                               extension=self._WRAP.get(str(min(wraps, key=str)), "REPEAT"),
+                                               srgb=space == "sRGB" or (space == "auto" and eight_bit)))
         if transform is not None:
             self.textures[-1]["transform"] = transform
         self.texture_index[key] = len(self.textures) - 1
@@ -471,8 +471,7 @@ class _Reader:
                 return np.repeat(values[face_of_tri][:, None, :], 3, axis=1)
             return np.broadcast_to(values[0], (len(tris), 3, values.shape[-1]))
 
-        out = {"name": name, "positions": np.ascontiguousarray(pos, dtype=np.float32),
-               "indices": np.ascontiguousarray(tris, dtype=np.uint32)}
+        out = scenedict.mesh(name, np.ascontiguousarray(pos, dtype=np.float32), np.ascontiguousarray(tris, dtype=np.uint32))
         pv_api = UsdGeom.PrimvarsAPI(prim)
         nrm_pv = pv_api.GetPrimvar("normals")
         if nrm_pv and nrm_pv.HasValue():
@@ -551,12 +550,10 @@ class _Reader:
             angle = shaping.GetShapingConeAngleAttr().Get(t) if shaping else None
             if angle is not None and angle < 180:
                 minus_z = -m[:3, 2] / np.linalg.norm(m[:3, 2])
-                return {"type": "SPOT", "name": name, "position": pos, "direction": tuple(minus_z.tolist()),
-                        "radius": r, "spot_size": 2 * math.radians(angle),
-                        "spot_blend": float(shaping.GetShapingConeSoftnessAttr().Get(t) or 0.0),
-                        "soft_falloff": True, "power": tuple(power.tolist()), "visible_camera": visible}
-            return {"type": "POINT", "name": name, "position": pos, "radius": r, "soft_falloff": True,
-                    "power": tuple(power.tolist()), "visible_camera": visible}
+                return scenedict.spot_light(name, pos, minus_z.tolist(), power.tolist(), r, 2 * math.radians(angle),
+                                            float(shaping.GetShapingConeSoftnessAttr().Get(t) or 0.0),
+                                            visible_camera=visible)
+            return scenedict.point_light(name, pos, power.tolist(), r, visible_camera=visible)
         if prim.IsA(UsdLux.RectLight) or prim.IsA(UsdLux.DiskLight):
             rect = prim.IsA(UsdLux.RectLight)
             light = UsdLux.RectLight(prim) if rect else UsdLux.DiskLight(prim)
@@ -574,9 +571,8 @@ class _Reader:
             # L = intensity·2^exposure·colour (÷ area when normalized); Blender's power P = π·L·A
             normalize = light.GetNormalizeAttr().Get(t)
             power = color * scale * math.pi * (1.0 if normalize else area)
-            return {"type": "AREA", "name": name, "matrix": m.astype(np.float32),
-                    "shape": "RECTANGLE" if rect else "DISK", "size": w, "size_y": h,
-                    "power": tuple(power.tolist()), "normalize": True, "visible_camera": visible}
+            return scenedict.area_light(name, m.astype(np.float32), "RECTANGLE" if rect else "DISK", w, h,
+                                        power.tolist(), visible_camera=visible)
         if prim.IsA(UsdLux.DistantLight):
             light = UsdLux.DistantLight(prim)
             color = _light_color(light, t, self.warnings, name)
@@ -585,10 +581,8 @@ class _Reader:
             # its exporter writes a sun of strength S and angle θ as intensity S/4, angle θ/2,
             # and its importer returns S and θ): irradiance = 4·intensity·2^exposure·colour,
             # angular diameter = 2·angle.
-            return {"type": "SUN", "name": name, "direction": tuple(plus_z.tolist()),
-                    "irradiance": tuple((color * 4.0 * _light_scale(light, t)).tolist()),
-                    "angle": 2.0 * math.radians(float(light.GetAngleAttr().Get(t) or 0.0)),
-                    "visible_camera": visible}
+            return scenedict.sun_light(name, plus_z.tolist(), (color * 4.0 * _light_scale(light, t)).tolist(),
+                                       2.0 * math.radians(float(light.GetAngleAttr().Get(t) or 0.0)), visible)
         self.warn(f"light '{name}': {prim.GetTypeName()} is not supported; skipped")
         return None
 
@@ -611,9 +605,8 @@ class _Reader:
             return scale, None, None
         h, w, _ = pixels.shape
         textures = self.textures
-        textures.append({"name": file.name, "width": w, "height": h, "channels": 3,
-                         "pixels": np.ascontiguousarray(pixels[::-1].reshape(-1, 3)),  # row 0 at the bottom
-                         "interpolation": "Linear", "extension": "REPEAT"})
+        textures.append(scenedict.texture(file.name, np.ascontiguousarray(pixels[::-1].reshape(-1, 3)), w, h,
+                                          interpolation="Linear", extension="REPEAT"))  # row 0 at the bottom
         m = _mat(self.xcache.GetLocalToWorldTransform(prim))[:3, :3]
         m = m / np.linalg.norm(m, axis=0)
         return scale, len(textures) - 1, np.ascontiguousarray(m.T, dtype=np.float32)
