@@ -540,64 +540,72 @@ fn numpy_to_image(obj: &Bound<'_, PyAny>) -> PyResult<Image> {
 }
 
 /// Renders a scene. `progress(fraction, elapsed_seconds)` is called about every 50 ms from
-/// the calling thread; if it returns True the render stops and keeps what it has.
+/// the calling thread; if it returns True the render stops and keeps what it has. Every
+/// setting left out (or None) takes `RenderSettings::default()`'s value (`DEFAULT_SETTINGS`).
 #[pyfunction]
-#[pyo3(signature = (scene, method="pt", spp=16, time_limit=0.0, max_bounces=8, nee=true, seed=0, threads=0, reconstruction="l1", alpha_rec=0.2, large_step_probability=0.3, alpha_target=1.0, chains=0, progress=None, preview=None, diffuse_bounces=1024, glossy_bounces=1024, transmission_bounces=1024, transparent_bounces=16, clamp_direct=0.0, clamp_indirect=0.0, data_passes=false))]
+#[pyo3(signature = (scene, method=None, spp=None, time_limit=None, max_bounces=None, nee=None, seed=None, threads=None, reconstruction=None, alpha_rec=None, large_step_probability=None, alpha_target=None, chains=None, progress=None, preview=None, diffuse_bounces=None, glossy_bounces=None, transmission_bounces=None, transparent_bounces=None, clamp_direct=None, clamp_indirect=None, data_passes=None))]
 #[allow(clippy::too_many_arguments)]
 fn render<'py>(
     py: Python<'py>,
     scene: &Scene,
-    method: &str,
-    spp: u32,
-    time_limit: f64,
-    max_bounces: u32,
-    nee: bool,
-    seed: u64,
-    threads: usize,
-    reconstruction: &str,
-    alpha_rec: f64,
-    large_step_probability: f32,
-    alpha_target: f32,
-    chains: u32,
+    method: Option<&str>,
+    spp: Option<u32>,
+    time_limit: Option<f64>,
+    max_bounces: Option<u32>,
+    nee: Option<bool>,
+    seed: Option<u64>,
+    threads: Option<usize>,
+    reconstruction: Option<&str>,
+    alpha_rec: Option<f64>,
+    large_step_probability: Option<f32>,
+    alpha_target: Option<f32>,
+    chains: Option<u32>,
     progress: Option<Bound<'py, PyAny>>,
     preview: Option<Bound<'py, PyAny>>,
-    diffuse_bounces: u32,
-    glossy_bounces: u32,
-    transmission_bounces: u32,
-    transparent_bounces: u32,
-    clamp_direct: f32,
-    clamp_indirect: f32,
-    data_passes: bool,
+    diffuse_bounces: Option<u32>,
+    glossy_bounces: Option<u32>,
+    transmission_bounces: Option<u32>,
+    transparent_bounces: Option<u32>,
+    clamp_direct: Option<f32>,
+    clamp_indirect: Option<f32>,
+    data_passes: Option<bool>,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let method = Method::parse(method).map_err(|e| verr(e.to_string()))?;
-    let reconstruction = crate::reconstruct::Norm::parse(reconstruction)
-        .ok_or_else(|| verr(format!("unknown reconstruction '{reconstruction}' (expected l1 or l2)")))?;
+    let d = RenderSettings::default();
+    let method = match method {
+        Some(m) => Method::parse(m).map_err(|e| verr(e.to_string()))?,
+        None => d.method,
+    };
+    let reconstruction = match reconstruction {
+        Some(r) => crate::reconstruct::Norm::parse(r)
+            .ok_or_else(|| verr(format!("unknown reconstruction '{r}' (expected l1 or l2)")))?,
+        None => d.reconstruction,
+    };
     let settings = RenderSettings {
         method,
-        spp,
-        time_limit,
+        spp: spp.unwrap_or(d.spp),
+        time_limit: time_limit.unwrap_or(d.time_limit),
         path: PathSettings {
-            max_bounces,
-            nee,
-            diffuse_bounces,
-            glossy_bounces,
-            transmission_bounces,
-            transparent_bounces,
-            clamp_direct,
-            clamp_indirect,
+            max_bounces: max_bounces.unwrap_or(d.path.max_bounces),
+            nee: nee.unwrap_or(d.path.nee),
+            diffuse_bounces: diffuse_bounces.unwrap_or(d.path.diffuse_bounces),
+            glossy_bounces: glossy_bounces.unwrap_or(d.path.glossy_bounces),
+            transmission_bounces: transmission_bounces.unwrap_or(d.path.transmission_bounces),
+            transparent_bounces: transparent_bounces.unwrap_or(d.path.transparent_bounces),
+            clamp_direct: clamp_direct.unwrap_or(d.path.clamp_direct),
+            clamp_indirect: clamp_indirect.unwrap_or(d.path.clamp_indirect),
         },
-        seed,
-        threads,
+        seed: seed.unwrap_or(d.seed),
+        threads: threads.unwrap_or(d.threads),
         reconstruction,
-        alpha_rec,
-        large_step_probability,
-        alpha_target,
-        chains,
-        data_passes,
-        ..RenderSettings::default()
+        alpha_rec: alpha_rec.unwrap_or(d.alpha_rec),
+        large_step_probability: large_step_probability.unwrap_or(d.large_step_probability),
+        alpha_target: alpha_target.unwrap_or(d.alpha_target),
+        chains: chains.unwrap_or(d.chains),
+        data_passes: data_passes.unwrap_or(d.data_passes),
+        ..d
     };
     settings.validate().map_err(|e| verr(e.to_string()))?;
-    let control = RenderControl::new(time_limit);
+    let control = RenderControl::new(settings.time_limit);
     let sc = self::Scene { inner: scene.inner.clone() };
     let progress = progress.map(|p| p.unbind());
     let preview = preview.map(|p| p.unbind());
@@ -689,6 +697,38 @@ fn render<'py>(
 fn mat_to_numpy<'py>(py: Python<'py>, m: &[[f32; 4]; 4]) -> PyResult<Bound<'py, PyAny>> {
     let flat: Vec<f32> = m.iter().flatten().copied().collect();
     Ok(PyArray1::from_vec(py, flat).reshape([4, 4])?.into_any())
+}
+
+/// An f32 setting as the f64 its shortest decimal reads as (0.3, not 0.30000001192…).
+fn shortest(x: f32) -> f64 {
+    x.to_string().parse().unwrap_or(x as f64)
+}
+
+/// `render`'s settings as RenderSettings::default() has them, keyed as its arguments: the one
+/// place the core's defaults live (gdmlt.settings builds the product's on them).
+fn default_settings(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
+    let d = RenderSettings::default();
+    let out = PyDict::new(py);
+    out.set_item("method", d.method.name())?;
+    out.set_item("spp", d.spp)?;
+    out.set_item("time_limit", d.time_limit)?;
+    out.set_item("max_bounces", d.path.max_bounces)?;
+    out.set_item("nee", d.path.nee)?;
+    out.set_item("seed", d.seed)?;
+    out.set_item("threads", d.threads)?;
+    out.set_item("reconstruction", if d.reconstruction == crate::reconstruct::Norm::L1 { "l1" } else { "l2" })?;
+    out.set_item("alpha_rec", d.alpha_rec)?;
+    out.set_item("large_step_probability", shortest(d.large_step_probability))?;
+    out.set_item("alpha_target", shortest(d.alpha_target))?;
+    out.set_item("chains", d.chains)?;
+    out.set_item("diffuse_bounces", d.path.diffuse_bounces)?;
+    out.set_item("glossy_bounces", d.path.glossy_bounces)?;
+    out.set_item("transmission_bounces", d.path.transmission_bounces)?;
+    out.set_item("transparent_bounces", d.path.transparent_bounces)?;
+    out.set_item("clamp_direct", shortest(d.path.clamp_direct))?;
+    out.set_item("clamp_indirect", shortest(d.path.clamp_indirect))?;
+    out.set_item("data_passes", d.data_passes)?;
+    Ok(out)
 }
 
 /// The scene dict of a built-in scene (the names in `scene::builtin::BUILTIN_SCENES`).
@@ -911,6 +951,7 @@ fn init_module(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(cpu_supports_x86_64_v3, m)?)?;
     m.add_function(wrap_pyfunction!(check_memory, m)?)?;
     m.add("METHODS", vec!["pt", "gdpt", "pssmlt", "gdpssmlt"])?;
+    m.add("DEFAULT_SETTINGS", default_settings(m.py())?)?;
     // The path builder's Russian roulette starts after this many bounces (benchmarks set
     // their peers' roulette to it, so that every renderer traces paths of the same length).
     m.add("RR_START_DEPTH", crate::path::RR_START_DEPTH)?;

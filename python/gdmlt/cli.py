@@ -72,6 +72,8 @@ def _version():
 
 
 def build_parser():
+    from .settings import PRODUCT as D  # the defaults the help texts name
+
     p = argparse.ArgumentParser(prog="gdmlt", description="GDMLT: gradient-domain Metropolis light transport renderer")
     p.add_argument("--version", action="version", version=_version())
     sub = p.add_subparsers(dest="command", required=True)
@@ -85,24 +87,25 @@ def build_parser():
                    help="light transport method: pt (path tracing), gdpt (gradient-domain path tracing), "
                         "pssmlt (primary-sample-space Metropolis), gdpssmlt (gradient-domain Metropolis), "
                         "auto (a short pilot picks the one with the least error per second on this scene); "
-                        "default: the file's, else auto")
+                        f"default: the file's, else {D['method']}")
     r.add_argument("--alpha-target", type=_pos_float, dest="alpha_target",
-                   help="gdpssmlt: weight of the primal term in the target function (default 1.0)")
+                   help=f"gdpssmlt: weight of the primal term in the target function (default {D['alpha_target']})")
     r.add_argument("--large-step", type=_nonneg_float, dest="large_step_probability",
-                   help="Metropolis methods: probability of a large step (default 0.3)")
+                   help=f"Metropolis methods: probability of a large step (default {D['large_step_probability']})")
     r.add_argument("--chains", type=_chains,
                    help="Metropolis methods: number of Markov chains (default 0 = one per 2000 mutations, up to 1024)")
     r.add_argument("--recon", choices=["l1", "l2"], type=str.lower, dest="reconstruction",
-                   help="gradient-domain reconstruction norm (default l1: robust; l2: unbiased)")
+                   help=f"gradient-domain reconstruction norm, l1 (robust) or l2 (unbiased); default {D['reconstruction']}")
     r.add_argument("--alpha-rec", type=_pos_float, dest="alpha_rec",
-                   help="screened-Poisson weight of the primal image in the reconstruction (default 0.2)")
-    r.add_argument("--spp", type=_positive_int, help="samples (PT methods) or mutations (Metropolis methods) per pixel (default: the file's, else 64)")
+                   help=f"screened-Poisson weight of the primal image in the reconstruction (default {D['alpha_rec']})")
+    r.add_argument("--spp", type=_positive_int, help=f"samples (PT methods) or mutations (Metropolis methods) per pixel (default: the file's, else {D['spp']})")
     r.add_argument("--time", type=_nonneg_float, dest="time_limit", help="time limit in seconds, 0 = none; halts on whichever of --spp and --time comes first")
-    r.add_argument("--max-bounces", type=_bounces, help="maximum bounces as in Cycles (0 = direct light; default 8)")
-    for kind, default in (("diffuse", 1024), ("glossy", 1024), ("transmission", 1024), ("transparent", 16)):
+    r.add_argument("--max-bounces", type=_bounces, help=f"maximum bounces as in Cycles (0 = direct light; default {D['max_bounces']})")
+    for kind in BOUNCE_KINDS:
+        default = D[f"{kind}_bounces"]
         r.add_argument(f"--{kind}-bounces", type=_bounces,
                        help=f"maximum {kind} bounces as in Cycles (default {default}"
-                            + (": only the total limits them)" if default == 1024 else ")"))
+                            + (": only the total limits them)" if default >= 1024 else ")"))
     for kind in ("direct", "indirect"):
         r.add_argument(f"--clamp-{kind}", type=_nonneg_float, dest=f"clamp_{kind}",
                        help=f"Cycles' Clamp {kind.title()}: limit a light sample's contribution (default 0 = off; "
@@ -110,7 +113,7 @@ def build_parser():
     nee = r.add_mutually_exclusive_group()
     nee.add_argument("--nee", dest="nee", action="store_true", default=None, help="next-event estimation with MIS (default)")
     nee.add_argument("--no-nee", dest="nee", action="store_false", help="naive path tracing: lights found only by hitting them")
-    r.add_argument("--seed", type=_seed, help="random seed (default 0)")
+    r.add_argument("--seed", type=_seed, help=f"random seed (default {D['seed']})")
     den = r.add_mutually_exclusive_group()
     den.add_argument("--denoise", dest="denoise", action="store_true", default=None,
                      help="denoise the image with Intel Open Image Denoise, the raw one kept as the 'Noisy Image' "
@@ -226,13 +229,12 @@ def render_settings(args, stored: dict) -> tuple:
     """(gdmlt.render's settings, whether to denoise): the CLI's options over the settings the
     scene file holds (`stored`: a .blend's scene.gdmlt, what `gdmlt export` stored in a USD
     stage) over the defaults; denoising defaults to on, as in Cycles."""
-    opts = {"method": "auto", "spp": 64, "time_limit": 0.0, "max_bounces": 8, "nee": True, "seed": 0, "threads": 0,
-            "reconstruction": "l1", "alpha_rec": 0.2, "alpha_target": 1.0, "large_step_probability": 0.3,
-            "chains": 0, "diffuse_bounces": 1024, "glossy_bounces": 1024, "transmission_bounces": 1024,
-            "transparent_bounces": 16, "clamp_direct": 0.0, "clamp_indirect": 0.0}
+    from .settings import PRODUCT
+
+    opts = {k: v for k, v in PRODUCT.items() if k not in ("denoise", "data_passes")}
     opts.update({k: v for k, v in stored.items() if k in opts})
     opts.update(_settings(args))
-    denoise = args.denoise if args.denoise is not None else stored.get("denoise", True)
+    denoise = args.denoise if args.denoise is not None else stored.get("denoise", PRODUCT["denoise"])
     return opts, denoise
 
 

@@ -3,6 +3,7 @@ however broken, either build or raise ValueError naming what is wrong — never 
 panic across the FFI — and whatever builds renders finite pixels."""
 
 import numpy as np
+import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
 
 import gdmlt
@@ -63,3 +64,36 @@ def test_any_valid_settings_render_finite(method, spp, bounces, nee, seed, alpha
     res = gdmlt.render(scene, method=method, spp=spp, max_bounces=bounces, nee=nee, seed=seed, alpha_rec=alpha,
                        large_step_probability=large)
     assert all(np.isfinite(img).all() for img in res["layers"].values())
+
+
+def test_every_layer_takes_its_defaults_from_one_place(bpy_mod):
+    """Issue 19.4: render defaults were written four times (the core, its Python signature,
+    the add-on's properties, the CLI). Now the core's live in RenderSettings::default()
+    (gdmlt.settings.CORE) and the product's (gdmlt.settings.PRODUCT) are built on them: a
+    fresh scene's GDMLT properties, the CLI with no options and gdmlt.render without
+    arguments all give them."""
+    import argparse
+
+    from gdmlt import cli
+    from gdmlt.blend import PROPERTY_OF, settings_of
+    from gdmlt.settings import CORE, PRODUCT
+
+    bpy = bpy_mod
+    scene = bpy.data.scenes.new("defaults")
+    try:
+        blender = settings_of(scene.gdmlt)
+    finally:
+        bpy.data.scenes.remove(scene)
+    # (Blender stores a FloatProperty in single precision)
+    for k in PROPERTY_OF:
+        want = PRODUCT[k]
+        assert blender[k] == (pytest.approx(want, rel=1e-6) if isinstance(want, float) else want), (k, blender[k])
+    args = cli.build_parser().parse_args(["render", "cornell", "-o", "x.exr"])
+    opts, denoise = cli.render_settings(args, {})
+    assert denoise == PRODUCT["denoise"] and opts == {k: v for k, v in PRODUCT.items() if k not in ("denoise", "data_passes")}
+    assert isinstance(args, argparse.Namespace)
+    core = gdmlt.Scene(gdmlt.builtin_scene("cornell", 8, 8))
+    st = gdmlt.render(core)["stats"]
+    assert (st["method"], st["spp_max"]) == (CORE["method"], CORE["spp"])
+    # a setting given as None is the default too (what callers passing settings through get)
+    assert gdmlt.render(core, spp=None, method=None)["stats"]["spp_max"] == CORE["spp"]
