@@ -57,6 +57,25 @@ impl PathSettings {
     pub fn new(max_bounces: u32, nee: bool) -> PathSettings {
         PathSettings { max_bounces, nee, ..Default::default() }
     }
+
+    /// Cycles' sample clamping of a light contribution `c` added after `bounces` scatterings:
+    /// its RGB sum at most 3 × the direct (0 bounces) or indirect limit (0 = no limit).
+    #[inline]
+    pub fn clamp(&self, c: Spectrum, bounces: u32) -> Spectrum {
+        let limit = 3.0 * if bounces == 0 { self.clamp_direct } else { self.clamp_indirect };
+        let sum = c.x.abs() + c.y.abs() + c.z.abs();
+        if limit > 0.0 && sum > limit {
+            c * (limit / sum)
+        } else {
+            c
+        }
+    }
+
+    /// The per-kind limits: diffuse, glossy, transmission.
+    #[inline]
+    fn kind_limits(&self) -> [u32; 3] {
+        [self.diffuse_bounces, self.glossy_bounces, self.transmission_bounces]
+    }
 }
 
 impl Default for PathSettings {
@@ -104,6 +123,31 @@ pub struct Vertex {
 }
 
 impl Vertex {
+    /// The vertex at `si`, reached from direction `wo` (towards where the path came from)
+    /// with throughput `throughput` by a sample of pdf `pdf_in`; its outgoing half is filled
+    /// in when the path continues.
+    #[inline]
+    fn at(si: &SurfaceInteraction, wo: Vec3, throughput: Spectrum, pdf_in: f32) -> Vertex {
+        Vertex {
+            p: si.p,
+            ng: si.ng,
+            frame: si.frame,
+            material: si.material,
+            prim: si.prim,
+            front: si.front,
+            uv: si.uv,
+            wo,
+            throughput,
+            pdf_in,
+            wi: Vec3::ZERO,
+            f_out: Spectrum::ZERO,
+            pdf_out: 0.0,
+            delta_out: false,
+            eta_out: 1.0,
+            rr: 1.0,
+        }
+    }
+
     /// The path went straight through here (the pass-through lobe of a transparent surface:
     /// a delta transmission with relative IOR exactly 1, see `BsdfSample::is_pass_through`).
     #[inline]
@@ -197,6 +241,12 @@ pub fn trace_path<S: Sampler>(
 }
 
 /// The same path from its traced camera ray on (`sampler` then stands after the lens sample).
+///
+/// Each segment, in order: trace it (the camera ray's hit is given); add the analytic lights
+/// it crosses; at a miss, the world (or, for a camera ray through a transparent film, the
+/// film's transparency) and stop; at a surface, its emission, then the vertex (recorded for
+/// the shift), its primary samples, the bounce limits, next-event estimation, and the BSDF
+/// sample that continues the path (`PathState::scatter`, with Russian roulette).
 pub fn trace_path_from<S: Sampler>(
     scene: &Scene,
     cfg: &PathSettings,
@@ -210,227 +260,246 @@ pub fn trace_path_from<S: Sampler>(
         p.lens = primary.lens;
     }
     let mut out = PathContribution::default();
-    let cam = primary.ray;
+    let mut st = PathState::new(primary.ray, cfg.nee && scene.has_lights());
     let mut pending_hit = Some(primary.hit); // the camera ray's, traced by the caller
-    let (mut o, mut d, mut tmin, mut tmax) = (cam.origin, cam.dir, cam.tmin, cam.tmax);
-    let mut beta = Spectrum::ONE;
-    let mut depth = 0u32; // scattering events so far (bounces; pass-through crossings excluded)
-    let mut transparent = 0u32; // pass-through crossings so far
-    let mut by_kind = [0u32; 3]; // scattering events so far: diffuse, glossy, transmission
-    let kind_limit = [cfg.diffuse_bounces, cfg.glossy_bounces, cfg.transmission_bounces];
-    let mut nvert = 0u32; // surface vertices so far (the index of the next one)
-    let mut prev_p = o;
-    let mut prev_pdf = 0.0f32; // pdf of the BSDF sample that produced `d` (0: camera ray)
-    let mut prev_delta = true; // camera ray or specular bounce: no MIS with NEE
-    let mut prev_fcos = Spectrum::ONE; // BSDF·cos of the sampled direction at the previous vertex
-                                       // Whether the segment from the last scattering vertex has gone through transparent
-                                       // surfaces (MIS and events see through them: the segment continues), and their tints.
-    let mut passed = false;
-    let mut pass_tint = Spectrum::ONE;
-    let mut last_vertex = CAMERA_VERTEX; // index of the last vertex that scattered
-    let use_nee = cfg.nee && scene.has_lights();
-    // Cycles' sample clamping of a light contribution added after `bounces` scatterings
-    let clamp = |c: Spectrum, bounces: u32| -> Spectrum {
-        let limit = 3.0 * if bounces == 0 { cfg.clamp_direct } else { cfg.clamp_indirect };
-        let sum = c.x.abs() + c.y.abs() + c.z.abs();
-        if limit > 0.0 && sum > limit {
-            c * (limit / sum)
-        } else {
-            c
-        }
-    };
-
     loop {
+        // 1. the segment
         let hit = match pending_hit.take() {
             Some(h) => h,
-            None => scene.intersect(o, d, tmin, tmax),
+            None => scene.intersect(st.o, st.d, st.tmin, st.tmax),
         };
-        let t_surface = hit.map_or(tmax, |h| h.t);
+        let t_surface = hit.map_or(st.tmax, |h| h.t);
         // the camera ray itself (very-direct light); lamps stay invisible to the camera
         // through transparent surfaces too (depth counts scattering, not crossings)
-        let camera_ray = nvert == 0;
-        let camera_visibility = depth == 0;
-        let mis = |pdf_light: f32| {
-            if !use_nee || prev_delta {
-                1.0
-            } else {
-                power_heuristic(prev_pdf, pdf_light)
-            }
-        };
+        let camera_ray = st.nvert == 0;
+        let camera_visibility = st.depth == 0;
 
-        // Events after pass-throughs from the camera hang on the first crossed vertex, with
-        // the camera's "pdf" 1 (they are not very direct, and the shift fails on them).
-        let (from_vertex, ev_pdf) = match (camera_ray, last_vertex) {
-            (true, _) => (CAMERA_VERTEX, prev_pdf),
-            (false, CAMERA_VERTEX) => (0, 1.0),
-            (false, v) => (v, prev_pdf),
-        };
-        // NEE cannot produce a path whose last bounce was specular: its light pdf is then 0.
-        let pdf_l_if_nee = |pdf: f32| if use_nee && !prev_delta { pdf } else { 0.0 };
-        // An event is recorded only when it carries light (its numerator is not zero): the
-        // shift treats an offset event worth nothing as absent (the path tracer could not
-        // have recorded it), so a zero-valued base event — a black texel of a textured
-        // emitter — must be absent too, or a pair would be counted from both sides.
-        let push = |rec: &mut Option<&mut Path>, light: u32, z: Vec3, at_infinity: bool, le: Spectrum, pdf_l: f32| {
-            let numerator = beta * le * ev_pdf;
-            if !(numerator.max_element() > 0.0) {
-                return;
-            }
-            if let Some(p) = rec.as_deref_mut() {
-                p.events.push(Event {
-                    nee: false,
-                    vertex: from_vertex,
-                    light,
-                    z,
-                    at_infinity,
-                    delta: false,
-                    le: le * pass_tint,
-                    f: prev_fcos,
-                    pdf_b: ev_pdf,
-                    pdf_l: pdf_l_if_nee(pdf_l),
-                    numerator,
-                    through_transparent: passed,
-                });
-            }
-        };
-
-        // Analytic lights crossed before the surface (lights are transparent). After
+        // 2. analytic lights crossed before the surface (lights are transparent). After
         // pass-throughs the light pdf is NEE's from the vertex the segment started at.
         let mut crossed = Spectrum::ZERO;
+        let (prev_p, o, d) = (st.prev_p, st.o, st.d);
         scene.for_each_light_crossed(prev_p, o, d, t_surface, camera_visibility, |li, t, le, pdf_light| {
             let inf = !t.is_finite();
             let z = if inf { d } else { o + d * t };
-            let pdf_light = if passed { scene.light_eval(li, prev_p, z).map_or(0.0, |x| x.1) } else { pdf_light };
-            crossed += le * mis(pdf_light);
-            push(&mut record, li, z, inf, le, pdf_light);
+            let pdf_light = if st.passed { scene.light_eval(li, prev_p, z).map_or(0.0, |x| x.1) } else { pdf_light };
+            crossed += le * st.mis(pdf_light);
+            st.record_emission(&mut record, li, z, inf, le, pdf_light);
         });
-        add(&mut out, clamp(beta * crossed, depth), camera_ray);
+        add(&mut out, cfg.clamp(st.beta * crossed, st.depth), camera_ray);
 
+        // 3. a miss: the world, or the film's transparency
         let Some(hit) = hit else {
             if camera_visibility && scene.camera.film_transparent {
                 // the world behind the camera ray (or behind the transparent surfaces it
                 // crossed) is the film's transparency, not light
-                out.transparent += (beta.x + beta.y + beta.z) / 3.0;
+                out.transparent += (st.beta.x + st.beta.y + st.beta.z) / 3.0;
                 break;
             }
-            let (le, pdf_light) = scene.world_eval(prev_p, d);
+            let (le, pdf_light) = scene.world_eval(st.prev_p, st.d);
             if le.max_element() > 0.0 {
-                add(&mut out, clamp(beta * le * mis(pdf_light), depth), camera_ray);
-                push(&mut record, scene.env_light(), d, true, le, pdf_light);
+                add(&mut out, cfg.clamp(st.beta * le * st.mis(pdf_light), st.depth), camera_ray);
+                st.record_emission(&mut record, scene.env_light(), st.d, true, le, pdf_light);
             }
             break;
         };
-        let si: SurfaceInteraction = scene.interaction(&hit, d);
-        let wo_world = -d;
-        if let Some((le, pdf_light)) = scene.surface_emission(&si, prev_p, d) {
-            add(&mut out, clamp(beta * le * mis(pdf_light), depth), camera_ray);
+
+        // 4. the surface: its emission, the vertex
+        let si: SurfaceInteraction = scene.interaction(&hit, st.d);
+        if let Some((le, pdf_light)) = scene.surface_emission(&si, st.prev_p, st.d) {
+            add(&mut out, cfg.clamp(st.beta * le * st.mis(pdf_light), st.depth), camera_ray);
             let li = scene.triangle_light(si.prim).unwrap_or(u32::MAX);
-            push(&mut record, li, si.p, false, le, pdf_light);
+            st.record_emission(&mut record, li, si.p, false, le, pdf_light);
         }
         let bsdf = scene.bsdf_at(&si);
-        if nvert == 0 {
+        if camera_ray {
             out.albedo = bsdf.albedo();
             out.normal = si.frame.n;
         }
         if let Some(p) = record.as_deref_mut() {
-            p.vertices.push(Vertex {
-                p: si.p,
-                ng: si.ng,
-                frame: si.frame,
-                material: si.material,
-                prim: si.prim,
-                front: si.front,
-                uv: si.uv,
-                wo: wo_world,
-                throughput: beta,
-                pdf_in: prev_pdf,
-                wi: Vec3::ZERO,
-                f_out: Spectrum::ZERO,
-                pdf_out: 0.0,
-                delta_out: false,
-                eta_out: 1.0,
-                rr: 1.0,
-            });
+            p.vertices.push(Vertex::at(&si, -st.d, st.beta, st.prev_pdf));
         }
-        // Consume this vertex's primary samples in their fixed order.
+
+        // 5. this vertex's primary samples, consumed in their fixed order
         let u_light_select = sampler.next_1d();
         let u_light = sampler.next_2d();
         let u_lobe = sampler.next_1d();
         let u_bsdf = sampler.next_2d();
         let u_rr = sampler.next_1d();
-        if depth > cfg.max_bounces || by_kind.iter().zip(&kind_limit).any(|(n, max)| n > max) {
+
+        // 6. the bounce limits
+        if st.depth > cfg.max_bounces || st.by_kind.iter().zip(&cfg.kind_limits()).any(|(n, max)| n > max) {
             break;
         }
-        let wo = si.frame.to_local(wo_world);
+        let wo = si.frame.to_local(-st.d);
         // The continuation is sampled first: it does not depend on the light sample, so the
         // processor overlaps the two computations before the shadow ray's traversal.
         let sampled = bsdf.sample(wo, u_lobe, u_bsdf);
 
-        // Next-event estimation.
-        if use_nee && !bsdf.is_delta() {
-            if let Some((li, ls)) = scene.sample_light(si.p, u_light_select, u_light) {
-                let wi = si.frame.to_local(ls.wi);
-                let f = bsdf.eval(wo, wi);
-                // the same directions BSDF sampling may continue in (below): on one side of both
-                // the geometric and the shading normal — the reflection side, or through a
-                // transmitting surface (rough glass) on the other (skipping that side while
-                // BSDF-sampled hits there were MIS-weighted as if it had been tried darkened
-                // a bulb in rough glass by 13%)
-                let through = if f.max_element() > 0.0 && ls.wi.dot(si.ng) * wi.z > 0.0 {
-                    scene.transmittance(&si, &ls)
-                } else {
-                    None
-                };
-                if let Some((tr, crossed_transparent)) = through {
-                    let radiance = ls.radiance * tr;
-                    let pdf_b = if ls.is_delta { 0.0 } else { bsdf.pdf(wo, wi) };
-                    let w = if ls.is_delta { 1.0 } else { power_heuristic(ls.pdf, pdf_b) };
-                    add(&mut out, clamp(beta * f * radiance * (w / ls.pdf), depth), false);
-                    let numerator = beta * f * radiance;
-                    if let (Some(p), true) = (record.as_deref_mut(), numerator.max_element() > 0.0) {
-                        let at_infinity = !ls.dist.is_finite();
-                        p.events.push(Event {
-                            nee: true,
-                            vertex: nvert,
-                            light: li,
-                            z: if at_infinity { ls.wi } else { ls.p },
-                            at_infinity,
-                            delta: ls.is_delta,
-                            le: radiance,
-                            f,
-                            pdf_b,
-                            pdf_l: ls.pdf,
-                            numerator,
-                            through_transparent: crossed_transparent,
-                        });
-                    }
+        // 7. next-event estimation
+        if st.use_nee && !bsdf.is_delta() {
+            let nee = next_event(scene, &si, &bsdf, wo, u_light_select, u_light);
+            if let Some(e) = nee {
+                add(&mut out, cfg.clamp(st.beta * e.f * e.le * (e.weight / e.pdf_l), st.depth), false);
+                let numerator = st.beta * e.f * e.le;
+                if let (Some(p), true) = (record.as_deref_mut(), numerator.max_element() > 0.0) {
+                    p.events.push(Event { vertex: st.nvert, numerator, ..e.event });
                 }
             }
         }
 
-        // BSDF sampling.
+        // 8. the BSDF sample that continues the path
         let Some(bs) = sampled else {
             break;
         };
+        if !st.scatter(&si, wo, &bs, u_rr, cfg, record.as_deref_mut()) {
+            break;
+        }
+    }
+    out
+}
+
+/// The path being built: its current segment, throughput and bounce counts, and what MIS
+/// and the recorded events need of the last scattering vertex.
+struct PathState {
+    /// The segment being traced.
+    o: Vec3,
+    d: Vec3,
+    tmin: f32,
+    tmax: f32,
+    /// Throughput (BSDF·cos/pdf products, Russian roulette included).
+    beta: Spectrum,
+    /// Scattering events so far (bounces; pass-through crossings excluded), pass-through
+    /// crossings, and scattering events of each kind (diffuse, glossy, transmission).
+    depth: u32,
+    transparent: u32,
+    by_kind: [u32; 3],
+    /// Surface vertices so far (the index of the next one).
+    nvert: u32,
+    /// The last scattering vertex (the camera's position at first): where the segment's
+    /// light pdfs are taken from, the pdf of the BSDF sample that left it (0: camera ray),
+    /// whether that was specular or the camera (no MIS with NEE), and its BSDF·cos.
+    prev_p: Vec3,
+    prev_pdf: f32,
+    prev_delta: bool,
+    prev_fcos: Spectrum,
+    /// Whether the segment from the last scattering vertex has gone through transparent
+    /// surfaces (MIS and events see through them: the segment continues), and their tints.
+    passed: bool,
+    pass_tint: Spectrum,
+    /// Index of the last vertex that scattered (CAMERA_VERTEX before the first).
+    last_vertex: u32,
+    use_nee: bool,
+}
+
+impl PathState {
+    fn new(cam: CameraRay, use_nee: bool) -> PathState {
+        PathState {
+            o: cam.origin,
+            d: cam.dir,
+            tmin: cam.tmin,
+            tmax: cam.tmax,
+            beta: Spectrum::ONE,
+            depth: 0,
+            transparent: 0,
+            by_kind: [0; 3],
+            nvert: 0,
+            prev_p: cam.origin,
+            prev_pdf: 0.0,
+            prev_delta: true,
+            prev_fcos: Spectrum::ONE,
+            passed: false,
+            pass_tint: Spectrum::ONE,
+            last_vertex: CAMERA_VERTEX,
+            use_nee,
+        }
+    }
+
+    /// MIS weight of emission found by BSDF sampling whose light-sampling pdf is `pdf_light`.
+    #[inline]
+    fn mis(&self, pdf_light: f32) -> f32 {
+        if !self.use_nee || self.prev_delta {
+            1.0
+        } else {
+            power_heuristic(self.prev_pdf, pdf_light)
+        }
+    }
+
+    /// Records emission found by BSDF sampling (a light crossed or hit, the world) as an
+    /// event for the shift. Events after pass-throughs from the camera hang on the first
+    /// crossed vertex, with the camera's "pdf" 1 (they are not very direct, and the shift
+    /// fails on them). An event is recorded only when it carries light (its numerator is
+    /// not zero): the shift treats an offset event worth nothing as absent (the path tracer
+    /// could not have recorded it), so a zero-valued base event — a black texel of a
+    /// textured emitter — must be absent too, or a pair would be counted from both sides.
+    #[inline]
+    fn record_emission(
+        &self,
+        rec: &mut Option<&mut Path>,
+        light: u32,
+        z: Vec3,
+        at_infinity: bool,
+        le: Spectrum,
+        pdf_l: f32,
+    ) {
+        let (vertex, pdf_b) = match (self.nvert == 0, self.last_vertex) {
+            (true, _) => (CAMERA_VERTEX, self.prev_pdf),
+            (false, CAMERA_VERTEX) => (0, 1.0),
+            (false, v) => (v, self.prev_pdf),
+        };
+        let numerator = self.beta * le * pdf_b;
+        if !(numerator.max_element() > 0.0) {
+            return;
+        }
+        if let Some(p) = rec.as_deref_mut() {
+            p.events.push(Event {
+                nee: false,
+                vertex,
+                light,
+                z,
+                at_infinity,
+                delta: false,
+                le: le * self.pass_tint,
+                f: self.prev_fcos,
+                pdf_b,
+                // NEE cannot produce a path whose last bounce was specular: its light pdf is then 0
+                pdf_l: if self.use_nee && !self.prev_delta { pdf_l } else { 0.0 },
+                numerator,
+                through_transparent: self.passed,
+            });
+        }
+    }
+
+    /// Continues the path with the BSDF sample `bs` at `si`: the throughput, the bounce
+    /// counts, the recorded vertex's outgoing half, Russian roulette (after RR_START_DEPTH
+    /// scatterings, `u_rr`) and the next segment. False when the path ends here.
+    fn scatter(
+        &mut self,
+        si: &SurfaceInteraction,
+        wo: Vec3,
+        bs: &crate::bsdf::BsdfSample,
+        u_rr: f32,
+        cfg: &PathSettings,
+        record: Option<&mut Path>,
+    ) -> bool {
         let wi_world = si.frame.to_world(bs.wi);
         if wi_world.dot(si.ng) * bs.wi.z <= 0.0 {
-            break; // shading normal sent the ray through the geometric surface
+            return false; // shading normal sent the ray through the geometric surface
         }
-        beta *= bs.weight;
+        self.beta *= bs.weight;
         let pass_through = bs.is_pass_through(wo);
         if pass_through {
-            transparent += 1;
+            self.transparent += 1;
         } else {
-            depth += 1;
+            self.depth += 1;
             match bs.scatter {
-                Scatter::Diffuse => by_kind[0] += 1,
-                Scatter::Glossy => by_kind[1] += 1,
-                Scatter::Transmission => by_kind[2] += 1,
+                Scatter::Diffuse => self.by_kind[0] += 1,
+                Scatter::Glossy => self.by_kind[1] += 1,
+                Scatter::Transmission => self.by_kind[2] += 1,
                 Scatter::Transparent => {}
             }
         }
-        let q = if depth >= RR_START_DEPTH && !pass_through { beta.max_element().min(1.0) } else { 1.0 };
-        if let Some(v) = record.as_deref_mut().and_then(|p| p.vertices.last_mut()) {
+        let q = if self.depth >= RR_START_DEPTH && !pass_through { self.beta.max_element().min(1.0) } else { 1.0 };
+        if let Some(v) = record.and_then(|p| p.vertices.last_mut()) {
             v.wi = wi_world;
             v.f_out = bs.weight * bs.pdf;
             v.pdf_out = bs.pdf;
@@ -440,33 +509,90 @@ pub fn trace_path_from<S: Sampler>(
         }
         if q < 1.0 {
             if !(q > 0.0) || u_rr >= q {
-                break;
+                return false;
             }
-            beta /= q;
+            self.beta /= q;
         }
-        if !is_finite_spectrum(beta) || beta.max_element() <= 0.0 || transparent > cfg.transparent_bounces {
-            break;
+        if !is_finite_spectrum(self.beta)
+            || self.beta.max_element() <= 0.0
+            || self.transparent > cfg.transparent_bounces
+        {
+            return false;
         }
         if pass_through {
             // the segment from the last scattering vertex goes on through this surface
-            passed = true;
-            pass_tint *= bs.weight;
+            self.passed = true;
+            self.pass_tint *= bs.weight;
         } else {
-            passed = false;
-            pass_tint = Spectrum::ONE;
-            last_vertex = nvert;
-            prev_p = si.p;
-            prev_pdf = bs.pdf;
-            prev_fcos = bs.weight * bs.pdf;
-            prev_delta = bs.lobe == crate::bsdf::LobeKind::Specular;
+            self.passed = false;
+            self.pass_tint = Spectrum::ONE;
+            self.last_vertex = self.nvert;
+            self.prev_p = si.p;
+            self.prev_pdf = bs.pdf;
+            self.prev_fcos = bs.weight * bs.pdf;
+            self.prev_delta = bs.lobe == crate::bsdf::LobeKind::Specular;
         }
-        nvert += 1;
-        o = si.spawn_origin(wi_world);
-        d = wi_world;
-        tmin = 0.0;
-        tmax = f32::INFINITY;
+        self.nvert += 1;
+        self.o = si.spawn_origin(wi_world);
+        self.d = wi_world;
+        self.tmin = 0.0;
+        self.tmax = f32::INFINITY;
+        true
     }
-    out
+}
+
+/// A light sample at a vertex that reaches it: its radiance (through transparent surfaces),
+/// the BSDF·cos towards it, its pdf and MIS weight, and the event to record (vertex and
+/// numerator filled in by the caller).
+struct NextEvent {
+    le: Spectrum,
+    f: Spectrum,
+    pdf_l: f32,
+    weight: f32,
+    event: Event,
+}
+
+/// Next-event estimation at `si`: one light sample (`u_select`, `u_light`), unoccluded and on
+/// a side BSDF sampling may continue to, or None.
+#[inline]
+fn next_event(
+    scene: &Scene,
+    si: &SurfaceInteraction,
+    bsdf: &crate::bsdf::Bsdf,
+    wo: Vec3,
+    u_select: f32,
+    u_light: Vec2,
+) -> Option<NextEvent> {
+    let (li, ls) = scene.sample_light(si.p, u_select, u_light)?;
+    let wi = si.frame.to_local(ls.wi);
+    let f = bsdf.eval(wo, wi);
+    // the same directions BSDF sampling may continue in (below): on one side of both the
+    // geometric and the shading normal — the reflection side, or through a transmitting
+    // surface (rough glass) on the other (skipping that side while BSDF-sampled hits there
+    // were MIS-weighted as if it had been tried darkened a bulb in rough glass by 13%)
+    if !(f.max_element() > 0.0 && ls.wi.dot(si.ng) * wi.z > 0.0) {
+        return None;
+    }
+    let (tr, crossed_transparent) = scene.transmittance(si, &ls)?;
+    let radiance = ls.radiance * tr;
+    let pdf_b = if ls.is_delta { 0.0 } else { bsdf.pdf(wo, wi) };
+    let weight = if ls.is_delta { 1.0 } else { power_heuristic(ls.pdf, pdf_b) };
+    let at_infinity = !ls.dist.is_finite();
+    let event = Event {
+        nee: true,
+        vertex: 0,
+        light: li,
+        z: if at_infinity { ls.wi } else { ls.p },
+        at_infinity,
+        delta: ls.is_delta,
+        le: radiance,
+        f,
+        pdf_b,
+        pdf_l: ls.pdf,
+        numerator: Spectrum::ZERO,
+        through_transparent: crossed_transparent,
+    };
+    Some(NextEvent { le: radiance, f, pdf_l: ls.pdf, weight, event })
 }
 
 /// What a camera ray sees first.
