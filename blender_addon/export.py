@@ -7,14 +7,15 @@ of instanced triangles). Lights follow Cycles' conventions; the conversion to ra
 happens in the core. Everything unsupported is reported as a warning with a fallback.
 """
 
+from dataclasses import dataclass, field
+
 import numpy as np
+from gdmlt import scenedict  # the scene dict's one builder (the add-on registers only once gdmlt imports)
+from gdmlt.scenedict import DEFAULT_MATERIAL
 
 GEOMETRY_TYPES = {"MESH", "CURVE", "SURFACE", "META", "FONT", "CURVES", "POINTCLOUD", "VOLUME"}
 # Object types GDMLT cannot render yet: left out of the scene with a warning naming the object.
 NOT_RENDERED = {"CURVES": "hair curves", "POINTCLOUD": "point clouds", "VOLUME": "volumes"}
-
-from gdmlt import scenedict  # the scene dict's one builder (the add-on registers only once gdmlt imports)
-from gdmlt.scenedict import DEFAULT_MATERIAL
 
 
 class ExportCancelled(Exception):
@@ -352,92 +353,143 @@ def _shader_leaves(node, weight, leaves, textures, warnings, what, branch=()):
             _shader_leaves(sock.links[0].from_node, w, leaves, textures, warnings, what, branch + (node.name,))
 
 
-def _combine(leaves, warnings, what):
-    """One material from weighted leaves: the diffuse, metal and glass lobes of every leaf
-    (Principled weights (1−m)(1−t), m, (1−m)t) are summed per kind — exact, since lobes of
-    one kind differ only in colour — and emission adds up. The specular layer, the metal and
-    the glass lobes keep their own roughness; lobes of one kind with different roughness, or
-    glass lobes with different IOR, are averaged (with a warning).
-    A total BSDF weight above 1 (Add Shader of two BSDFs) is normalized, with a warning."""
-    lobes = {"d": [0.0, np.zeros(3)], "m": [0.0, np.zeros(3)], "g": [0.0, np.zeros(3)]}
-    passing = [0.0, np.zeros(3)]  # Transparent BSDF leaves (and 1 − alpha)
-    emission = np.zeros(3)
-    rough, iors, tex, rough_tex = [], [], [], []
-    layer = [0.0, []]  # diffuse-lobe weight under a specular layer, and the layers' IORs
-    normals = []  # the leaves' normal maps
-    multiscatter = []  # the metal leaves' distributions (Multiscatter GGX or not)
-    glowing = [p for w, p in leaves if w > 0 and max(p["emission"][:3]) > 0]
+@dataclass
+class _LobeSum:
+    """The summed weight and weight × colour of the lobes of one kind."""
+    weight: float = 0.0
+    colour: np.ndarray = field(default_factory=lambda: np.zeros(3))
+
+    def add(self, w, colour):
+        self.weight += w
+        self.colour += w * colour
+
+    def mean(self, scale):
+        return tuple((self.colour / self.weight * scale).tolist()) if self.weight > 0 else (0.0, 0.0, 0.0)
+
+
+@dataclass
+class _Mixture:
+    """What the weighted leaves of a Mix/Add Shader tree add up to (`_gather`), before it is
+    turned into one material (`_combine`)."""
+    lobes: dict = field(default_factory=lambda: {"d": _LobeSum(), "m": _LobeSum(), "g": _LobeSum()})
+    passing: _LobeSum = field(default_factory=_LobeSum)  # Transparent BSDF leaves (and 1 − alpha)
+    emission: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    glowing: list = field(default_factory=list)  # the leaves that emit
+    rough: list = field(default_factory=list)  # (lobe kind: layer, m or g; weight; roughness)
+    iors: list = field(default_factory=list)  # the glass lobes' IOR
+    layer_weight: float = 0.0  # diffuse-lobe weight under a specular layer
+    layer_iors: list = field(default_factory=list)
+    textures: list = field(default_factory=list)  # (base colour texture, on a diffuse-only leaf)
+    rough_textures: list = field(default_factory=list)
+    normals: list = field(default_factory=list)  # the leaves' normal maps (texture, strength)
+    multiscatter: list = field(default_factory=list)  # the metal leaves' distributions
+    bsdf_leaves: int = 0
+
+    @property
+    def bsdf_weight(self):
+        return sum(v.weight for v in self.lobes.values())
+
+
+def _gather(leaves, warnings, what) -> _Mixture:
+    """Sums the leaves' lobes (Principled weights (1−m)(1−t), m, (1−m)t), emission and
+    pass-through, and lists what each leaf asks of the shared parameters."""
+    mix = _Mixture(glowing=[p for w, p in leaves if w > 0 and max(p["emission"][:3]) > 0])
     for w, p in leaves:
-        emission += w * np.array(p["emission"][:3], dtype=np.float64)
+        mix.emission += w * np.array(p["emission"][:3], dtype=np.float64)
         if "pass" in p:
-            passing[0] += w
-            passing[1] += w * np.array(p["pass"][:3], dtype=np.float64)
+            mix.passing.add(w, np.array(p["pass"][:3], dtype=np.float64))
             continue
         if not p.get("bsdf", True):
             continue
+        mix.bsdf_leaves += 1
         m, t = p["metallic"], p["transmission"]
-        color = np.array(p["base_color"][:3], dtype=np.float64)
+        colour = np.array(p["base_color"][:3], dtype=np.float64)
         for k, wk in (("d", (1 - m) * (1 - t)), ("m", m), ("g", (1 - m) * t)):
             if w * wk > 0:
-                lobes[k][0] += w * wk
-                lobes[k][1] += w * wk * color
+                mix.lobes[k].add(w * wk, colour)
         has_layer = p.get("specular_ior", 1.0) > 1.0 and w * (1 - m) * (1 - t) > 0
         if has_layer:
-            layer[0] += w * (1 - m) * (1 - t)
-            layer[1].append(p["specular_ior"])
+            mix.layer_weight += w * (1 - m) * (1 - t)
+            mix.layer_iors.append(p["specular_ior"])
         for kind, wk in (("layer", w * (1 - m) * (1 - t) if has_layer else 0.0), ("m", w * m), ("g", w * (1 - m) * t)):
             if wk > 0:
-                rough.append((kind, wk, p["roughness"]))
+                mix.rough.append((kind, wk, p["roughness"]))
         if w * (1 - m) * t > 0:
-            iors.append(p["ior"])
+            mix.iors.append(p["ior"])
         if "base_color_texture" in p:
-            tex.append((p["base_color_texture"], (1 - m) * (1 - t) > 0.999))
+            mix.textures.append((p["base_color_texture"], (1 - m) * (1 - t) > 0.999))
         if "roughness_texture" in p:
-            rough_tex.append(p["roughness_texture"])
+            mix.rough_textures.append(p["roughness_texture"])
         if "alpha_texture" in p:
             warnings.append(f"{what}: an image's alpha inside a Mix/Add Shader is not supported; that shader is "
                             f"rendered opaque")
         if "normal_texture" in p:
-            normals.append((p["normal_texture"], p["normal_strength"]))
+            mix.normals.append((p["normal_texture"], p["normal_strength"]))
         if w * m > 0:
-            multiscatter.append(p.get("multiscatter", False))
-    total = sum(v[0] for v in lobes.values())
-    total_all = total + passing[0]
-    textured = [p["emission_texture"] for p in glowing if "emission_texture" in p]
-    out = {"emission": tuple(emission.tolist()), "metallic": 0.0, "transmission": 0.0, "roughness": 0.5,
-           "ior": iors[0] if iors else 1.5}
-    if textured:  # an emission image multiplies all emission: right when it is the only emitter
-        if len(glowing) == 1:
+            mix.multiscatter.append(p.get("multiscatter", False))
+    return mix
+
+
+def _combine(leaves, warnings, what):
+    """One material from weighted leaves: the diffuse, metal and glass lobes of every leaf
+    are summed per kind — exact, since lobes of one kind differ only in colour — and
+    emission adds up. The specular layer, the metal and the glass lobes keep their own
+    roughness; lobes of one kind with different roughness, or glass lobes with different
+    IOR, are averaged (with a warning). A total BSDF weight above 1 (Add Shader of two BSDFs)
+    is normalized, with a warning. Steps: gather the leaves (`_gather`); emission; the
+    pass-through lobe; the lobe weights and colours; the specular layer; roughness; IOR;
+    textures; the metal distribution; the normal map."""
+    mix = _gather(leaves, warnings, what)
+    total = mix.bsdf_weight
+    total_all = total + mix.passing.weight
+    out = {"emission": tuple(mix.emission.tolist()), "metallic": 0.0, "transmission": 0.0, "roughness": 0.5,
+           "ior": mix.iors[0] if mix.iors else 1.5}
+    _combined_emission_texture(mix, out, warnings, what)
+    scale = min(total_all, 1.0)
+    if total_all > 1.0 + 1e-6:
+        warnings.append(f"{what}: Add Shader of BSDFs with total weight {total_all:.2f} is normalized to 1")
+    if mix.passing.weight > 0:
+        # the core's pass-through lobe takes probability τ; the other lobes share 1 − τ
+        out["transparency"] = mix.passing.weight / total_all
+        out["transparent_color"] = mix.passing.mean(scale)
+    if total <= 0:
+        out["base_color"] = (0.0, 0.0, 0.0)
+        return out
+    colour = {k: v.mean(scale) for k, v in mix.lobes.items()}
+    out["metallic"] = mix.lobes["m"].weight / total
+    dg = mix.lobes["d"].weight + mix.lobes["g"].weight
+    out["transmission"] = mix.lobes["g"].weight / dg if dg > 0 else 0.0
+    out["base_color"], out["metal_color"], out["glass_color"] = colour["d"], colour["m"], colour["g"]
+    if mix.layer_weight > 0:
+        out["specular_ior"] = mix.layer_iors[0]
+        out["specular"] = mix.layer_weight / mix.lobes["d"].weight
+        if max(mix.layer_iors) - min(mix.layer_iors) > 1e-4:
+            warnings.append(f"{what}: the mixed Principled specular layers have different IOR; "
+                            f"{mix.layer_iors[0]:.3f} is used")
+    _combined_roughness(mix, out, warnings, what)
+    if len(set(mix.iors)) > 1:
+        warnings.append(f"{what}: the mixed glass lobes have different IOR; {mix.iors[0]} is used")
+    _combined_textures(mix, out, colour, warnings, what)
+    return out
+
+
+def _combined_emission_texture(mix, out, warnings, what):
+    """An emission image multiplies all emission: right when it is the only emitter."""
+    textured = [p["emission_texture"] for p in mix.glowing if "emission_texture" in p]
+    if textured:
+        if len(mix.glowing) == 1:
             out["emission_texture"] = textured[0]
         else:
             warnings.append(f"{what}: an emission image mixed with other emission is not supported; its "
                             f"strength is used as white light")
-    scale = min(total_all, 1.0)
-    if total_all > 1.0 + 1e-6:
-        warnings.append(f"{what}: Add Shader of BSDFs with total weight {total_all:.2f} is normalized to 1")
-    if passing[0] > 0:
-        # the core's pass-through lobe takes probability τ; the other lobes share 1 − τ
-        out["transparency"] = passing[0] / total_all
-        out["transparent_color"] = tuple((passing[1] / passing[0] * scale).tolist())
-    if total <= 0:
-        out["base_color"] = (0.0, 0.0, 0.0)
-        return out
-    color = {k: tuple((v[1] / v[0] * scale).tolist()) if v[0] > 0 else (0.0, 0.0, 0.0) for k, v in lobes.items()}
-    out["metallic"] = lobes["m"][0] / total
-    dg = lobes["d"][0] + lobes["g"][0]
-    out["transmission"] = lobes["g"][0] / dg if dg > 0 else 0.0
-    out["base_color"], out["metal_color"], out["glass_color"] = color["d"], color["m"], color["g"]
-    if layer[0] > 0:
-        out["specular_ior"] = layer[1][0]
-        out["specular"] = layer[0] / lobes["d"][0]
-        if max(layer[1]) - min(layer[1]) > 1e-4:
-            warnings.append(f"{what}: the mixed Principled specular layers have different IOR; {layer[1][0]:.3f} "
-                            f"is used")
-    # each lobe kind keeps its own roughness (the specular layer's is `roughness`); lobes of
-    # one kind with different roughness share their weighted mean
+
+
+def _combined_roughness(mix, out, warnings, what):
+    """Each lobe kind keeps its own roughness (the specular layer's is `roughness`); lobes of
+    one kind with different roughness share their weighted mean."""
     means = {}
     for kind in ("layer", "m", "g"):
-        rs = [(w, r) for k, w, r in rough if k == kind]
+        rs = [(w, r) for k, w, r in mix.rough if k == kind]
         if rs:
             means[kind] = sum(w * r for w, r in rs) / sum(w for w, _ in rs)
             if max(r for _, r in rs) - min(r for _, r in rs) > 1e-3:
@@ -449,30 +501,31 @@ def _combine(leaves, warnings, what):
         for kind, key in (("m", "metal_roughness"), ("g", "glass_roughness")):
             if kind in means and abs(means[kind] - out["roughness"]) > 1e-6:
                 out[key] = means[kind]
-    if len(set(iors)) > 1:
-        warnings.append(f"{what}: the mixed glass lobes have different IOR; {iors[0]} is used")
-    if tex:
-        index, diffuse_only = tex[0]
-        if len(tex) == 1 and diffuse_only:
-            out["base_color_texture"] = index  # scales with the diffuse lobe's weight below
-            out["base_color"] = color["d"]
+
+
+def _combined_textures(mix, out, colour, warnings, what):
+    """Image textures (one base colour image on a diffuse-only leaf, the first roughness
+    image), the metal lobes' distribution and the normal map — each shared by the mixture."""
+    if mix.textures:
+        index, diffuse_only = mix.textures[0]
+        if len(mix.textures) == 1 and diffuse_only:
+            out["base_color_texture"] = index  # scales with the diffuse lobe's weight
+            out["base_color"] = colour["d"]
         else:
             warnings.append(f"{what}: image textures inside a Mix/Add Shader are supported on one Diffuse "
                             f"(or diffuse-only Principled) input only; their socket values are used elsewhere")
-    if rough_tex:
-        out["roughness_texture"] = rough_tex[0]
-    if multiscatter:
-        out["multiscatter"] = multiscatter[0]
-        if len(set(multiscatter)) > 1:
+    if mix.rough_textures:
+        out["roughness_texture"] = mix.rough_textures[0]
+    if mix.multiscatter:
+        out["multiscatter"] = mix.multiscatter[0]
+        if len(set(mix.multiscatter)) > 1:
             warnings.append(f"{what}: the mixed glossy/metal lobes use different distributions; "
-                            f"{'Multiscatter GGX' if multiscatter[0] else 'GGX'} is used for all")
-    if normals:
+                            f"{'Multiscatter GGX' if mix.multiscatter[0] else 'GGX'} is used for all")
+    if mix.normals:
         # one shading normal per point in the core: a normal map shared by every BSDF leaf
-        out["normal_texture"], out["normal_strength"] = normals[0]
-        bsdf_leaves = sum(1 for _, p in leaves if p.get("bsdf", True) and "pass" not in p)
-        if len(set(normals)) > 1 or len(normals) < bsdf_leaves:
+        out["normal_texture"], out["normal_strength"] = mix.normals[0]
+        if len(set(mix.normals)) > 1 or len(mix.normals) < mix.bsdf_leaves:
             warnings.append(f"{what}: the mixed shaders have different normals; the first normal map is used for all")
-    return out
 
 
 def _matrix(m):
