@@ -824,6 +824,9 @@ fn builtin_scene<'py>(py: Python<'py>, name: &str, width: u32, height: u32) -> P
         };
         td.set_item("extension", ext)?;
         td.set_item("srgb", t.srgb)?;
+        if let Some(m) = t.transform {
+            td.set_item("transform", m.to_vec())?;
+        }
         textures.append(td)?;
     }
     out.set_item("textures", textures)?;
