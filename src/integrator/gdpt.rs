@@ -179,12 +179,18 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl)
             run_phase(scene, settings, &mut rows, phase, done, to);
         }
         control.work_done.fetch_add(w as u64 * h as u64 * (to - done) as u64, Ordering::Relaxed);
+        let dt = t0.elapsed().as_secs_f64();
+        let per_sample = dt / (to - done) as f64;
         done = to;
         control.offer_preview(|| {
             resolve(&rows, w, h, done, settings.alpha_rec, crate::reconstruct::Norm::L2, &|| false).0
         });
-        if t0.elapsed().as_secs_f64() < 0.1 {
+        if dt < 0.1 {
             batch = (batch * 2).min(64);
+        }
+        batch = control.samples_fitting(batch, per_sample);
+        if batch == 0 {
+            break;
         }
     }
     let (combined, primal_full, dx, dy, direct) =
