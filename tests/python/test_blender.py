@@ -487,6 +487,20 @@ def _multilayer_passes(bpy, scene, path):
     return out
 
 
+def _passes_from_cycles_and_gdmlt(bpy, tmp_out, tag, method, spp, setup):
+    """The lights scene (its area light alone) rendered by Cycles and by GDMLT's `method`
+    into multilayer EXRs after `setup(scene, view_layer)`: (Cycles' passes, GDMLT's)."""
+    got = {}
+    for engine in ("CYCLES", "GDMLT"):
+        scene = open_scene(bpy, "lights", engine, spp, 1, keep={"Area"})
+        if engine == "GDMLT":
+            scene.gdmlt.method = method
+            scene.gdmlt.use_denoising = False
+        setup(scene, bpy.context.view_layer)
+        got[engine] = _multilayer_passes(bpy, scene, tmp_out / f"{tag}{engine}.exr")
+    return got["CYCLES"], got["GDMLT"]
+
+
 @pytest.mark.parametrize("method", ["PT", "GDPSSMLT"])
 def test_depth_normal_and_position_passes_agree_with_cycles(bpy_mod, tmp_out, method):
     """Issue 17: the View Layer's Depth, Normal and Position passes were not written. They are
@@ -495,17 +509,12 @@ def test_depth_normal_and_position_passes_agree_with_cycles(bpy_mod, tmp_out, me
     (its world position) per pixel except at edges — both renderers take one jittered sample
     there —, Normal (averaged shading normal) per pixel within a small tolerance."""
     bpy = bpy_mod
-    got = {}
-    for engine in ("CYCLES", "GDMLT"):
-        scene = open_scene(bpy, "lights", engine, 16, 1, keep={"Area"})
-        if engine == "GDMLT":
-            scene.gdmlt.method = method
-            scene.gdmlt.use_denoising = False
-        vl = bpy.context.view_layer
+
+    def setup(scene, vl):
         vl.use_pass_z = vl.use_pass_normal = vl.use_pass_position = True
-        got[engine] = _multilayer_passes(bpy, scene, tmp_out / f"data{method}{engine}.exr")
-        cam = np.array(scene.camera.matrix_world.translation)
-    c, g = got["CYCLES"], got["GDMLT"]
+
+    c, g = _passes_from_cycles_and_gdmlt(bpy, tmp_out, f"data{method}", method, 16, setup)
+    cam = np.array(bpy.context.scene.camera.matrix_world.translation)
     for name in ("Depth", "Normal", "Position"):
         assert name in g, (name, sorted(g))
         assert g[name].shape == c[name].shape, (name, g[name].shape, c[name].shape)
@@ -534,21 +543,16 @@ def test_object_and_material_index_passes_agree_with_cycles(bpy_mod, tmp_out, me
     the Pass Index of what a pixel's first sample hits, 0 for the world) were not written.
     They are, and equal Cycles' on every pixel but silhouettes (one jittered sample each)."""
     bpy = bpy_mod
-    got = {}
-    for engine in ("CYCLES", "GDMLT"):
-        scene = open_scene(bpy, "lights", engine, 4, 1, keep={"Area"})
-        if engine == "GDMLT":
-            scene.gdmlt.method = method
-            scene.gdmlt.use_denoising = False
+
+    def setup(scene, vl):
         meshes = sorted((o for o in scene.objects if o.type == "MESH"), key=lambda o: o.name)
         for k, ob in enumerate(meshes):
             ob.pass_index = k + 1
         for k, mat in enumerate(sorted(bpy.data.materials, key=lambda m: m.name)):
             mat.pass_index = 10 * (k + 1)
-        vl = bpy.context.view_layer
         vl.use_pass_object_index = vl.use_pass_material_index = True
-        got[engine] = _multilayer_passes(bpy, scene, tmp_out / f"index{method}{engine}.exr")
-    c, g = got["CYCLES"], got["GDMLT"]
+
+    c, g = _passes_from_cycles_and_gdmlt(bpy, tmp_out, f"index{method}", method, 4, setup)
     for name in ("Object Index", "Material Index"):
         assert name in g and name in c, (name, sorted(g), sorted(c))
         agree = (g[name] == c[name]).mean()
