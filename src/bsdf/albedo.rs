@@ -1,4 +1,4 @@
-//! Directional albedos of GGX lobes, tabulated once per process and read by interpolation
+//! Directional albedos of GGX lobes, tabulated at build time and read by interpolation
 //! (as Cycles keeps its `ggx_E` tables):
 //! * the dielectric specular layer, E(cos θo, roughness, η), which weights the diffuse base
 //!   under it (layered.rs);
@@ -7,98 +7,26 @@
 //!   "Multiscatter GGX", conductor.rs).
 //!
 //! Each entry integrates ∫ F·D·G2 / (4 cos θo) dωi with the visible-normal estimator F·G2/G1
-//! on a stratified grid.
+//! on a stratified grid (albedo_tables.rs), once, when the crate is built.
 
-use super::microfacet::{fresnel_dielectric, reflect, Ggx};
-use glam::{Vec2, Vec3};
-use std::sync::OnceLock;
+pub use super::albedo_tables::{ggx_albedo_integral, specular_albedo_integral};
+use super::albedo_tables::{N_ETA, N_MU, N_ROUGH, N_ROUGH_WHITE};
 
-/// Stratified visible-normal samples per table entry (STRATA²).
-const STRATA: usize = 20;
-
-/// The albedo of a GGX reflection lobe of Blender roughness `roughness` with Fresnel term
-/// `fresnel(ωo·h)`, at cos θo.
-pub fn ggx_albedo_integral(cos_o: f32, roughness: f32, fresnel: impl Fn(f32) -> f32) -> f32 {
-    let cos_o = cos_o.clamp(1e-4, 1.0);
-    let wo = Vec3::new((1.0 - cos_o * cos_o).sqrt(), 0.0, cos_o);
-    let g = Ggx::from_roughness(roughness);
-    let mut sum = 0.0f64;
-    for i in 0..STRATA {
-        for j in 0..STRATA {
-            let u = Vec2::new((i as f32 + 0.5) / STRATA as f32, (j as f32 + 0.5) / STRATA as f32);
-            let h = g.sample_visible(wo, u);
-            let wi = reflect(wo, h);
-            if wi.z > 0.0 {
-                sum += (fresnel(wo.dot(h)) * g.g2(wo, wi) / g.g1(wo)) as f64;
-            }
-        }
-    }
-    (sum / (STRATA * STRATA) as f64) as f32
-}
-
-/// E(θo) of the dielectric layer: F = the dielectric Fresnel term of η.
-pub fn specular_albedo_integral(cos_o: f32, roughness: f32, eta: f32) -> f32 {
-    ggx_albedo_integral(cos_o, roughness, |c| fresnel_dielectric(c, eta))
-}
-
-/// Nodes along √cos θo, roughness and x = (η − 1)/(η + 1) ∈ [0, 1/2] (η ∈ [1, 3]).
-const N_MU: usize = 32;
-const N_ROUGH: usize = 24;
-const N_ETA: usize = 16;
-/// The white lobe's table is 2D: finer in roughness.
-const N_ROUGH_WHITE: usize = 64;
-
-fn build(n: usize, entry: impl Fn(usize) -> f32 + Sync + Send) -> Vec<f32> {
-    use rayon::prelude::*;
-    (0..n).into_par_iter().map(entry).collect()
-}
-
-/// cos θo of node i along the √cos θo axis, and roughness of node j of `n_rough`.
-#[inline]
-fn node(i: usize, j: usize, n_rough: usize) -> (f32, f32) {
-    let s = i as f32 / (N_MU - 1) as f32;
-    (s * s, j as f32 / (n_rough - 1) as f32)
+/// The tables, tabulated by the build script (build.rs, from albedo_tables.rs).
+mod compiled {
+    include!(concat!(env!("OUT_DIR"), "/albedo_tables.rs"));
 }
 
 fn dielectric_table() -> &'static [f32] {
-    static TABLE: OnceLock<Vec<f32>> = OnceLock::new();
-    TABLE.get_or_init(|| {
-        build(N_MU * N_ROUGH * N_ETA, |n| {
-            let (i, j, k) = (n % N_MU, (n / N_MU) % N_ROUGH, n / (N_MU * N_ROUGH));
-            let x = 0.5 * k as f32 / (N_ETA - 1) as f32;
-            let (mu, r) = node(i, j, N_ROUGH);
-            specular_albedo_integral(mu, r, (1.0 + x) / (1.0 - x))
-        })
-    })
+    &compiled::DIELECTRIC
 }
 
 fn white_table() -> &'static [f32] {
-    static TABLE: OnceLock<Vec<f32>> = OnceLock::new();
-    TABLE.get_or_init(|| {
-        build(N_MU * N_ROUGH_WHITE, |n| {
-            let (mu, r) = node(n % N_MU, n / N_MU, N_ROUGH_WHITE);
-            ggx_albedo_integral(mu, r, |_| 1.0)
-        })
-    })
+    &compiled::WHITE
 }
 
-/// E_avg(roughness) = 2∫ E(μ) μ dμ per roughness node, by the trapezoid rule over the
-/// table's nodes (μ = s², dμ = 2s ds).
 fn white_average_table() -> &'static [f32] {
-    static TABLE: OnceLock<Vec<f32>> = OnceLock::new();
-    TABLE.get_or_init(|| {
-        let t = white_table();
-        (0..N_ROUGH_WHITE)
-            .map(|j| {
-                let f = |i: usize| {
-                    let s = i as f32 / (N_MU - 1) as f32;
-                    2.0 * t[j * N_MU + i] * s * s * 2.0 * s // 2·E·μ·dμ/ds
-                };
-                let h = 1.0 / (N_MU - 1) as f32;
-                h * ((1..N_MU - 1).map(f).sum::<f32>() + 0.5 * (f(0) + f(N_MU - 1)))
-            })
-            .collect()
-    })
+    &compiled::WHITE_AVERAGE
 }
 
 /// Position of `v` on an axis of `n` nodes over [0, 1]: (lower node, fraction).
@@ -197,5 +125,21 @@ mod tests {
         }
         let avg: Vec<f32> = [0.0f32, 0.3, 0.6, 1.0].iter().map(|&r| ggx_albedo_average(r)).collect();
         assert!(avg.windows(2).all(|w| w[1] < w[0]), "{avg:?}");
+    }
+
+    /// The tables compiled in are the ones albedo_tables.rs defines, entry for entry (a few
+    /// spot checks per table: the whole of them would take the 0.2 s the build saves).
+    #[test]
+    fn compiled_tables_are_their_definition() {
+        use super::super::albedo_tables::{dielectric_entry, white_averages, white_entry};
+        assert_eq!(dielectric_table().len(), N_MU * N_ROUGH * N_ETA);
+        assert_eq!(white_table().len(), N_MU * N_ROUGH_WHITE);
+        for n in (0..dielectric_table().len()).step_by(97) {
+            assert_eq!(dielectric_table()[n], dielectric_entry(n), "dielectric entry {n}");
+        }
+        for n in (0..white_table().len()).step_by(13) {
+            assert_eq!(white_table()[n], white_entry(n), "white entry {n}");
+        }
+        assert_eq!(white_average_table(), white_averages(white_table()).as_slice());
     }
 }
