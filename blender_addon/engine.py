@@ -10,7 +10,7 @@ import numpy as np
 
 from . import export, viewport
 
-# Statistics of the last finished render in this process (the CLI prints them).
+# Statistics of the last finished render in this process (the Last Render panel shows them).
 last_stats = {}
 # The last render's warnings (export, scene, render), kept for the Render Properties'
 # "Last Render" panel: the status bar shows a warning only for a moment.
