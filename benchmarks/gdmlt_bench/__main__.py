@@ -40,6 +40,10 @@ def build_parser():
                                     "sphere of 10k to 10M triangles, 1 thread and all; build time and memory.")
     sb.add_argument("--sizes", default="10000,100000,1000000,10000000", help="comma-separated triangle counts")
     sb.add_argument("--size", type=_positive_int, default=64, help="image side in pixels")
+    sb.add_argument("--memory", action="store_true",
+                    help="instead: peak bytes per pixel of each method by image size and thread count")
+    sb.add_argument("--images", default="512x512,1024x1024,1920x1080",
+                    help="with --memory: comma-separated WxH image sizes")
     cb = sub.add_parser("reconbench", help="seconds of the L1 and L2 reconstruction by image size",
                         description="Times gdmlt.reconstruct (L1 and L2) on synthetic noisy RGB inputs and prints "
                                     "the MSE of each result against the image the inputs were made from.")
@@ -106,6 +110,17 @@ def main(argv=None):
         except (ValueError, RuntimeError, FileNotFoundError) as e:
             print(f"gdmlt: error: {e}", file=sys.stderr)
             return 1
+        return 0
+    if args.command == "scalebench" and args.memory:
+        from .membench import run as membench
+
+        try:
+            images = [tuple(int(v) for v in s.lower().split("x")) for s in args.images.split(",")]
+        except ValueError:
+            parser.error(f"--images: '{args.images}' is not a comma-separated list of WxH")
+        if any(len(s) != 2 or min(s) < 1 for s in images):
+            parser.error(f"--images: '{args.images}' is not a comma-separated list of WxH")
+        membench(images)
         return 0
     if args.command == "scalebench":
         from .scalebench import run as scalebench
