@@ -1,4 +1,4 @@
-//! Film: per-pixel accumulation in f64 with per-pixel sample counts, and the images it
+//! Film: per-pixel accumulation in f32 (as Cycles' render buffers) with per-pixel sample counts, and the images it
 //! resolves to. Non-finite samples never reach it: they are counted and dropped.
 
 use crate::math::{is_finite_spectrum, Spectrum};
@@ -46,13 +46,13 @@ impl Image {
 /// Accumulators for one row of pixels; rows are owned by one thread at a time, so no locks.
 #[derive(Clone, Debug)]
 pub struct FilmRow {
-    pub color: Vec<[f64; 3]>,
+    pub color: Vec<[f32; 3]>,
     /// Light seen directly by the camera (part of `color`), for gradient-domain comparisons.
-    pub direct: Vec<[f64; 3]>,
-    pub albedo: Vec<[f64; 3]>,
-    pub normal: Vec<[f64; 3]>,
+    pub direct: Vec<[f32; 3]>,
+    pub albedo: Vec<[f32; 3]>,
+    pub normal: Vec<[f32; 3]>,
     /// Sum of the samples' `transparent` (film transparency; 0 unless the film is transparent).
-    pub transparent: Vec<f64>,
+    pub transparent: Vec<f32>,
     pub count: Vec<u32>,
     pub invalid: u64,
 }
@@ -81,11 +81,11 @@ impl FilmRow {
             self.invalid += 1;
             Spectrum::ZERO
         };
-        let acc = |a: &mut [f64; 3], v: Vec3| {
+        let acc = |a: &mut [f32; 3], v: Vec3| {
             if is_finite_spectrum(v) {
-                a[0] += v.x as f64;
-                a[1] += v.y as f64;
-                a[2] += v.z as f64;
+                a[0] += v.x;
+                a[1] += v.y;
+                a[2] += v.z;
             }
         };
         acc(&mut self.color[x], c);
@@ -95,7 +95,7 @@ impl FilmRow {
         acc(&mut self.albedo[x], albedo);
         acc(&mut self.normal[x], normal);
         if sample.transparent.is_finite() {
-            self.transparent[x] += sample.transparent as f64;
+            self.transparent[x] += sample.transparent;
         }
         self.count[x] += 1;
     }
@@ -130,14 +130,14 @@ impl Film {
         (if lo == u32::MAX { 0 } else { lo }, hi)
     }
 
-    fn resolve(&self, pick: impl Fn(&FilmRow) -> &Vec<[f64; 3]>) -> Image {
+    fn resolve(&self, pick: impl Fn(&FilmRow) -> &Vec<[f32; 3]>) -> Image {
         let mut img = Image::new(self.width, self.height, 3);
         for (y, row) in self.rows.iter().enumerate() {
             let acc = pick(row);
             for (x, (px, &count)) in acc.iter().zip(&row.count).enumerate().take(self.width) {
-                let n = count.max(1) as f64;
+                let n = count.max(1) as f32;
                 for (c, v) in px.iter().enumerate() {
-                    img.data[(y * self.width + x) * 3 + c] = (v / n) as f32;
+                    img.data[(y * self.width + x) * 3 + c] = v / n;
                 }
             }
         }
@@ -162,7 +162,7 @@ impl Film {
         let mut img = Image::new(self.width, self.height, 1);
         for (y, row) in self.rows.iter().enumerate() {
             for (x, (&t, &n)) in row.transparent.iter().zip(&row.count).enumerate() {
-                img.data[y * self.width + x] = (1.0 - t / n.max(1) as f64) as f32;
+                img.data[y * self.width + x] = 1.0 - t / n.max(1) as f32;
             }
         }
         img

@@ -524,9 +524,11 @@ impl Scene {
     }
 }
 
-fn image_to_numpy<'py>(py: Python<'py>, img: &Image) -> PyResult<Bound<'py, PyAny>> {
-    let a = PyArray1::from_slice(py, &img.data);
-    Ok(a.reshape([img.height, img.width, img.channels])?.into_any())
+/// The image as a (H, W, C) float32 array that takes over its buffer (no copy: a render's
+/// layers are not held twice).
+fn image_to_numpy(py: Python<'_>, img: Image) -> PyResult<Bound<'_, PyAny>> {
+    let shape = [img.height, img.width, img.channels];
+    Ok(PyArray1::from_vec(py, img.data).reshape(shape)?.into_any())
 }
 
 fn numpy_to_image(obj: &Bound<'_, PyAny>) -> PyResult<Image> {
@@ -637,7 +639,7 @@ fn render<'py>(
                     }
                     if let Some(img) = control.take_preview() {
                         Python::attach(|py| {
-                            let r = image_to_numpy(py, &img).and_then(|a| cb.call1(py, (a,)));
+                            let r = image_to_numpy(py, img).and_then(|a| cb.call1(py, (a,)));
                             if let Err(e) = r {
                                 control.cancel();
                                 callback_error.get_or_insert(e);
@@ -674,7 +676,7 @@ fn render<'py>(
     };
     let dict = PyDict::new(py);
     let layers = PyDict::new(py);
-    for (name, img) in &out.layers {
+    for (name, img) in out.layers {
         layers.set_item(name, image_to_numpy(py, img)?)?;
     }
     dict.set_item("layers", layers)?;
@@ -898,13 +900,13 @@ fn reconstruct<'py>(
     if p.channels != 3 || [&gx, &gy, &d].iter().any(|i| (i.width, i.height, i.channels) != (p.width, p.height, 3)) {
         return Err(verr("primal, dx, dy and direct must all be float32 arrays of the same shape (H, W, 3)"));
     }
-    let f = |i: &Image| -> Vec<f64> { i.data.iter().map(|&v| v as f64).collect() };
-    let (w, h) = (p.width, p.height);
-    let (combined, _) = py.detach(|| {
-        crate::reconstruct::gradient_domain_image(w, h, &f(&p), &f(&gx), &f(&gy), &f(&d), alpha, norm, &|| false)
+    let out = py.detach(|| {
+        use crate::reconstruct::{gradient_domain_image, Problem, RowPlanar};
+        let planar = |i: &Image| RowPlanar::from_interleaved(&i.data, i.width, i.height, 1.0);
+        let problem = Problem::new(alpha, planar(&p), planar(&gx), planar(&gy));
+        gradient_domain_image(&problem, &d.data, norm, &|| false)
     });
-    let out = Image { width: w, height: h, channels: 3, data: combined.iter().map(|&v| v as f32).collect() };
-    image_to_numpy(py, &out)
+    image_to_numpy(py, out)
 }
 
 /// Writes an RGB float32 (H, W, 3) linear image as an 8-bit sRGB PNG.

@@ -49,12 +49,10 @@ fn run_method(
 fn estimate(out: &RenderOutput) -> Image {
     let layers = ["GD Primal", "GD Gradient X", "GD Gradient Y", "Very Direct"].map(|n| out.layer(n));
     let [Some(p), Some(dx), Some(dy), Some(vd)] = layers else { return out.layer("Combined").unwrap().clone() };
-    let f = |i: &Image| i.data.iter().map(|&v| v as f64).collect::<Vec<f64>>();
-    let vd = f(vd);
-    let primal: Vec<f64> = f(p).iter().zip(&vd).map(|(a, b)| a - b).collect();
+    let primal: Vec<f32> = p.data.iter().zip(&vd.data).map(|(a, b)| a - b).collect();
     let alpha = RenderSettings::default().alpha_rec;
-    let rec = reconstruct_rgb(p.width, p.height, &primal, &f(dx), &f(dy), alpha, Norm::L2, &|| false);
-    Image { data: rec.iter().zip(&vd).map(|(a, b)| (a + b) as f32).collect(), ..p.clone() }
+    let rec = reconstruct_rgb(p.width, p.height, &primal, &dx.data, &dy.data, alpha, Norm::L2, &|| false);
+    Image { data: rec.iter().zip(&vd.data).map(|(a, b)| a + b).collect(), ..p.clone() }
 }
 
 fn mean_and_stderr(img: &Image, channel: usize) -> (f64, f64) {

@@ -11,7 +11,7 @@ use super::{RenderControl, RenderOutput, RenderSettings, RenderStats};
 use crate::film::Image;
 use crate::math::{is_finite_spectrum, Spectrum};
 use crate::path::{trace_path_from, Path, Primary};
-use crate::reconstruct::gradient_domain_image;
+use crate::reconstruct::{gradient_domain_image, gradient_domain_layers, Norm, Problem, RowPlanar};
 use crate::sampler::Sampler;
 use crate::scene::{CameraRay, Scene};
 use crate::shift::shift_from;
@@ -19,41 +19,96 @@ use glam::Vec2;
 use rayon::prelude::*;
 use std::sync::atomic::Ordering;
 
-/// Accumulators of one image row.
-#[derive(Clone)]
-pub struct GdRow {
-    pub primal: Vec<[f64; 3]>,
-    pub dx: Vec<[f64; 3]>,
-    pub dy: Vec<[f64; 3]>,
-    pub direct: Vec<[f64; 3]>,
-    pub albedo: Vec<[f64; 3]>,
-    pub normal: Vec<[f64; 3]>,
+/// The accumulators of a render, whole images in f32: primal and gradients row-planar (the
+/// reconstruction's layout, so they become its problem without a copy), the first-hit sums
+/// interleaved RGB (the output's layout). About 76 bytes per pixel.
+struct GdFilm {
+    primal: RowPlanar,
+    dx: RowPlanar,
+    dy: RowPlanar,
+    direct: Vec<f32>,
+    albedo: Vec<f32>,
+    normal: Vec<f32>,
     /// Sum of the base samples' film transparency.
-    pub transparent: Vec<f64>,
-    pub invalid: u64,
+    transparent: Vec<f32>,
+    /// Invalid (non-finite) samples, per base row.
+    invalid: Vec<u64>,
 }
 
-impl GdRow {
-    fn new(w: usize) -> GdRow {
-        let z = vec![[0.0; 3]; w];
-        GdRow {
-            primal: z.clone(),
-            dx: z.clone(),
-            dy: z.clone(),
-            direct: z.clone(),
-            albedo: z.clone(),
-            normal: z,
-            transparent: vec![0.0; w],
-            invalid: 0,
+/// One row's share of every accumulator (row-planar rows: R, G, B of the row in turn).
+pub struct GdRow<'a> {
+    primal: &'a mut [f32],
+    dx: &'a mut [f32],
+    dy: &'a mut [f32],
+    direct: &'a mut [f32],
+    albedo: &'a mut [f32],
+    normal: &'a mut [f32],
+    transparent: &'a mut [f32],
+    invalid: &'a mut u64,
+}
+
+impl GdFilm {
+    fn new(w: usize, h: usize) -> GdFilm {
+        GdFilm {
+            primal: RowPlanar::zeros(w, h),
+            dx: RowPlanar::zeros(w, h),
+            dy: RowPlanar::zeros(w, h),
+            direct: vec![0.0; 3 * w * h],
+            albedo: vec![0.0; 3 * w * h],
+            normal: vec![0.0; 3 * w * h],
+            transparent: vec![0.0; w * h],
+            invalid: vec![0; h],
         }
+    }
+
+    fn rows(&mut self) -> Vec<GdRow<'_>> {
+        let w = self.primal.width;
+        let mut primal = self.primal.data.chunks_mut(3 * w);
+        let mut dx = self.dx.data.chunks_mut(3 * w);
+        let mut dy = self.dy.data.chunks_mut(3 * w);
+        let mut direct = self.direct.chunks_mut(3 * w);
+        let mut albedo = self.albedo.chunks_mut(3 * w);
+        let mut normal = self.normal.chunks_mut(3 * w);
+        let mut transparent = self.transparent.chunks_mut(w);
+        self.invalid
+            .iter_mut()
+            .map(|invalid| GdRow {
+                primal: primal.next().expect("one row each"),
+                dx: dx.next().expect("one row each"),
+                dy: dy.next().expect("one row each"),
+                direct: direct.next().expect("one row each"),
+                albedo: albedo.next().expect("one row each"),
+                normal: normal.next().expect("one row each"),
+                transparent: transparent.next().expect("one row each"),
+                invalid,
+            })
+            .collect()
+    }
+
+    /// The gradient-domain problem of `spp` samples per pixel, and the very-direct image,
+    /// copied (the render goes on).
+    fn problem(&self, spp: u32, alpha: f64) -> (Problem, Vec<f32>) {
+        let s = 1.0 / spp.max(1) as f32;
+        let p = Problem::new(alpha, self.primal.scaled(s), self.dx.scaled(s), self.dy.scaled(s));
+        (p, self.direct.par_iter().map(|v| v * s).collect())
     }
 }
 
+/// Adds v·s to pixel x of a row-planar row.
 #[inline]
-fn acc(a: &mut [f64; 3], v: Spectrum, s: f64) {
-    a[0] += v.x as f64 * s;
-    a[1] += v.y as f64 * s;
-    a[2] += v.z as f64 * s;
+fn acc_planar(row: &mut [f32], x: usize, v: Spectrum, s: f32) {
+    let w = row.len() / 3;
+    row[x] += v.x * s;
+    row[w + x] += v.y * s;
+    row[2 * w + x] += v.z * s;
+}
+
+/// Adds v to pixel x of an interleaved RGB row.
+#[inline]
+fn acc_rgb(row: &mut [f32], x: usize, v: Spectrum) {
+    row[3 * x] += v.x;
+    row[3 * x + 1] += v.y;
+    row[3 * x + 2] += v.z;
 }
 
 /// (dx, dy) of the four shifts.
@@ -61,7 +116,15 @@ pub const SHIFTS: [(i32, i32); 4] = [(1, 0), (-1, 0), (0, 1), (0, -1)];
 
 /// Renders samples [from, to) of the base pixels of row `y`; `win` holds rows lo..lo+len.
 #[allow(clippy::too_many_arguments)]
-fn render_row(scene: &Scene, settings: &RenderSettings, y: usize, lo: usize, win: &mut [GdRow], from: u32, to: u32) {
+fn render_row(
+    scene: &Scene,
+    settings: &RenderSettings,
+    y: usize,
+    lo: usize,
+    win: &mut [GdRow<'_>],
+    from: u32,
+    to: u32,
+) {
     let (w, h) = (scene.camera.width as i32, scene.camera.height as i32);
     let mut path = Path::default();
     for x in 0..w as usize {
@@ -80,33 +143,33 @@ fn render_row(scene: &Scene, settings: &RenderSettings, y: usize, lo: usize, win
             let c = trace_path_from(scene, &settings.path, Primary { lens, ray, hit }, &mut sampler, Some(&mut path));
             let me = &mut win[y - lo];
             if !is_finite_spectrum(c.radiance) {
-                me.invalid += 1;
+                *me.invalid += 1;
                 continue;
             }
-            acc(&mut me.direct[x], c.very_direct, 1.0);
-            acc(&mut me.albedo[x], c.albedo, 1.0);
-            acc(&mut me.normal[x], c.normal, 1.0);
-            me.transparent[x] += c.transparent as f64;
+            acc_rgb(me.direct, x, c.very_direct);
+            acc_rgb(me.albedo, x, c.albedo);
+            acc_rgb(me.normal, x, c.normal);
+            me.transparent[x] += c.transparent;
             for (i, (dx, dy)) in SHIFTS.into_iter().enumerate() {
                 let (nx, ny) = (x as i32 + dx, y as i32 + dy);
                 let inside = nx >= 0 && ny >= 0 && nx < w && ny < h;
                 let pc = shift_from(scene, &path, inside.then(|| (rays[1 + i], hits[1 + i])));
                 if !is_finite_spectrum(pc.base) || !is_finite_spectrum(pc.offset) {
-                    win[y - lo].invalid += 1;
+                    *win[y - lo].invalid += 1;
                     continue;
                 }
-                acc(&mut win[y - lo].primal[x], pc.base, 0.25);
+                acc_planar(win[y - lo].primal, x, pc.base, 0.25);
                 if !inside {
                     continue;
                 }
                 let (nx, ny) = (nx as usize, ny as usize);
-                acc(&mut win[ny - lo].primal[nx], pc.offset, 0.25);
+                acc_planar(win[ny - lo].primal, nx, pc.offset, 0.25);
                 let g = pc.offset - pc.base;
                 match (dx, dy) {
-                    (1, 0) => acc(&mut win[y - lo].dx[x], g, 1.0),
-                    (-1, 0) => acc(&mut win[ny - lo].dx[nx], g, -1.0),
-                    (0, 1) => acc(&mut win[y - lo].dy[x], g, 1.0),
-                    _ => acc(&mut win[ny - lo].dy[nx], g, -1.0),
+                    (1, 0) => acc_planar(win[y - lo].dx, x, g, 1.0),
+                    (-1, 0) => acc_planar(win[ny - lo].dx, nx, g, -1.0),
+                    (0, 1) => acc_planar(win[y - lo].dy, x, g, 1.0),
+                    _ => acc_planar(win[ny - lo].dy, nx, g, -1.0),
                 }
             }
         }
@@ -114,10 +177,10 @@ fn render_row(scene: &Scene, settings: &RenderSettings, y: usize, lo: usize, win
 }
 
 /// Runs one phase: base rows y ≡ phase (mod 3), each with its window of rows y−1..=y+1.
-fn run_phase(scene: &Scene, settings: &RenderSettings, rows: &mut [GdRow], phase: usize, from: u32, to: u32) {
+fn run_phase(scene: &Scene, settings: &RenderSettings, rows: &mut [GdRow<'_>], phase: usize, from: u32, to: u32) {
     let h = rows.len();
     let mut windows = Vec::new();
-    let mut rest: &mut [GdRow] = rows;
+    let mut rest: &mut [GdRow<'_>] = rows;
     let mut offset = 0;
     for y in (phase..h).step_by(3) {
         let lo = y.saturating_sub(1);
@@ -131,59 +194,27 @@ fn run_phase(scene: &Scene, settings: &RenderSettings, rows: &mut [GdRow], phase
     windows.into_par_iter().for_each(|(y, lo, win)| render_row(scene, settings, y, lo, win, from, to));
 }
 
-fn to_image(rows: &[GdRow], pick: impl Fn(&GdRow) -> &Vec<[f64; 3]>, scale: f64) -> Vec<f64> {
-    let mut out = Vec::new();
-    for r in rows {
-        for px in pick(r) {
-            out.extend(px.iter().map(|v| v * scale));
-        }
-    }
-    out
-}
-
-fn f32_image(w: usize, h: usize, data: &[f64]) -> Image {
-    Image { width: w, height: h, channels: 3, data: data.iter().map(|&v| v as f32).collect() }
-}
-
-/// Normalises the accumulators of `spp` samples and reconstructs:
-/// (combined, primal + very direct, dx, dy, very direct).
-fn resolve(
-    rows: &[GdRow],
-    w: usize,
-    h: usize,
-    spp: u32,
-    alpha: f64,
-    norm: crate::reconstruct::Norm,
-    stop: &(dyn Fn() -> bool + Sync),
-) -> (Image, Image, Image, Image, Image) {
-    let scale = 1.0 / spp.max(1) as f64;
-    let primal = to_image(rows, |r| &r.primal, scale);
-    let dx = to_image(rows, |r| &r.dx, scale);
-    let dy = to_image(rows, |r| &r.dy, scale);
-    let direct = to_image(rows, |r| &r.direct, scale);
-    let (combined, primal_full) = gradient_domain_image(w, h, &primal, &dx, &dy, &direct, alpha, norm, stop);
-    let im = |v: &[f64]| f32_image(w, h, v);
-    (im(&combined), im(&primal_full), im(&dx), im(&dy), im(&direct))
-}
-
 pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl) -> RenderOutput {
     let (w, h) = (scene.camera.width as usize, scene.camera.height as usize);
-    let mut rows = vec![GdRow::new(w); h];
+    let mut film = GdFilm::new(w, h);
     control.work_total.store(w as u64 * h as u64 * settings.spp as u64, Ordering::Relaxed);
     let (mut done, mut batch) = (0u32, 1u32);
     // Whole passes only (a pass is short): every pixel always has the same sample count.
     while done < settings.spp && !control.should_stop() {
         let to = (done + batch).min(settings.spp);
         let t0 = std::time::Instant::now();
+        let mut rows = film.rows();
         for phase in 0..3 {
             run_phase(scene, settings, &mut rows, phase, done, to);
         }
+        drop(rows);
         control.work_done.fetch_add(w as u64 * h as u64 * (to - done) as u64, Ordering::Relaxed);
         let dt = t0.elapsed().as_secs_f64();
         let per_sample = dt / (to - done) as f64;
         done = to;
         control.offer_preview(|| {
-            resolve(&rows, w, h, done, settings.alpha_rec, crate::reconstruct::Norm::L2, &|| false).0
+            let (p, direct) = film.problem(done, settings.alpha_rec);
+            gradient_domain_image(&p, &direct, Norm::L2, &|| false)
         });
         if dt < 0.1 {
             batch = (batch * 2).min(64);
@@ -193,25 +224,24 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl)
             break;
         }
     }
-    let (combined, primal_full, dx, dy, direct) =
-        resolve(&rows, w, h, done, settings.alpha_rec, control.final_norm(settings.reconstruction), &|| {
-            control.is_cancelled()
-        });
-    let scale = 1.0 / done.max(1) as f64;
-    let n = |v: &[f64]| f32_image(w, h, v);
-    let albedo = to_image(&rows, |r| &r.albedo, scale);
-    let normal = to_image(&rows, |r| &r.normal, scale);
-    let mut layers = vec![
-        ("Combined".into(), combined),
-        ("GD Primal".into(), primal_full),
-        ("GD Gradient X".into(), dx),
-        ("GD Gradient Y".into(), dy),
-        ("Very Direct".into(), direct),
-        ("Denoising Albedo".into(), n(&albedo)),
-        ("Denoising Normal".into(), n(&normal)),
-    ];
+    // the accumulators become the layers: scaled in place, the primal and gradients handed to
+    // the reconstruction as its problem (nothing is held twice)
+    let s = 1.0 / done.max(1) as f32;
+    let GdFilm { mut primal, mut dx, mut dy, mut direct, mut albedo, mut normal, transparent, invalid } = film;
+    for v in [&mut primal, &mut dx, &mut dy] {
+        v.scale(s);
+    }
+    for v in [&mut direct, &mut albedo, &mut normal] {
+        v.par_iter_mut().for_each(|x| *x *= s);
+    }
+    let problem = Problem::new(settings.alpha_rec, primal, dx, dy);
+    let norm = control.final_norm(settings.reconstruction);
+    let mut layers = gradient_domain_layers(problem, direct, norm, &|| control.is_cancelled());
+    let img = |data: Vec<f32>| Image { width: w, height: h, channels: 3, data };
+    layers.push(("Denoising Albedo".into(), img(albedo)));
+    layers.push(("Denoising Normal".into(), img(normal)));
     if scene.camera.film_transparent {
-        let data = rows.iter().flat_map(|r| r.transparent.iter().map(|t| (1.0 - t * scale) as f32)).collect();
+        let data = transparent.iter().map(|t| 1.0 - t * s).collect();
         let alpha = Image { width: w, height: h, channels: 1, data };
         layers[0].1.clear_uncovered(&alpha);
         layers.push(("Alpha".into(), alpha));
@@ -223,7 +253,7 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl)
             elapsed: control.elapsed(),
             spp_min: done,
             spp_max: done,
-            invalid_samples: rows.iter().map(|r| r.invalid).sum(),
+            invalid_samples: invalid.iter().sum(),
             ..Default::default()
         },
     }

@@ -1,11 +1,13 @@
 //! Memory a render will need, estimated before anything is allocated, so that an image too
 //! large for the machine is refused with a message instead of an allocation abort.
 //!
-//! The per-pixel figures are the films and accumulation buffers each method keeps (measured
-//! as peak resident memory over an empty process: 1024² Cornell box, one sample, rounded up;
-//! 2026-12-02): `pt` 160 B, `gdpt` 456 B, `pssmlt` 276 B, `gdpssmlt` 612 B per pixel, the
-//! same on 1 and 2 threads (the Metropolis methods keep one image whatever the thread count;
-//! their chains' splat logs are bounded by chains × ROUND, ≤ 90 MB, not by the image).
+//! The per-pixel figures are the films and accumulation buffers each method keeps, f32
+//! throughout, plus the reconstruction's workspace (peak resident memory above the built
+//! scene, `gdmlt_bench scalebench --memory`, 1024² and 1920×1080 Cornell box, one sample,
+//! L1; 2026-12-03): `pt` 105 B, `gdpt` 155 B, `pssmlt` 69 B, `gdpssmlt` 164 B per pixel,
+//! the same on 1 and 2 threads (the Metropolis methods keep one image whatever the thread
+//! count; their bootstrap (≤ 4 MB) and splat logs (≤ 6 MB on up to 16 threads) do not grow
+//! with the image).
 
 use super::Method;
 use crate::error::RenderError;
@@ -13,10 +15,10 @@ use crate::error::RenderError;
 /// Bytes per pixel each method allocates (rounded up from the measurements above).
 pub fn bytes_per_pixel(method: Method) -> u64 {
     match method {
-        Method::Pt => 200,
-        Method::Gdpt => 500,
-        Method::Pssmlt => 300,
-        Method::Gdpssmlt => 650,
+        Method::Pt => 120,
+        Method::Gdpt => 170,
+        Method::Pssmlt => 90,
+        Method::Gdpssmlt => 180,
     }
 }
 

@@ -14,20 +14,19 @@
 //! the bootstrap's size. Expected-value splatting: proposed × a/F_p, current × (1−a)/F_c;
 //! image × b/mpp.
 //!
-//! Parallelism and memory: chains run in rounds of `ROUND` mutations, all chains in parallel
-//! (so every core is busy); each records its splats in its own log, sorted into
-//! `MERGE_BANDS` bands of the image as they are made, and after the round the logs are added
-//! to the one image, band by band in parallel, chain by chain in order. The image therefore
-//! depends only on the seed (not on the thread count, unless a time limit stops chains
-//! early), and memory is one image plus logs whose size is bounded by chains × `ROUND`,
-//! whatever the image size or thread count.
+//! Parallelism and memory: chains run in rounds of `ROUND` mutations, in batches of
+//! `CHAIN_BATCH` (or 4 per thread) chains in parallel (so every core is busy); each records
+//! its splats in a log, sorted into `MERGE_BANDS` bands of the image as they are made, and
+//! after the batch the logs are added to the one image, band by band in parallel, chain by
+//! chain in order. The image therefore depends only on the seed (not on the thread count,
+//! unless a time limit stops chains early), and memory is one f32 image plus logs bounded by
+//! the batch × `ROUND`, whatever the image size or the number of chains.
 
 use super::{ChainStart, RenderControl, RenderOutput, RenderSettings, RenderStats};
-use crate::distribution::Distribution1D;
 use crate::film::Image;
 use crate::math::{abs_luminance, is_finite_spectrum, Spectrum};
 use crate::path::{camera_transparency, first_hit, trace_path, Path};
-use crate::reconstruct::{gradient_domain_image, Norm};
+use crate::reconstruct::{gradient_domain_image, gradient_domain_layers, Norm, Problem, RowPlanar};
 use crate::sampler::{mix64, IndependentSampler, PssSampler, Sampler};
 use crate::scene::{CameraRay, Scene};
 use crate::shift::shift;
@@ -43,6 +42,55 @@ pub const BOOTSTRAP_SAMPLES: (usize, usize) = (16_384, 1 << 20);
 fn bootstrap_samples(w: usize, h: usize) -> usize {
     (16 * w * h).clamp(BOOTSTRAP_SAMPLES.0, BOOTSTRAP_SAMPLES.1)
 }
+/// The bootstrap's states, by F: chain starts are drawn ∝ F. 4 bytes a state (F, and f64
+/// sums of blocks of `Bootstrap::BLOCK` states: an exact f64 CDF without storing one).
+struct Bootstrap {
+    f: Vec<f32>,
+    /// Running sums of F up to the end of each block.
+    block_ends: Vec<f64>,
+    total: f64,
+}
+
+impl Bootstrap {
+    const BLOCK: usize = 1024;
+
+    /// F of each state (a non-finite or negative F counts as 0).
+    fn new(mut f: Vec<f32>) -> Bootstrap {
+        f.iter_mut().filter(|v| !(v.is_finite() && **v > 0.0)).for_each(|v| *v = 0.0);
+        let mut acc = 0.0f64;
+        let block_ends = f.chunks(Self::BLOCK).map(|b| {
+            acc += b.iter().map(|&v| v as f64).sum::<f64>();
+            acc
+        });
+        let block_ends: Vec<f64> = block_ends.collect();
+        Bootstrap { total: block_ends.last().copied().unwrap_or(0.0), f, block_ends }
+    }
+
+    /// The state i with Σ_{j<i} F_j ≤ u·ΣF < Σ_{j≤i} F_j (a state of F > 0), None if all F are 0.
+    fn sample(&self, u: f64) -> Option<usize> {
+        if self.total <= 0.0 {
+            return None;
+        }
+        let t = u.clamp(0.0, 1.0) * self.total;
+        let b = self.block_ends.partition_point(|&e| e <= t).min(self.block_ends.len() - 1);
+        let mut acc = if b == 0 { 0.0 } else { self.block_ends[b - 1] };
+        let block = &self.f[b * Self::BLOCK..((b + 1) * Self::BLOCK).min(self.f.len())];
+        let mut last = None;
+        for (k, &v) in block.iter().enumerate() {
+            if v > 0.0 {
+                last = Some(b * Self::BLOCK + k);
+                acc += v as f64;
+                if t < acc {
+                    return last;
+                }
+            }
+        }
+        // rounding at the block's end (t within an ulp of its sum): its last state of F > 0,
+        // or, for an empty block there, the last state of F > 0 before it
+        last.or_else(|| self.f[..b * Self::BLOCK].iter().rposition(|&v| v > 0.0))
+    }
+}
+
 /// Probability that a small step also redraws the shift direction d (its own symmetric
 /// mutation: a Gaussian step of the other coordinates never changes d).
 pub const DIRECTION_MUTATION_PROBABILITY: f32 = 0.1;
@@ -149,6 +197,9 @@ impl Target<'_> {
 
 /// Mutations a chain runs per round (between merges, previews and stop checks).
 const ROUND: u64 = 256;
+/// Chains run (and logged) at once at least; more on machines of more than 16 threads
+/// (4 per thread). Bounds the logs' memory: ≈ 86 KB a chain for gdpssmlt.
+const CHAIN_BATCH: usize = 64;
 
 /// One splat as a chain records it: `at` = pixel · 4 + layer (`DENSITY` counts a visit).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -165,7 +216,7 @@ struct Log {
     sorted: Vec<Splat>,
     /// `sorted[offsets[b]..offsets[b + 1]]` are band b's splats.
     offsets: [usize; MERGE_BANDS + 1],
-    /// Pixels per merge band.
+    /// Pixels per merge band (whole rows).
     band_pixels: u64,
     mutations: u64,
     accepted: u64,
@@ -185,13 +236,13 @@ impl Log {
         }
     }
 
-    fn new(pixels: usize, gradient: bool) -> Log {
+    fn new(w: usize, h: usize, gradient: bool) -> Log {
         let cap = ROUND as usize * Log::max_splats_per_mutation(gradient);
         Log {
             raw: Vec::with_capacity(cap),
             sorted: Vec::with_capacity(cap),
             offsets: [0; MERGE_BANDS + 1],
-            band_pixels: (pixels as u64).div_ceil(MERGE_BANDS as u64).max(1),
+            band_pixels: (h.div_ceil(MERGE_BANDS).max(1) * w) as u64,
             mutations: 0,
             accepted: 0,
             large_f: 0.0,
@@ -257,11 +308,10 @@ struct Chain {
     d: usize,
     remaining: u64,
     path: Path,
-    log: Log,
 }
 
 /// One Metropolis–Hastings step with expected-value splatting (docs/algorithm.md §2).
-fn mutate(target: &Target, c: &mut Chain, gradient: bool) {
+fn mutate(target: &Target, c: &mut Chain, log: &mut Log, gradient: bool) {
     c.s.start_iteration();
     let d_new = if !gradient {
         c.d
@@ -274,35 +324,36 @@ fn mutate(target: &Target, c: &mut Chain, gradient: bool) {
     let (fc, fp) = (c.cur.f[c.d], prop.f[d_new]);
     let a = if fc > 0.0 { (fp / fc).min(1.0) } else { 1.0 };
     if fp > 0.0 {
-        c.log.splat(&prop.splats[d_new], a as f64 / fp as f64);
+        log.splat(&prop.splats[d_new], a as f64 / fp as f64);
     }
     if c.s.is_large_step() {
         // an independent uniform state (u, d): one more sample of b = E[F]
-        c.log.large_f += fp as f64;
-        c.log.large_steps += 1;
+        log.large_f += fp as f64;
+        log.large_steps += 1;
     }
     if fc > 0.0 {
-        c.log.splat(&c.cur.splats[c.d], (1.0 - a) as f64 / fc as f64);
+        log.splat(&c.cur.splats[c.d], (1.0 - a) as f64 / fc as f64);
     }
     if c.s.rng().next_1d() < a {
         c.s.accept();
         c.cur = prop;
         c.d = d_new;
-        c.log.accepted += 1;
+        log.accepted += 1;
     } else {
         c.s.reject();
     }
-    c.log.push(DENSITY, c.cur.splats[c.d].pixel, [0.0; 3]);
-    c.log.mutations += 1;
+    log.push(DENSITY, c.cur.splats[c.d].pixel, [0.0; 3]);
+    log.mutations += 1;
 }
 
-/// One merge band of the image: its slice of every layer and of the density.
-type BandMut<'a> = (Vec<&'a mut [[f64; 3]]>, &'a mut [u32]);
+/// One merge band of the image (whole rows): its rows of every layer and of the density.
+type BandMut<'a> = (Vec<&'a mut [f32]>, &'a mut [u32]);
 
-/// The image so far: the splat sums of each layer (primal; and dx, dy for gdpssmlt), the
-/// chains' visits per pixel, and the tallies.
+/// The image so far: the splat sums of each layer (primal; and dx, dy for gdpssmlt),
+/// row-planar f32 as the reconstruction takes them, the chains' visits per pixel, and the
+/// tallies.
 struct Accum {
-    layers: Vec<Vec<[f64; 3]>>,
+    layers: Vec<RowPlanar>,
     density: Vec<u32>,
     mutations: u64,
     accepted: u64,
@@ -311,11 +362,11 @@ struct Accum {
 }
 
 impl Accum {
-    fn new(pixels: usize, gradient: bool) -> Accum {
+    fn new(w: usize, h: usize, gradient: bool) -> Accum {
         let n_layers = if gradient { 3 } else { 1 };
         Accum {
-            layers: (0..n_layers).map(|_| vec![[0.0; 3]; pixels]).collect(),
-            density: vec![0; pixels],
+            layers: (0..n_layers).map(|_| RowPlanar::zeros(w, h)).collect(),
+            density: vec![0; w * h],
             mutations: 0,
             accepted: 0,
             large_f: 0.0,
@@ -323,13 +374,15 @@ impl Accum {
         }
     }
 
-    /// Adds the chains' logs of a round: band by band in parallel, chain by chain in order
-    /// within a band (so every pixel sums its splats in the same order on any thread count).
-    fn merge(&mut self, chains: &[Chain]) {
-        let Some(first) = chains.first() else { return };
-        let bp = first.log.band_pixels as usize;
-        let mut layer_bands: Vec<std::slice::ChunksMut<'_, [f64; 3]>> =
-            self.layers.iter_mut().map(|l| l.chunks_mut(bp)).collect();
+    /// Adds the chains' logs of a round (or of a batch of its chains): band by band in
+    /// parallel, chain by chain in order within a band (so every pixel sums its splats in the
+    /// same order on any thread count).
+    fn merge(&mut self, logs: &[Log]) {
+        let Some(first) = logs.first() else { return };
+        let bp = first.band_pixels as usize;
+        let w = self.layers[0].width;
+        let mut layer_bands: Vec<std::slice::ChunksMut<'_, f32>> =
+            self.layers.iter_mut().map(|l| l.data.chunks_mut(3 * bp)).collect();
         let bands: Vec<BandMut> = self
             .density
             .chunks_mut(bp)
@@ -337,25 +390,27 @@ impl Accum {
             .collect();
         bands.into_par_iter().enumerate().for_each(|(b, (mut layers, density))| {
             let base = b * bp;
-            for c in chains {
-                for s in c.log.band_splats(b) {
+            for log in logs {
+                for s in log.band_splats(b) {
                     let (pixel, layer) = ((s.at / 4) as usize - base, (s.at % 4) as usize);
                     if layer == DENSITY {
                         density[pixel] += 1;
                     } else {
-                        let a = &mut layers[layer][pixel];
-                        a[0] += s.v[0] as f64;
-                        a[1] += s.v[1] as f64;
-                        a[2] += s.v[2] as f64;
+                        // row-planar: the band's row r holds R, G, B rows of w values
+                        let (r, x) = (pixel / w, pixel % w);
+                        let l = &mut layers[layer];
+                        for (k, v) in s.v.iter().enumerate() {
+                            l[(3 * r + k) * w + x] += v;
+                        }
                     }
                 }
             }
         });
-        for c in chains {
-            self.mutations += c.log.mutations;
-            self.accepted += c.log.accepted;
-            self.large_f += c.log.large_f;
-            self.large_steps += c.log.large_steps;
+        for log in logs {
+            self.mutations += log.mutations;
+            self.accepted += log.accepted;
+            self.large_f += log.large_f;
+            self.large_steps += log.large_steps;
         }
     }
 
@@ -373,23 +428,23 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl,
 
     // Bootstrap (parallel, deterministic): F averaged over the four directions.
     let n_boot = bootstrap_samples(w, h);
-    let boot: Vec<(f32, [f32; 4])> = (0..n_boot)
+    let boot: Vec<f32> = (0..n_boot)
         .into_par_iter()
         .map_init(
             || (Path::default(), PssSampler::new(boot_seed, 0, p_large)),
             |(path, s), i| {
                 if control.is_cancelled() {
-                    return (0.0, [0.0; 4]); // Esc during the bootstrap: finish at once
+                    return 0.0; // Esc during the bootstrap: finish at once
                 }
                 s.restart(boot_seed, i as u64);
                 s.start_iteration();
                 let ev = target.evaluate(s, path, None);
-                (ev.f.iter().sum::<f32>() * 0.25, ev.f)
+                ev.f.iter().sum::<f32>() * 0.25
             },
         )
         .collect();
-    let boot_sum: f64 = boot.iter().map(|(f, _)| *f as f64).sum::<f64>();
-    let starts = Distribution1D::new(&boot.iter().map(|(f, _)| *f).collect::<Vec<_>>());
+    let starts = Bootstrap::new(boot);
+    let boot_sum = starts.total;
 
     let total = settings.spp as u64 * (w * h) as u64;
     let n_chains = match settings.chains {
@@ -397,7 +452,7 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl,
         n => (n as u64).min(total.max(1)) as usize,
     };
     let dimmest =
-        boot.iter().enumerate().filter(|(_, (f, _))| *f > 0.0).min_by(|a, b| a.1 .0.total_cmp(&b.1 .0)).map(|(i, _)| i);
+        starts.f.iter().enumerate().filter(|(_, f)| **f > 0.0).min_by(|a, b| a.1.total_cmp(b.1)).map(|(i, _)| i);
     control.work_total.store(total, Ordering::Relaxed);
     let chain_seed = mix64(settings.seed ^ 0xC4A1);
 
@@ -406,7 +461,6 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl,
     // Metropolis render.
     let mut first = FirstHits::new(w, h, settings.path.transparent_bounces);
     first.add(scene, settings.seed, VERY_DIRECT_SPP.0, control);
-    let mut direct = first.very_direct(gradient);
 
     // Every chain starts from a bootstrap state (replayed; direction ∝ F) ...
     let mut chains: Vec<Chain> = (0..n_chains)
@@ -414,7 +468,7 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl,
         .filter_map(|chain| {
             let mutations = total / n_chains as u64 + u64::from((chain as u64) < total % n_chains as u64);
             let mut pick = IndependentSampler::new(chain_seed, chain as u64);
-            let (start, _) = starts.sample(pick.next_1d())?;
+            let start = starts.sample(pick.next_1d() as f64)?;
             let start = match settings.chain_start {
                 ChainStart::Proportional => start,
                 ChainStart::Dimmest => dimmest?,
@@ -432,36 +486,41 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl,
                 acc -= cur.f[d];
                 d += 1;
             }
-            Some(Chain { s, cur, d, remaining: mutations, path, log: Log::new(w * h, gradient) })
+            Some(Chain { s, cur, d, remaining: mutations, path })
         })
         .collect();
-    let mut image = Accum::new(w * h, gradient);
+    let no_light = starts.total <= 0.0;
+    drop(starts); // the bootstrap is not needed once the chains have started
+    let mut image = Accum::new(w, h, gradient);
     // ... and all chains advance in rounds of ROUND mutations, so that a time limit or Esc
     // stops them at about the same length, and intermediate images can be taken in between.
+    // A round runs the chains batch by batch (a batch in parallel, each chain into its own
+    // log), each batch merged before the next: the same additions in the same order as one
+    // merge of all chains, with logs for one batch only.
+    let batch = (4 * rayon::current_num_threads()).max(CHAIN_BATCH).min(chains.len().max(1));
+    let mut logs: Vec<Log> = (0..batch).map(|_| Log::new(w, h, gradient)).collect();
     while !control.should_stop() && chains.iter().any(|c| c.remaining > 0) {
-        chains.par_iter_mut().with_max_len(1).for_each(|c| {
-            c.log.clear();
-            if control.should_stop() {
-                return;
-            }
-            let n = c.remaining.min(ROUND);
-            for _ in 0..n {
-                mutate(&target, c, gradient);
-            }
-            c.log.sort_by_band();
-            c.remaining -= n;
-            control.work_done.fetch_add(n, Ordering::Relaxed);
-        });
-        image.merge(&chains);
+        for group in chains.chunks_mut(batch) {
+            group.par_iter_mut().zip(logs.par_iter_mut()).with_max_len(1).for_each(|(c, log)| {
+                log.clear();
+                if control.should_stop() {
+                    return;
+                }
+                let n = c.remaining.min(ROUND);
+                for _ in 0..n {
+                    mutate(&target, c, log, gradient);
+                }
+                log.sort_by_band();
+                c.remaining -= n;
+                control.work_done.fetch_add(n, Ordering::Relaxed);
+            });
+            image.merge(&logs[..group.len()]);
+        }
         let target = very_direct_target(image.mutations, w * h);
         if target >= 2 * first.spp {
             first.add(scene, settings.seed, target, control);
-            direct = first.very_direct(gradient);
         }
-        control.offer_preview(|| {
-            let b = image.normalisation(boot_sum, n_boot);
-            resolve(&image, b, w, h, gradient, &direct, settings.alpha_rec, Norm::L2, &|| false).remove(0).1
-        });
+        control.offer_preview(|| preview(&image, image.normalisation(boot_sum, n_boot), &first, settings.alpha_rec));
     }
     drop(chains);
     let (mutations, accepted) = (image.mutations, image.accepted);
@@ -476,18 +535,17 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl,
     let b = image.normalisation(boot_sum, n_boot);
     stats.normalization = b;
     stats.chains = n_chains;
-    if starts.is_empty() {
+    if no_light {
         stats.warnings.push("no light reaches the camera in the bootstrap: the image is black".into());
     }
     first.add(scene, settings.seed, very_direct_target(mutations, w * h), control);
-    let direct = first.very_direct(gradient);
-    let [albedo, normal] = [1, 2].map(|k| first.mean(k));
+    let ([direct, albedo, normal], alpha) = first.into_means();
     let norm = control.final_norm(settings.reconstruction);
-    let mut layers = resolve(&image, b, w, h, gradient, &direct, settings.alpha_rec, norm, &|| control.is_cancelled());
-    let img = |v: Vec<f64>| Image { width: w, height: h, channels: 3, data: v.into_iter().map(|x| x as f32).collect() };
+    let mut layers = resolve(image, b, direct, settings.alpha_rec, norm, &|| control.is_cancelled());
+    let img = |data: Vec<f32>| Image { width: w, height: h, channels: 3, data };
     layers.push(("Denoising Albedo".into(), img(albedo)));
     layers.push(("Denoising Normal".into(), img(normal)));
-    if let Some(alpha) = first.alpha() {
+    if let Some(alpha) = alpha {
         // alpha comes from the first-hit pass, the colour from the chains: where the pass saw
         // only the world, the colour is made 0 too (a sliver of geometry the chains found in
         // such a pixel is lost: a bias confined to silhouettes, shrinking as the pass's
@@ -508,8 +566,8 @@ fn very_direct_target(mutations: u64, pixels: usize) -> u32 {
 /// samples per pixel accumulated progressively: sums of [very direct, albedo, normal], RGB;
 /// and, with a transparent film, of the camera rays' transparency (alpha = 1 − its mean).
 struct FirstHits {
-    sums: [Vec<f64>; 3],
-    transparent: Vec<f64>,
+    sums: [Vec<f32>; 3],
+    transparent: Vec<f32>,
     /// Transparent surfaces a camera ray may cross (PathSettings::transparent_bounces).
     crossings: u32,
     spp: u32,
@@ -539,12 +597,21 @@ impl FirstHits {
             }
             let (from, n) = (self.spp, (target - self.spp).min(8));
             let (film_transparent, crossings) = (scene.camera.film_transparent, self.crossings);
-            let per_pixel: Vec<([Spectrum; 3], f32)> = (0..h)
-                .into_par_iter()
-                .flat_map_iter(|y| {
-                    (0..w).map(move |x| {
-                        let mut acc = [Spectrum::ZERO; 3];
-                        let mut transparent = 0.0f32;
+            if film_transparent {
+                self.transparent.resize(w * h, 0.0);
+            }
+            // each row's samples are added to its sums in place (no image-sized temporary)
+            let [direct, albedo, normal] = &mut self.sums;
+            let mut transparent: Vec<&mut [f32]> = self.transparent.chunks_mut(w).collect();
+            transparent.resize_with(h, || &mut []);
+            direct
+                .par_chunks_mut(3 * w)
+                .zip(albedo.par_chunks_mut(3 * w))
+                .zip(normal.par_chunks_mut(3 * w))
+                .zip(transparent.into_par_iter())
+                .enumerate()
+                .for_each(|(y, (((direct, albedo), normal), transparent))| {
+                    for x in 0..w {
                         let mut rays = [CameraRay::default(); 8];
                         for (k, ray) in rays.iter_mut().enumerate().take(n as usize) {
                             let mut smp = super::pt::pixel_sampler(seed ^ 0xD1, y * w + x, from + k as u32);
@@ -552,102 +619,131 @@ impl FirstHits {
                             *ray = scene.camera.generate_ray(raster, smp.next_2d());
                         }
                         let hits = scene.intersect_camera_rays(&rays[..n as usize]);
+                        let mut acc = [Spectrum::ZERO; 3];
+                        let mut t = 0.0f32;
                         for (ray, hit) in rays.iter().zip(hits).take(n as usize) {
                             let f = first_hit(scene, ray, hit);
                             acc[0] += f.very_direct;
                             acc[1] += f.albedo;
                             acc[2] += f.normal;
                             if film_transparent {
-                                transparent += camera_transparency(scene, ray, hit, crossings);
+                                t += camera_transparency(scene, ray, hit, crossings);
                             }
                         }
-                        (acc, transparent)
-                    })
-                })
-                .collect();
-            for (k, sum) in self.sums.iter_mut().enumerate() {
-                for (i, (p, _)) in per_pixel.iter().enumerate() {
-                    sum[3 * i] += p[k].x as f64;
-                    sum[3 * i + 1] += p[k].y as f64;
-                    sum[3 * i + 2] += p[k].z as f64;
-                }
-            }
-            if film_transparent {
-                self.transparent.resize(w * h, 0.0);
-                for (t, (_, v)) in self.transparent.iter_mut().zip(&per_pixel) {
-                    *t += *v as f64;
-                }
-            }
+                        for (sum, a) in [&mut *direct, &mut *albedo, &mut *normal].into_iter().zip(acc) {
+                            sum[3 * x] += a.x;
+                            sum[3 * x + 1] += a.y;
+                            sum[3 * x + 2] += a.z;
+                        }
+                        if film_transparent {
+                            transparent[x] += t;
+                        }
+                    }
+                });
             self.spp += n;
         }
     }
 
     /// The mean of image `k` (0 very direct, 1 albedo, 2 normal).
-    fn mean(&self, k: usize) -> Vec<f64> {
-        let n = self.spp.max(1) as f64;
-        self.sums[k].iter().map(|v| v / n).collect()
+    fn mean(&self, k: usize) -> Vec<f32> {
+        let n = self.spp.max(1) as f32;
+        self.sums[k].par_iter().map(|v| v / n).collect()
     }
 
-    /// The alpha layer of a transparent film (one channel), None otherwise.
-    fn alpha(&self) -> Option<Image> {
-        let n = self.spp.max(1) as f64;
-        let data = self.transparent.iter().map(|t| (1.0 - t / n) as f32).collect::<Vec<_>>();
-        (!data.is_empty()).then_some(Image { width: self.w, height: self.h, channels: 1, data })
-    }
-
-    /// The very-direct image gdpssmlt adds after reconstruction; zero for pssmlt, whose
-    /// chains carry that light themselves.
-    fn very_direct(&self, gradient: bool) -> Vec<f64> {
-        if gradient {
-            self.mean(0)
-        } else {
-            vec![0.0; self.w * self.h * 3]
+    /// The means of [very direct, albedo, normal], made in place, and the alpha layer of a
+    /// transparent film (one channel; None otherwise).
+    fn into_means(self) -> ([Vec<f32>; 3], Option<Image>) {
+        let n = self.spp.max(1) as f32;
+        let mut sums = self.sums;
+        for v in &mut sums {
+            v.par_iter_mut().for_each(|x| *x /= n);
         }
+        let data: Vec<f32> = self.transparent.iter().map(|t| 1.0 - t / n).collect();
+        let alpha = (!data.is_empty()).then_some(Image { width: self.w, height: self.h, channels: 1, data });
+        (sums, alpha)
     }
 }
 
-/// The output layers from the image so far: splats × b/mpp; for gdpssmlt the screened
-/// Poisson reconstruction plus the very-direct image.
-#[allow(clippy::too_many_arguments)]
+/// The factor of the splat sums: b / (mutations per pixel).
+fn splat_scale(image: &Accum, b: f64) -> f32 {
+    let pixels = image.density.len().max(1);
+    let mpp = image.mutations as f64 / pixels as f64;
+    if mpp > 0.0 {
+        (b / mpp) as f32
+    } else {
+        0.0
+    }
+}
+
+/// The image so far (a preview): the splats × b/mpp; for gdpssmlt their L2 screened Poisson
+/// reconstruction plus the very-direct image.
+fn preview(image: &Accum, b: f64, first: &FirstHits, alpha_rec: f64) -> Image {
+    let s = splat_scale(image, b);
+    let (w, h) = (first.w, first.h);
+    if image.layers.len() == 1 {
+        let data = image.layers[PRIMAL].scaled(s).to_interleaved(None, f32::NEG_INFINITY);
+        return Image { width: w, height: h, channels: 3, data };
+    }
+    let [p, dx, dy] = [PRIMAL, DX, DY].map(|l| image.layers[l].scaled(s));
+    gradient_domain_image(&Problem::new(alpha_rec, p, dx, dy), &first.mean(0), Norm::L2, &|| false)
+}
+
+/// The output layers, from the image (consumed: its buffers become the problem and the
+/// layers) and the very-direct image: splats × b/mpp; for gdpssmlt the screened Poisson
+/// reconstruction plus the very-direct image (pssmlt's chains carry that light themselves);
+/// and the chains' density.
 fn resolve(
-    image: &Accum,
+    image: Accum,
     b: f64,
-    w: usize,
-    h: usize,
-    gradient: bool,
-    direct: &[f64],
+    direct: Vec<f32>,
     alpha_rec: f64,
     norm: Norm,
     stop: &(dyn Fn() -> bool + Sync),
 ) -> Vec<(String, Image)> {
-    let mpp = image.mutations as f64 / (w * h) as f64;
-    let scale = if mpp > 0.0 { b / mpp } else { 0.0 };
-    let sum_layer =
-        |l: usize| -> Vec<f64> { image.layers[l].par_iter().flat_map_iter(|v| v.map(|x| x * scale)).collect() };
-    let primal = sum_layer(PRIMAL);
-    let dmean = image.density.iter().map(|&d| d as f64).sum::<f64>() / (w * h) as f64;
-    let density_img: Vec<f64> = image.density.iter().flat_map(|&v| [v as f64 / dmean.max(1e-300); 3]).collect();
-    let img = |v: &[f64]| Image { width: w, height: h, channels: 3, data: v.iter().map(|&x| x as f32).collect() };
-    if !gradient {
-        return vec![("Combined".into(), img(&primal)), ("MLT Density".into(), img(&density_img))];
+    let s = splat_scale(&image, b);
+    let Accum { mut layers, density, .. } = image;
+    let (w, h) = (layers[0].width, layers[0].height);
+    let img = |data: Vec<f32>| Image { width: w, height: h, channels: 3, data };
+    for l in &mut layers {
+        l.scale(s);
     }
-    let dx = sum_layer(DX);
-    let dy = sum_layer(DY);
-    let (combined, primal_full) = gradient_domain_image(w, h, &primal, &dx, &dy, direct, alpha_rec, norm, stop);
-    vec![
-        ("Combined".into(), img(&combined)),
-        ("GD Primal".into(), img(&primal_full)),
-        ("GD Gradient X".into(), img(&dx)),
-        ("GD Gradient Y".into(), img(&dy)),
-        ("Very Direct".into(), img(direct)),
-        ("MLT Density".into(), img(&density_img)),
-    ]
+    let mut out = match <[RowPlanar; 3]>::try_from(layers) {
+        Ok([primal, dx, dy]) => gradient_domain_layers(Problem::new(alpha_rec, primal, dx, dy), direct, norm, stop),
+        Err(primal) => vec![("Combined".into(), img(primal[PRIMAL].to_interleaved(None, f32::NEG_INFINITY)))],
+    };
+    let dmean = density.iter().map(|&d| d as f64).sum::<f64>() / (w * h) as f64;
+    let density: Vec<f32> = density.iter().flat_map(|&v| [(v as f64 / dmean.max(1e-300)) as f32; 3]).collect();
+    out.push(("MLT Density".into(), img(density)));
+    out
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::path::first_hit;
+
+    /// Chain starts are drawn exactly ∝ F: the state sampled for u is the one whose slice of
+    /// the f64 running sum holds u·ΣF (checked against a direct running sum), across block
+    /// boundaries, skipping states of F = 0, and never a state of F = 0.
+    #[test]
+    fn bootstrap_starts_follow_the_running_sum_of_f() {
+        let mut s = IndependentSampler::new(11, 0);
+        let f: Vec<f32> =
+            (0..5000).map(|i| if i % 7 == 0 || (1024..2048).contains(&i) { 0.0 } else { s.next_1d() * 3.0 }).collect();
+        let boot = Bootstrap::new(f.clone());
+        let total: f64 = f.iter().map(|&v| v as f64).sum();
+        assert!((boot.total - total).abs() < 1e-9 * total);
+        for k in 0..20_000 {
+            let u = (k as f64 + 0.5) / 20_000.0;
+            let i = boot.sample(u).expect("F > 0 somewhere");
+            let before: f64 = f[..i].iter().map(|&v| v as f64).sum();
+            assert!(f[i] > 0.0, "u = {u}: state {i} has F = 0");
+            let t = u * total;
+            assert!(before <= t * (1.0 + 1e-12) && t < (before + f[i] as f64) * (1.0 + 1e-12), "u = {u}: state {i}");
+        }
+        assert_eq!(boot.sample(1.0), f.iter().rposition(|&v| v > 0.0));
+        assert_eq!(Bootstrap::new(vec![0.0; 10]).sample(0.5), None);
+    }
 
     /// The first-hit pass, tracing each pixel's camera rays in packets of eight and topped up
     /// in two passes, gives every pixel the mean of the samples that single rays give it.
@@ -679,7 +775,7 @@ mod tests {
                     let a = a / spp as f32;
                     for c in 0..3 {
                         let v = img[i + c];
-                        assert!((v - a[c] as f64).abs() <= 1e-6 * v.abs().max(1.0), "pixel ({x}, {y})");
+                        assert!((v - a[c]).abs() <= 1e-6 * v.abs().max(1.0), "pixel ({x}, {y})");
                     }
                 }
             }

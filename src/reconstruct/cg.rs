@@ -44,6 +44,45 @@ impl RowPlanar {
         out
     }
 
+    /// From an interleaved RGB image (W·H·3), times `scale` (a non-finite value becomes 0).
+    pub fn from_interleaved(data: &[f32], width: usize, height: usize, scale: f32) -> RowPlanar {
+        let mut out = RowPlanar::zeros(width, height);
+        out.data.par_chunks_mut(3 * width).zip(data.par_chunks(3 * width)).for_each(|(row, src)| {
+            for (x, px) in src.chunks_exact(3).enumerate() {
+                for c in 0..3 {
+                    let v = px[c] * scale;
+                    row[c * width + x] = if v.is_finite() { v } else { 0.0 };
+                }
+            }
+        });
+        out
+    }
+
+    /// A copy times `scale`.
+    pub fn scaled(&self, scale: f32) -> RowPlanar {
+        RowPlanar { width: self.width, height: self.height, data: self.data.par_iter().map(|v| v * scale).collect() }
+    }
+
+    /// Multiplies every value by `scale`, in place.
+    pub fn scale(&mut self, scale: f32) {
+        self.data.par_iter_mut().for_each(|v| *v *= scale);
+    }
+
+    /// As an interleaved RGB image, plus `add` (interleaved, if any), clipped at `floor`.
+    pub fn to_interleaved(&self, add: Option<&[f32]>, floor: f32) -> Vec<f32> {
+        let w = self.width;
+        let mut out = vec![0.0f32; 3 * w * self.height];
+        out.par_chunks_mut(3 * w).zip(self.data.par_chunks(3 * w)).enumerate().for_each(|(y, (dst, row))| {
+            for (x, px) in dst.chunks_exact_mut(3).enumerate() {
+                for c in 0..3 {
+                    let a = add.map_or(0.0, |a| a[3 * (y * w + x) + c]);
+                    px[c] = (row[c * w + x] + a).max(floor);
+                }
+            }
+        });
+        out
+    }
+
     /// Channel c as a row-major plane.
     pub fn plane(&self, c: usize) -> Vec<f64> {
         let w = self.width;
@@ -54,6 +93,12 @@ impl RowPlanar {
     pub fn row(&self, y: usize, c: usize) -> &[f32] {
         let s = (3 * y + c) * self.width;
         &self.data[s..s + self.width]
+    }
+
+    #[inline]
+    pub fn row_mut(&mut self, y: usize, c: usize) -> &mut [f32] {
+        let s = (3 * y + c) * self.width;
+        &mut self.data[s..s + self.width]
     }
 }
 
@@ -288,6 +333,16 @@ impl Problem {
             rz = rz_new;
             self.direction(&mut d, &r, &dinv, beta);
         }
+    }
+
+    /// (A·x, b) of the weighted problem: the normal equations' two sides, for tests.
+    #[cfg(test)]
+    pub fn operator_and_rhs(&self, wts: &Weights, x: &RowPlanar) -> (RowPlanar, RowPlanar) {
+        let (mut ax, mut b) =
+            (RowPlanar::zeros(self.width(), self.height()), RowPlanar::zeros(self.width(), self.height()));
+        bands(&mut ax, |y0, out| self.apply_band(wts, x, y0, out));
+        bands(&mut b, |y0, out| self.rhs_band(wts, y0, out));
+        (ax, b)
     }
 
     /// d = M⁻¹ r + β·d.

@@ -14,7 +14,7 @@
 //! gdpssmlt.
 
 use super::cg::{Problem, RowPlanar, Weights, BAND};
-use super::{solve_l2_dct, Channel};
+use super::dct::solve_l2;
 use rayon::prelude::*;
 
 #[derive(Clone, Debug)]
@@ -102,72 +102,102 @@ fn irls_weights(p: &Problem, sol: &RowPlanar, reg: f32) -> Weights {
 
 /// `stop` is asked between outer iterations and inside every CG iteration: when it turns true
 /// (Esc), the current iterate — the L2 solution refined so far — is returned.
-pub fn solve_l1(chans: &[Channel], alpha: f64, params: &IrlsParams, stop: &(dyn Fn() -> bool + Sync)) -> Vec<Vec<f64>> {
-    let (w, h) = (chans[0].width, chans[0].height);
-    // channels are independent given the shared weights: solved in parallel
-    let l2: Vec<Vec<f64>> = chans.par_iter().map(|c| solve_l2_dct(c, alpha)).collect();
-    let p = Problem {
-        alpha: alpha as f32,
-        primal: RowPlanar::from_planes([chans[0].primal, chans[1].primal, chans[2].primal], w, h),
-        dx: RowPlanar::from_planes([chans[0].dx, chans[1].dx, chans[2].dx], w, h),
-        dy: RowPlanar::from_planes([chans[0].dy, chans[1].dy, chans[2].dy], w, h),
-    };
-    let mut sol = RowPlanar::from_planes([&l2[0], &l2[1], &l2[2]], w, h);
-    let mut reg = params.reg0;
-    let mut refined = false;
-    for _ in 0..params.outer_iterations {
-        if stop() {
-            break;
-        }
-        let wts = irls_weights(&p, &sol, reg as f32);
-        p.solve(&wts, &mut sol, params.cg_iterations, 1e-10, stop);
-        refined = true;
-        reg *= params.decay;
-    }
-    if !refined {
-        return l2; // stopped before the first reweighting: the exact L2 solution
+pub fn solve_l1(p: &Problem, params: &IrlsParams, stop: &(dyn Fn() -> bool + Sync)) -> RowPlanar {
+    let (w, h) = (p.width(), p.height());
+    let mut sol = solve_l2(p);
+    if params.outer_iterations == 0 || stop() {
+        return sol; // stopped before the first reweighting: the exact L2 solution
     }
     let r = params.low_frequency_radius;
-    (0..3)
-        .into_par_iter()
-        .map(|c| {
-            let l1 = sol.plane(c);
-            if r == 0 {
-                return l1;
-            }
-            let (b2, b1) = (box_blur(&l2[c], w, h, r), box_blur(&l1, w, h, r));
-            l1.iter().zip(b2.iter().zip(&b1)).map(|(v, (a, b))| v + (a - b)).collect()
-        })
-        .collect()
+    let lows = (r > 0).then(|| {
+        let mut b = RowPlanar::zeros(w, h);
+        for c in 0..3 {
+            set_plane(&mut b, c, &box_blur(&plane(&sol, c), w, h, r));
+        }
+        b
+    });
+    let mut reg = params.reg0;
+    for k in 0..params.outer_iterations {
+        if k > 0 && stop() {
+            break;
+        }
+        let wts = irls_weights(p, &sol, reg as f32);
+        p.solve(&wts, &mut sol, params.cg_iterations, 1e-10, stop);
+        reg *= params.decay;
+    }
+    if let Some(lows) = lows {
+        for c in 0..3 {
+            let b1 = box_blur(&plane(&sol, c), w, h, r);
+            sol.data.par_chunks_mut(3 * w).zip(b1.par_chunks(w)).enumerate().for_each(|(y, (row, b1))| {
+                for ((v, &l2), &l1) in row[c * w..(c + 1) * w].iter_mut().zip(lows.row(y, c)).zip(b1) {
+                    *v += l2 - l1;
+                }
+            });
+        }
+    }
+    sol
 }
 
-/// Box filter of radius r over a W×H image, the image reflected at its border (half-sample
+/// Channel c of a row-planar image as a row-major plane.
+fn plane(v: &RowPlanar, c: usize) -> Vec<f32> {
+    v.data.par_chunks(3 * v.width).flat_map_iter(|row| row[c * v.width..(c + 1) * v.width].iter().copied()).collect()
+}
+
+fn set_plane(v: &mut RowPlanar, c: usize, src: &[f32]) {
+    let w = v.width;
+    v.data.par_chunks_mut(3 * w).zip(src.par_chunks(w)).for_each(|(row, s)| row[c * w..(c + 1) * w].copy_from_slice(s));
+}
+
+/// Index of k ∈ [−n, 2n) in a line of n samples reflected at both ends (half-sample
+/// symmetric, as the DCT's boundary), for any k (period 2n).
+#[inline]
+fn reflect(k: isize, n: usize) -> usize {
+    let m = k.rem_euclid(2 * n as isize) as usize;
+    if m < n {
+        m
+    } else {
+        2 * n - 1 - m
+    }
+}
+
+/// Box filter of radius r over a W×H plane, the plane reflected at its border (half-sample
 /// symmetric, as the DCT's boundary): a symmetric, doubly stochastic operator, so the image
-/// sum is kept. Separable, by running sums: O(W·H) whatever r.
-pub fn box_blur(v: &[f64], w: usize, h: usize, r: usize) -> Vec<f64> {
-    let pass = |src: &[f64], n: usize, lines: usize, at: &dyn Fn(usize, usize) -> usize| -> Vec<f64> {
-        let mut out = vec![0.0; src.len()];
-        let reflect = |k: isize| -> usize {
-            let m = k.rem_euclid(2 * n as isize) as usize; // period 2n
-            if m < n {
-                m
-            } else {
-                2 * n - 1 - m
-            }
-        };
-        let mut prefix = vec![0.0; n + 2 * r + 1];
-        for line in 0..lines {
-            for k in 0..n + 2 * r {
-                prefix[k + 1] = prefix[k] + src[at(line, reflect(k as isize - r as isize))];
-            }
-            for c in 0..n {
-                out[at(line, c)] = (prefix[c + 2 * r + 1] - prefix[c]) / (2 * r + 1) as f64;
+/// sum is kept. Separable, by running sums in f64: O(W·H) whatever r, in parallel.
+pub fn box_blur(v: &[f32], w: usize, h: usize, r: usize) -> Vec<f32> {
+    let norm = 1.0 / (2 * r + 1) as f64;
+    let ri = r as isize;
+    let mut rows = vec![0.0f32; w * h];
+    rows.par_chunks_mut(w).zip(v.par_chunks(w)).for_each(|(out, src)| {
+        let mut acc: f64 = (-ri..=ri).map(|k| src[reflect(k, w)] as f64).sum();
+        for (x, o) in out.iter_mut().enumerate() {
+            *o = (acc * norm) as f32;
+            let xi = x as isize;
+            acc += src[reflect(xi + ri + 1, w)] as f64 - src[reflect(xi - ri, w)] as f64;
+        }
+    });
+    // columns: bands of rows in parallel, each sliding a row of running sums down its band
+    const ROWS: usize = 64;
+    let mut out = vec![0.0f32; w * h];
+    out.par_chunks_mut(ROWS * w).enumerate().for_each(|(b, band)| {
+        let row = |y: isize| &rows[reflect(y, h) * w..(reflect(y, h) + 1) * w];
+        let y0 = (b * ROWS) as isize;
+        let mut acc = vec![0.0f64; w];
+        for k in -ri..=ri {
+            for (a, &v) in acc.iter_mut().zip(row(y0 + k)) {
+                *a += v as f64;
             }
         }
-        out
-    };
-    let rows = pass(v, w, h, &|y, x| y * w + x);
-    pass(&rows, h, w, &|x, y| y * w + x)
+        for (k, dst) in band.chunks_exact_mut(w).enumerate() {
+            for (o, &a) in dst.iter_mut().zip(&acc) {
+                *o = (a * norm) as f32;
+            }
+            let y = y0 + k as isize;
+            for ((a, &p), &m) in acc.iter_mut().zip(row(y + ri + 1)).zip(row(y - ri)) {
+                *a += p as f64 - m as f64;
+            }
+        }
+    });
+    out
 }
 
 #[cfg(test)]
@@ -175,52 +205,71 @@ mod tests {
     use super::*;
     use crate::sampler::{IndependentSampler, Sampler};
 
-    fn noise(n: usize, seed: u64) -> Vec<f64> {
+    fn noise(n: usize, seed: u64) -> Vec<f32> {
         let mut s = IndependentSampler::new(seed, 0);
-        (0..n).map(|_| s.next_1d() as f64).collect()
+        (0..n).map(|_| s.next_1d()).collect()
     }
 
     /// The reflected box filter keeps the image sum, is symmetric (⟨Bx, y⟩ = ⟨x, By⟩),
     /// leaves a constant image alone and is the identity at radius 0 — also when the radius
-    /// exceeds the image.
+    /// exceeds the image, and across the parallel bands of rows (h > 64).
     #[test]
     fn box_blur_is_symmetric_and_keeps_the_sum() {
-        for (w, h, r) in [(13, 7, 2), (16, 16, 8), (5, 3, 9), (1, 4, 1)] {
+        for (w, h, r) in [(13, 7, 2), (16, 16, 8), (5, 3, 9), (1, 4, 1), (7, 150, 3)] {
             let (x, y) = (noise(w * h, 1), noise(w * h, 2));
             let (bx, by) = (box_blur(&x, w, h, r), box_blur(&y, w, h, r));
-            let sum = |v: &[f64]| v.iter().sum::<f64>();
-            assert!((sum(&bx) - sum(&x)).abs() < 1e-9, "{w}×{h} r={r}: sum {} vs {}", sum(&bx), sum(&x));
-            let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(p, q)| p * q).sum::<f64>();
-            assert!((dot(&bx, &y) - dot(&x, &by)).abs() < 1e-9);
-            assert!(box_blur(&vec![0.7; w * h], w, h, r).iter().all(|v| (v - 0.7).abs() < 1e-12));
+            let sum = |v: &[f32]| v.iter().map(|&a| a as f64).sum::<f64>();
+            assert!(
+                (sum(&bx) - sum(&x)).abs() < 1e-6 * (w * h) as f64,
+                "{w}×{h} r={r}: sum {} vs {}",
+                sum(&bx),
+                sum(&x)
+            );
+            let dot = |a: &[f32], b: &[f32]| a.iter().zip(b).map(|(p, q)| (p * q) as f64).sum::<f64>();
+            assert!((dot(&bx, &y) - dot(&x, &by)).abs() < 1e-6 * (w * h) as f64);
+            assert!(box_blur(&vec![0.7; w * h], w, h, r).iter().all(|v| (v - 0.7).abs() < 1e-6));
             assert_eq!(box_blur(&x, w, h, 0), x);
+        }
+        // against the definition: the mean of the (2r+1)² reflected neighbours
+        let (w, h, r) = (6, 70, 2);
+        let x = noise(w * h, 3);
+        let b = box_blur(&x, w, h, r);
+        for (py, px) in [(0, 0), (35, 3), (69, 5), (64, 1)] {
+            let mut s = 0.0f64;
+            for dy in -(r as isize)..=r as isize {
+                for dx in -(r as isize)..=r as isize {
+                    s += x[reflect(py as isize + dy, h) * w + reflect(px as isize + dx, w)] as f64;
+                }
+            }
+            let want = s / ((2 * r + 1) * (2 * r + 1)) as f64;
+            assert!((b[py * w + px] as f64 - want).abs() < 1e-6, "({px}, {py}): {} vs {want}", b[py * w + px]);
         }
     }
 
     /// Noisy primal and gradients with rare bright outliers (as a caustic gives): plain L1
     /// loses their energy (its image mean is below the L2 one, which is unbiased); with the
-    /// L2 solution's low frequencies the mean is the L2 mean exactly, and the result is still
-    /// closer to the truth than the L2 solution at the outliers' pixels.
+    /// L2 solution's low frequencies the mean is the L2 mean, and the result is still closer
+    /// to the truth than the L2 solution at the outliers' pixels.
     #[test]
     fn l1_keeps_the_unbiased_low_frequencies() {
         let (w, h) = (32, 24);
         let truth: Vec<f64> = (0..w * h).map(|i| 1.0 + 0.5 * ((i % w) as f64 * 0.2).sin()).collect();
         let (tdx, tdy) = super::super::gradients(&truth, w, h);
         let mut s = IndependentSampler::new(3, 3);
-        // an estimator with mean = truth: 0 w.p. 0.1... most samples a bit low, a few 8× high
+        // an estimator with mean = truth: most samples a bit low, a few 8× high
         let mut spike = |v: f64| if s.next_1d() < 0.05 { v * 8.0 } else { v * (1.0 - 0.05 * 7.0) / 0.95 };
         let primal: Vec<f64> = truth.iter().map(|&v| spike(v)).collect();
         let dx: Vec<f64> = tdx.iter().map(|&v| v + 0.02 * (spike(1.0) - 1.0)).collect();
         let dy: Vec<f64> = tdy.iter().map(|&v| v + 0.02 * (spike(1.0) - 1.0)).collect();
-        let c = Channel { width: w, height: h, primal: &primal, dx: &dx, dy: &dy };
-        let chans = [c.clone(), c.clone(), c.clone()];
+        let rp = |v: &[f64]| RowPlanar::from_planes([v, v, v], w, h);
+        let p = Problem { alpha: 0.2, primal: rp(&primal), dx: rp(&dx), dy: rp(&dy) };
         let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
-        let l2 = solve_l2_dct(&c, 0.2);
-        let plain = solve_l1(&chans, 0.2, &IrlsParams { low_frequency_radius: 0, ..Default::default() }, &|| false);
-        let kept = solve_l1(&chans, 0.2, &IrlsParams::default(), &|| false);
-        assert!(mean(&plain[0]) < mean(&l2) - 0.02, "plain L1 {} vs L2 {}", mean(&plain[0]), mean(&l2));
-        assert!((mean(&kept[0]) - mean(&l2)).abs() < 1e-9, "{} vs {}", mean(&kept[0]), mean(&l2));
+        let l2 = solve_l2(&p).plane(0);
+        let plain = solve_l1(&p, &IrlsParams { low_frequency_radius: 0, ..Default::default() }, &|| false).plane(0);
+        let kept = solve_l1(&p, &IrlsParams::default(), &|| false).plane(0);
+        assert!(mean(&plain) < mean(&l2) - 0.02, "plain L1 {} vs L2 {}", mean(&plain), mean(&l2));
+        assert!((mean(&kept) - mean(&l2)).abs() < 1e-5, "{} vs {}", mean(&kept), mean(&l2));
         let err = |v: &[f64]| v.iter().zip(&truth).map(|(a, b)| (a - b).powi(2)).sum::<f64>();
-        assert!(err(&kept[0]) < err(&l2), "L1 with L2 lows {} vs L2 {}", err(&kept[0]), err(&l2));
+        assert!(err(&kept) < err(&l2), "L1 with L2 lows {} vs L2 {}", err(&kept), err(&l2));
     }
 }
