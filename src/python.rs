@@ -874,9 +874,11 @@ fn write_exr(
 /// The gradient-domain image from (primal without very-direct light, dx, dy, very direct),
 /// each float32 (H, W, 3): screened Poisson reconstruction (`norm` "l1" or "l2", weight
 /// `alpha`) plus the very-direct light, clipped at 0 — what gdpt/gdpssmlt write as Combined.
-/// Used to merge partial renders (gdmlt merge).
+/// Used to merge partial renders (gdmlt merge). `method` ("gdpt" or "gdpssmlt") picks the L1
+/// schedule that method's renders use.
 #[pyfunction]
-#[pyo3(signature = (primal, dx, dy, direct, alpha=0.2, norm="l1"))]
+#[pyo3(signature = (primal, dx, dy, direct, alpha=0.2, norm="l1", method="gdpssmlt"))]
+#[allow(clippy::too_many_arguments)] // Python's keyword arguments
 fn reconstruct<'py>(
     py: Python<'py>,
     primal: &Bound<'py, PyAny>,
@@ -885,9 +887,15 @@ fn reconstruct<'py>(
     direct: &Bound<'py, PyAny>,
     alpha: f64,
     norm: &str,
+    method: &str,
 ) -> PyResult<Bound<'py, PyAny>> {
     let norm = crate::reconstruct::Norm::parse(norm)
         .ok_or_else(|| verr(format!("unknown reconstruction '{norm}' (expected l1 or l2)")))?;
+    let irls = match method {
+        "gdpt" => crate::reconstruct::IrlsParams::short(),
+        "gdpssmlt" => crate::reconstruct::IrlsParams::default(),
+        _ => return Err(verr(format!("unknown method '{method}' (expected gdpt or gdpssmlt)"))),
+    };
     if !(alpha.is_finite() && alpha > 0.0) {
         return Err(verr("alpha must be a finite number > 0"));
     }
@@ -904,7 +912,7 @@ fn reconstruct<'py>(
         use crate::reconstruct::{gradient_domain_image, Problem, RowPlanar};
         let planar = |i: &Image| RowPlanar::from_interleaved(&i.data, i.width, i.height, 1.0);
         let problem = Problem::new(alpha, planar(&p), planar(&gx), planar(&gy));
-        gradient_domain_image(&problem, &d.data, norm, &|| false)
+        gradient_domain_image(&problem, &d.data, norm, &irls, &|| false)
     });
     image_to_numpy(py, out)
 }

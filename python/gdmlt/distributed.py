@@ -203,7 +203,8 @@ def merge(partials, alpha_rec=None, reconstruction=None) -> dict:
         direct = merged["Very Direct"]
         merged["Combined"] = gdmlt.reconstruct(
             np.ascontiguousarray(merged["GD Primal"] - direct), merged["GD Gradient X"], merged["GD Gradient Y"],
-            direct, alpha=alpha_rec or partials[0]["alpha_rec"], norm=reconstruction or partials[0]["reconstruction"])
+            direct, alpha=alpha_rec or partials[0]["alpha_rec"], norm=reconstruction or partials[0]["reconstruction"],
+            method=method)
     if "Alpha" in merged:
         # as the core does for one render: where every camera sample saw the (transparent)
         # world, the colour is 0 — the reconstruction must not spread light there

@@ -11,7 +11,7 @@ use super::{RenderControl, RenderOutput, RenderSettings, RenderStats};
 use crate::film::Image;
 use crate::math::{is_finite_spectrum, Spectrum};
 use crate::path::{trace_path_from, Path, Primary};
-use crate::reconstruct::{gradient_domain_image, gradient_domain_layers, Norm, Problem, RowPlanar};
+use crate::reconstruct::{gradient_domain_image, gradient_domain_layers, IrlsParams, Norm, Problem, RowPlanar};
 use crate::sampler::Sampler;
 use crate::scene::{CameraRay, Scene};
 use crate::shift::shift_from;
@@ -214,7 +214,7 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl)
         done = to;
         control.offer_preview(|| {
             let (p, direct) = film.problem(done, settings.alpha_rec);
-            gradient_domain_image(&p, &direct, Norm::L2, &|| false)
+            gradient_domain_image(&p, &direct, Norm::L2, &IrlsParams::short(), &|| false)
         });
         if dt < 0.1 {
             batch = (batch * 2).min(64);
@@ -236,7 +236,7 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl)
     }
     let problem = Problem::new(settings.alpha_rec, primal, dx, dy);
     let norm = control.final_norm(settings.reconstruction);
-    let mut layers = gradient_domain_layers(problem, direct, norm, &|| control.is_cancelled());
+    let mut layers = gradient_domain_layers(problem, direct, norm, &IrlsParams::short(), &|| control.is_cancelled());
     let img = |data: Vec<f32>| Image { width: w, height: h, channels: 3, data };
     layers.push(("Denoising Albedo".into(), img(albedo)));
     layers.push(("Denoising Normal".into(), img(normal)));

@@ -26,7 +26,7 @@ use super::{ChainStart, RenderControl, RenderOutput, RenderSettings, RenderStats
 use crate::film::Image;
 use crate::math::{abs_luminance, is_finite_spectrum, Spectrum};
 use crate::path::{camera_transparency, first_hit, trace_path, Path};
-use crate::reconstruct::{gradient_domain_image, gradient_domain_layers, Norm, Problem, RowPlanar};
+use crate::reconstruct::{gradient_domain_image, gradient_domain_layers, IrlsParams, Norm, Problem, RowPlanar};
 use crate::sampler::{mix64, IndependentSampler, PssSampler, Sampler};
 use crate::scene::{CameraRay, Scene};
 use crate::shift::shift;
@@ -685,7 +685,8 @@ fn preview(image: &Accum, b: f64, first: &FirstHits, alpha_rec: f64) -> Image {
         return Image { width: w, height: h, channels: 3, data };
     }
     let [p, dx, dy] = [PRIMAL, DX, DY].map(|l| image.layers[l].scaled(s));
-    gradient_domain_image(&Problem::new(alpha_rec, p, dx, dy), &first.mean(0), Norm::L2, &|| false)
+    let p = Problem::new(alpha_rec, p, dx, dy);
+    gradient_domain_image(&p, &first.mean(0), Norm::L2, &IrlsParams::default(), &|| false)
 }
 
 /// The output layers, from the image (consumed: its buffers become the problem and the
@@ -708,7 +709,10 @@ fn resolve(
         l.scale(s);
     }
     let mut out = match <[RowPlanar; 3]>::try_from(layers) {
-        Ok([primal, dx, dy]) => gradient_domain_layers(Problem::new(alpha_rec, primal, dx, dy), direct, norm, stop),
+        Ok([primal, dx, dy]) => {
+            let p = Problem::new(alpha_rec, primal, dx, dy);
+            gradient_domain_layers(p, direct, norm, &IrlsParams::default(), stop)
+        }
         Err(primal) => vec![("Combined".into(), img(primal[PRIMAL].to_interleaved(None, f32::NEG_INFINITY)))],
     };
     let dmean = density.iter().map(|&d| d as f64).sum::<f64>() / (w * h) as f64;

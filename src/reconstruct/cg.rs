@@ -150,23 +150,35 @@ impl Weights {
         }
     }
 
-    /// 1 / diagonal of the operator (the Jacobi preconditioner).
-    fn inverse_diagonal(&self, width: usize, a2: f32) -> Vec<f32> {
-        let n = self.g.len();
-        (0..n)
-            .into_par_iter()
-            .with_min_len(BAND * width)
-            .map(|i| {
-                let mut d = a2 * self.g[i] + self.x[i] + self.y[i];
-                if i % width > 0 {
-                    d += self.x[i - 1];
-                }
-                if i >= width {
-                    d += self.y[i - width];
-                }
-                1.0 / d.max(1e-30)
-            })
-            .collect()
+    /// 1 / diagonal of the operator (the Jacobi preconditioner) for row y, into `out`.
+    fn inverse_diagonal_row(&self, width: usize, a2: f32, y: usize, out: &mut [f32]) {
+        let at = y * width;
+        let (g, wx, wy) = (&self.g[at..at + width], &self.x[at..at + width], &self.y[at..at + width]);
+        for x in 0..width {
+            let mut d = a2 * g[x] + wx[x] + wy[x];
+            if x > 0 {
+                d += wx[x - 1];
+            }
+            if y > 0 {
+                d += self.y[at - width + x];
+            }
+            out[x] = 1.0 / d.max(1e-30);
+        }
+    }
+}
+
+/// The vectors of a CG solve: M⁻¹ (per pixel, shared by the channels), r, d and A·d.
+pub struct Workspace {
+    dinv: Vec<f32>,
+    r: RowPlanar,
+    d: RowPlanar,
+    ad: RowPlanar,
+}
+
+impl Workspace {
+    pub fn new(width: usize, height: usize) -> Workspace {
+        let z = || RowPlanar::zeros(width, height);
+        Workspace { dinv: vec![0.0; width * height], r: z(), d: z(), ad: z() }
     }
 }
 
@@ -264,33 +276,54 @@ impl Problem {
     /// moving once ‖r‖ ≤ tol·‖b‖; returns early with the current iterate once `stop()` is true
     /// (asked every step).
     pub fn solve(&self, wts: &Weights, x: &mut RowPlanar, iters: usize, tol: f64, stop: &(dyn Fn() -> bool + Sync)) {
+        let mut ws = Workspace::new(self.width(), self.height());
+        self.solve_in(&mut ws, wts, x, iters, tol, stop);
+    }
+
+    /// `solve` with its vectors in `ws` (every entry is written before it is read), so that
+    /// repeated solves (IRLS) do not fault in fresh pages each time.
+    pub fn solve_in(
+        &self,
+        ws: &mut Workspace,
+        wts: &Weights,
+        x: &mut RowPlanar,
+        iters: usize,
+        tol: f64,
+        stop: &(dyn Fn() -> bool + Sync),
+    ) {
+        let Workspace { dinv, r, d, ad } = ws;
         let w = self.width();
-        let dinv = wts.inverse_diagonal(w, self.alpha * self.alpha);
-        // r = b − A·x, d = M⁻¹ r
-        let mut r = RowPlanar::zeros(w, self.height());
-        let mut ax = RowPlanar::zeros(w, self.height());
-        bands(&mut ax, |y0, out| self.apply_band(wts, x, y0, out));
-        let norms: Vec<[[f64; 3]; 2]> = bands(&mut r, |y0, out| {
-            self.rhs_band(wts, y0, out);
-            let mut s = [[0.0; 3]; 2];
-            for (k, rows) in out.chunks_exact_mut(3 * w).enumerate() {
-                let y = y0 + k;
-                let m = &dinv[y * w..(y + 1) * w];
-                for (c, rr) in rows.chunks_exact_mut(w).enumerate() {
-                    s[0][c] += dot(rr, rr);
-                    for (ri, &a) in rr.iter_mut().zip(ax.row(y, c)) {
-                        *ri -= a;
+        let a2 = self.alpha * self.alpha;
+        // One pass, band by band (each band's rows stay in cache): M⁻¹, r = b − A·x, d = M⁻¹r,
+        // and ‖b‖², r·M⁻¹r.
+        let norms: Vec<[[f64; 3]; 2]> = dinv
+            .par_chunks_mut(BAND * w)
+            .zip(r.data.par_chunks_mut(3 * BAND * w))
+            .zip(d.data.par_chunks_mut(3 * BAND * w))
+            .enumerate()
+            .map(|(b, ((mb, rb), db))| {
+                let y0 = b * BAND;
+                self.rhs_band(wts, y0, rb);
+                self.apply_band(wts, x, y0, db); // A·x, for now
+                let mut s = [[0.0; 3]; 2];
+                for (k, ((m, rows), drows)) in
+                    mb.chunks_exact_mut(w).zip(rb.chunks_exact_mut(3 * w)).zip(db.chunks_exact_mut(3 * w)).enumerate()
+                {
+                    wts.inverse_diagonal_row(w, a2, y0 + k, m);
+                    for (c, (rr, dr)) in rows.chunks_exact_mut(w).zip(drows.chunks_exact_mut(w)).enumerate() {
+                        s[0][c] += dot(rr, rr);
+                        for ((ri, di), &mi) in rr.iter_mut().zip(dr.iter_mut()).zip(m.iter()) {
+                            *ri -= *di;
+                            *di = *ri * mi;
+                        }
+                        s[1][c] += dot_weighted(rr, m);
                     }
-                    s[1][c] += dot_weighted(rr, m);
                 }
-            }
-            s
-        });
+                s
+            })
+            .collect();
         let bnorm2 = sum3(norms.iter().map(|s| s[0]));
         let mut rz = sum3(norms.iter().map(|s| s[1]));
-        let mut d = ax; // reused as the search direction
-        self.direction(&mut d, &r, &dinv, [0.0; 3]);
-        let mut ad = RowPlanar::zeros(w, self.height());
         let tol2 = tol * tol;
         let mut rr = [f64::INFINITY; 3];
         for _ in 0..iters {
@@ -298,7 +331,7 @@ impl Problem {
             if stop() || !moving.iter().any(|&m| m) {
                 break;
             }
-            let dad = sum3(bands(&mut ad, |y0, out| self.apply_band(wts, &d, y0, out)));
+            let dad = sum3(bands(ad, |y0, out| self.apply_band(wts, d, y0, out)));
             let step: [f32; 3] =
                 std::array::from_fn(|c| if moving[c] && dad[c] > 0.0 { (rz[c] / dad[c]) as f32 } else { 0.0 });
             // x += a·d, r −= a·A·d; Σ r·M⁻¹r and Σ r·r
@@ -331,7 +364,7 @@ impl Problem {
             rr = sum3(sums.iter().map(|s| s[1]));
             let beta: [f32; 3] = std::array::from_fn(|c| if rz[c] > 0.0 { (rz_new[c] / rz[c]) as f32 } else { 0.0 });
             rz = rz_new;
-            self.direction(&mut d, &r, &dinv, beta);
+            self.direction(d, r, dinv, beta);
         }
     }
 

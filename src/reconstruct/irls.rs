@@ -1,6 +1,6 @@
 //! L1 reconstruction by iteratively reweighted least squares: start from the exact L2
-//! solution, then weight each residual row by 1/(‖e‖_RGB + reg_k) (weights normalised to
-//! mean 1 over all 3N rows together, reg_k = reg₀·decay^(k−1)) and re-solve by warm-started CG. RGB channels share
+//! solution, then weight each residual row by 1/(‖e‖_RGB + reg_k) (reg_k = reg₀·decay^(k−1))
+//! and re-solve by warm-started CG. RGB channels share
 //! their weights, so an outlier in one channel is treated as an outlier in all.
 //!
 //! The L1 minimiser is a robust estimator: it discards the energy of rare bright samples
@@ -13,7 +13,7 @@
 //! within ±2% where it was −10% to −20%, relMSE equal or lower for gdpt, up to 1.2× for
 //! gdpssmlt.
 
-use super::cg::{Problem, RowPlanar, Weights, BAND};
+use super::cg::{Problem, RowPlanar, Weights, Workspace, BAND};
 use super::dct::solve_l2;
 use rayon::prelude::*;
 
@@ -28,28 +28,39 @@ pub struct IrlsParams {
 }
 
 impl Default for IrlsParams {
+    /// The schedule for gdpssmlt. The public GDPT code uses 20 × 50. Measured on GDPT and
+    /// GDPSSMLT renders of the Cornell box (96², 16 and 64 per pixel, relMSE against PT at
+    /// 4096 spp, 2026-11-25): 10 × 10 warm-started iterations land within ±1% of 20 × 50 at
+    /// 1/7 of the time; 5 × 20 is up to 13% worse, plain L2 up to 60% worse. On gdpssmlt
+    /// renders (192² Cornell box and gap, 8 and 32 mutations per pixel, 3 seeds, 2026-12-02)
+    /// fewer reweightings lose: 4 × 10 is 5–15% worse than 10 × 10, 20 × 50 2–3% better.
     fn default() -> Self {
-        // The public GDPT code uses 20 × 50. Measured on GDPT and GDPSSMLT renders of the
-        // Cornell box (96², 16 and 64 per pixel, relMSE against PT at 4096 spp, 2026-11-25):
-        // 10 × 10 warm-started iterations land within ±1% of 20 × 50 (sometimes below it)
-        // at 1/7 of the time; 5 × 20 is up to 13% worse, plain L2 up to 60% worse.
         IrlsParams { outer_iterations: 10, cg_iterations: 10, reg0: 0.05, decay: 0.5, low_frequency_radius: 8 }
     }
 }
 
-/// The IRLS weights of the residual rows at `sol`: 1/(‖e‖_RGB + reg), normalised to mean 1
-/// over all existing rows (the last column's x rows and the last row's y rows do not exist).
-fn irls_weights(p: &Problem, sol: &RowPlanar, reg: f32) -> Weights {
+impl IrlsParams {
+    /// The schedule for gdpt: 4 reweightings of 10 CG steps, the regulariser falling 6× each
+    /// time (to about where 10 halvings take it). On gdpt renders (192² Cornell box and gap,
+    /// 8 and 32 spp, 3 seeds, relMSE against pt at 4096 spp, 2026-12-02) it is within 0.5% of
+    /// 10 × 10 on the box and 7–16% better on the gap — gdpt's independent samples gain
+    /// nothing from a closer approach to the L1 minimiser, which suppresses true detail with
+    /// the outliers — at 40% of the time (0.75–0.85 s instead of 1.75–1.9 s at 1920×1080 on
+    /// 2 cores).
+    pub fn short() -> Self {
+        IrlsParams { outer_iterations: 4, decay: 0.16, ..Default::default() }
+    }
+}
+
+/// The IRLS weights of the residual rows at `sol`: 1/(‖e‖_RGB + reg) (the last column's x rows
+/// and the last row's y rows do not exist: 0). Not normalised: a common factor of all row
+/// weights leaves the weighted minimiser unchanged (the reference implementation's
+/// normalisation to mean 1 was a pass over the image for nothing).
+fn irls_weights(p: &Problem, sol: &RowPlanar, reg: f32, wts: &mut Weights) {
     let (w, h) = (p.width(), p.height());
-    let mut g = vec![0.0f32; w * h];
-    let mut wx = vec![0.0f32; w * h];
-    let mut wy = vec![0.0f32; w * h];
-    let sums: Vec<f64> = g
-        .par_chunks_mut(BAND * w)
-        .zip(wx.par_chunks_mut(BAND * w).zip(wy.par_chunks_mut(BAND * w)))
-        .enumerate()
-        .map(|(b, (gb, (xb, yb)))| {
-            let mut sum = 0.0f64;
+    let Weights { g, x: wx, y: wy } = wts;
+    g.par_chunks_mut(BAND * w).zip(wx.par_chunks_mut(BAND * w).zip(wy.par_chunks_mut(BAND * w))).enumerate().for_each(
+        |(b, (gb, (xb, yb)))| {
             let (mut eg, mut ex, mut ey) = (vec![0.0f32; w], vec![0.0f32; w], vec![0.0f32; w]);
             for (k, ((gr, xr), yr)) in
                 gb.chunks_exact_mut(w).zip(xb.chunks_exact_mut(w)).zip(yb.chunks_exact_mut(w)).enumerate()
@@ -83,21 +94,9 @@ fn irls_weights(p: &Problem, sol: &RowPlanar, reg: f32) -> Weights {
                         *o = 1.0 / (e.sqrt() + reg);
                     }
                 }
-                sum += gr.iter().chain(xr.iter()).chain(yr.iter()).map(|&v| v as f64).sum::<f64>();
             }
-            sum
-        })
-        .collect();
-    // one normalisation over all 3N rows (as the reference implementation): the rows'
-    // weights keep their ratios across the primal and the two gradient images
-    let rows = w * h + (w - 1) * h + w * (h - 1);
-    let m = (sums.iter().sum::<f64>() / rows.max(1) as f64) as f32;
-    if m > 0.0 && m.is_finite() {
-        for v in [&mut g, &mut wx, &mut wy] {
-            v.par_iter_mut().for_each(|x| *x /= m);
-        }
-    }
-    Weights { g, x: wx, y: wy }
+        },
+    );
 }
 
 /// `stop` is asked between outer iterations and inside every CG iteration: when it turns true
@@ -117,14 +116,18 @@ pub fn solve_l1(p: &Problem, params: &IrlsParams, stop: &(dyn Fn() -> bool + Syn
         b
     });
     let mut reg = params.reg0;
+    // allocated once: fresh pages every reweighting cost as much as a CG step
+    let mut wts = Weights::ones(w, h);
+    let mut ws = Workspace::new(w, h);
     for k in 0..params.outer_iterations {
         if k > 0 && stop() {
             break;
         }
-        let wts = irls_weights(p, &sol, reg as f32);
-        p.solve(&wts, &mut sol, params.cg_iterations, 1e-10, stop);
+        irls_weights(p, &sol, reg as f32, &mut wts);
+        p.solve_in(&mut ws, &wts, &mut sol, params.cg_iterations, 1e-10, stop);
         reg *= params.decay;
     }
+    drop((wts, ws));
     if let Some(lows) = lows {
         for c in 0..3 {
             let b1 = box_blur(&plane(&sol, c), w, h, r);

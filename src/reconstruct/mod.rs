@@ -60,12 +60,12 @@ impl Problem {
         Problem { alpha: alpha as f32, primal, dx, dy }
     }
 
-    /// Its minimiser under `norm`; an L1 solve returns early with its current iterate once
-    /// `stop()` is true.
-    pub fn reconstruct(&self, norm: Norm, stop: &(dyn Fn() -> bool + Sync)) -> RowPlanar {
+    /// Its minimiser under `norm` (L1: by IRLS with `irls`'s schedule); an L1 solve returns
+    /// early with its current iterate once `stop()` is true.
+    pub fn reconstruct(&self, norm: Norm, irls: &IrlsParams, stop: &(dyn Fn() -> bool + Sync)) -> RowPlanar {
         match norm {
             Norm::L2 => solve_l2(self),
-            Norm::L1 => solve_l1(self, &IrlsParams::default(), stop),
+            Norm::L1 => solve_l1(self, irls, stop),
         }
     }
 }
@@ -73,8 +73,14 @@ impl Problem {
 /// The gradient-domain image: the reconstruction plus the very-direct light (`direct`,
 /// interleaved RGB), clipped at 0 (the screened Poisson solve is unconstrained and rings
 /// slightly negative in the dark).
-pub fn gradient_domain_image(p: &Problem, direct: &[f32], norm: Norm, stop: &(dyn Fn() -> bool + Sync)) -> Image {
-    let data = p.reconstruct(norm, stop).to_interleaved(Some(direct), 0.0);
+pub fn gradient_domain_image(
+    p: &Problem,
+    direct: &[f32],
+    norm: Norm,
+    irls: &IrlsParams,
+    stop: &(dyn Fn() -> bool + Sync),
+) -> Image {
+    let data = p.reconstruct(norm, irls, stop).to_interleaved(Some(direct), 0.0);
     Image { width: p.width(), height: p.height(), channels: 3, data }
 }
 
@@ -85,11 +91,12 @@ pub fn gradient_domain_layers(
     p: Problem,
     direct: Vec<f32>,
     norm: Norm,
+    irls: &IrlsParams,
     stop: &(dyn Fn() -> bool + Sync),
 ) -> Vec<(String, Image)> {
     let (w, h) = (p.width(), p.height());
     let img = |data: Vec<f32>| Image { width: w, height: h, channels: 3, data };
-    let combined = img(p.reconstruct(norm, stop).to_interleaved(Some(&direct), 0.0));
+    let combined = img(p.reconstruct(norm, irls, stop).to_interleaved(Some(&direct), 0.0));
     let Problem { primal, dx, dy, .. } = p;
     let primal = img(primal.to_interleaved(Some(&direct), f32::NEG_INFINITY));
     let dx = img(dx.to_interleaved(None, f32::NEG_INFINITY));
@@ -118,7 +125,7 @@ pub fn reconstruct_rgb(
 ) -> Vec<f32> {
     let planar = |v: &[f32]| RowPlanar::from_interleaved(v, w, h, 1.0);
     let p = Problem::new(alpha, planar(primal), planar(dx), planar(dy));
-    p.reconstruct(norm, stop).to_interleaved(None, f32::NEG_INFINITY)
+    p.reconstruct(norm, &IrlsParams::default(), stop).to_interleaved(None, f32::NEG_INFINITY)
 }
 
 #[cfg(test)]
@@ -282,7 +289,7 @@ mod tests {
         assert_eq!(rp(&primal).to_interleaved(None, f32::NEG_INFINITY), primal);
         let p = Problem::new(0.2, rp(&primal), rp(&dx), rp(&dy));
         let recon = solve_l2(&p).to_interleaved(None, f32::NEG_INFINITY);
-        let layers = gradient_domain_layers(p, direct.clone(), Norm::L2, &|| false);
+        let layers = gradient_domain_layers(p, direct.clone(), Norm::L2, &IrlsParams::default(), &|| false);
         let names: Vec<&str> = layers.iter().map(|(n, _)| n.as_str()).collect();
         assert_eq!(names, ["Combined", "GD Primal", "GD Gradient X", "GD Gradient Y", "Very Direct"]);
         for i in 0..3 * w * h {
