@@ -75,6 +75,17 @@ def build_parser():
     return p
 
 
+def _image_sizes(parser, option: str, text: str) -> list:
+    """'WxH,WxH,…' as [(W, H), …]; a usage error (exit 2) naming `option` otherwise."""
+    try:
+        sizes = [tuple(int(v) for v in s.lower().split("x")) for s in text.split(",")]
+    except ValueError:
+        sizes = []
+    if not sizes or any(len(s) != 2 or min(s) < 1 for s in sizes):
+        parser.error(f"{option}: '{text}' is not a comma-separated list of WxH")
+    return sizes
+
+
 def main(argv=None):
     parser = build_parser()
     args = parser.parse_args(argv)
@@ -114,13 +125,7 @@ def main(argv=None):
     if args.command == "scalebench" and args.memory:
         from .membench import run as membench
 
-        try:
-            images = [tuple(int(v) for v in s.lower().split("x")) for s in args.images.split(",")]
-        except ValueError:
-            parser.error(f"--images: '{args.images}' is not a comma-separated list of WxH")
-        if any(len(s) != 2 or min(s) < 1 for s in images):
-            parser.error(f"--images: '{args.images}' is not a comma-separated list of WxH")
-        membench(images)
+        membench(_image_sizes(parser, "--images", args.images))
         return 0
     if args.command == "scalebench":
         from .scalebench import run as scalebench
@@ -134,13 +139,7 @@ def main(argv=None):
     if args.command == "reconbench":
         from .reconbench import run as reconbench
 
-        try:
-            sizes = [tuple(int(v) for v in s.lower().split("x")) for s in args.sizes.split(",")]
-        except ValueError:
-            parser.error(f"--sizes: '{args.sizes}' is not a comma-separated list of WxH")
-        if any(len(s) != 2 or min(s) < 1 for s in sizes):
-            parser.error(f"--sizes: '{args.sizes}' is not a comma-separated list of WxH")
-        reconbench(sizes)
+        reconbench(_image_sizes(parser, "--sizes", args.sizes))
         return 0
     if args.command == "skipbench":
         from .skipbench import run as skipbench
