@@ -588,7 +588,10 @@ fn a_single_chain_started_in_a_dark_corner_covers_the_image() {
             // pixels above a quarter of the mean: ≥ 128 expected visits each
             let lit = reference.data.chunks(3).map(|c| c[1] > 0.25 * mean_g);
             let missed = dens.data.chunks(3).zip(lit).filter(|(d, lit)| *lit && d[0] == 0.0).count();
-            assert_eq!(missed, 0, "{method:?}: {missed} lit pixels never visited by the single chain");
+            // a chain's visits are correlated: measured over pssmlt seeds 1–60 with either
+            // roulette (max β, √max β), 2 of 120 runs missed one lit pixel (ref/mean 0.27–0.38),
+            // none missed two; a stuck chain misses most of them
+            assert!(missed <= 1, "{method:?}: {missed} lit pixels never visited by the single chain");
         }
         let est: Vec<Vec<f64>> = runs.iter().map(|r| block_means(&estimate(r), 4)).collect();
         assert_converges(
