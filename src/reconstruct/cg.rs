@@ -83,7 +83,22 @@ impl RowPlanar {
         out
     }
 
-    /// Channel c as a row-major plane.
+    /// Channel c as a row-major f32 plane.
+    pub fn channel(&self, c: usize) -> Vec<f32> {
+        let w = self.width;
+        self.data.par_chunks(3 * w).flat_map_iter(|row| row[c * w..(c + 1) * w].iter().copied()).collect()
+    }
+
+    /// Sets channel c from a row-major plane.
+    pub fn set_channel(&mut self, c: usize, src: &[f32]) {
+        let w = self.width;
+        self.data
+            .par_chunks_mut(3 * w)
+            .zip(src.par_chunks(w))
+            .for_each(|(row, s)| row[c * w..(c + 1) * w].copy_from_slice(s));
+    }
+
+    /// Channel c as a row-major plane, in f64 (for tests).
     pub fn plane(&self, c: usize) -> Vec<f64> {
         let w = self.width;
         self.data.chunks_exact(3 * w).flat_map(|row| row[c * w..(c + 1) * w].iter().map(|&v| v as f64)).collect()

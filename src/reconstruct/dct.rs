@@ -97,9 +97,7 @@ pub fn solve_l2(p: &Problem) -> RowPlanar {
         rows(&mut cols, h, &along_y, true);
         transpose(&cols, h, w, &mut plane);
         rows(&mut plane, w, &along_x, true);
-        out.data.par_chunks_mut(3 * w).zip(plane.par_chunks(w)).for_each(|(dst, src)| {
-            dst[c * w..(c + 1) * w].copy_from_slice(src);
-        });
+        out.set_channel(c, &plane);
     }
     out
 }

@@ -111,7 +111,7 @@ pub fn solve_l1(p: &Problem, params: &IrlsParams, stop: &(dyn Fn() -> bool + Syn
     let lows = (r > 0).then(|| {
         let mut b = RowPlanar::zeros(w, h);
         for c in 0..3 {
-            set_plane(&mut b, c, &box_blur(&plane(&sol, c), w, h, r));
+            b.set_channel(c, &box_blur(&sol.channel(c), w, h, r));
         }
         b
     });
@@ -130,7 +130,7 @@ pub fn solve_l1(p: &Problem, params: &IrlsParams, stop: &(dyn Fn() -> bool + Syn
     drop((wts, ws));
     if let Some(lows) = lows {
         for c in 0..3 {
-            let b1 = box_blur(&plane(&sol, c), w, h, r);
+            let b1 = box_blur(&sol.channel(c), w, h, r);
             sol.data.par_chunks_mut(3 * w).zip(b1.par_chunks(w)).enumerate().for_each(|(y, (row, b1))| {
                 for ((v, &l2), &l1) in row[c * w..(c + 1) * w].iter_mut().zip(lows.row(y, c)).zip(b1) {
                     *v += l2 - l1;
@@ -139,16 +139,6 @@ pub fn solve_l1(p: &Problem, params: &IrlsParams, stop: &(dyn Fn() -> bool + Syn
         }
     }
     sol
-}
-
-/// Channel c of a row-planar image as a row-major plane.
-fn plane(v: &RowPlanar, c: usize) -> Vec<f32> {
-    v.data.par_chunks(3 * v.width).flat_map_iter(|row| row[c * v.width..(c + 1) * v.width].iter().copied()).collect()
-}
-
-fn set_plane(v: &mut RowPlanar, c: usize, src: &[f32]) {
-    let w = v.width;
-    v.data.par_chunks_mut(3 * w).zip(src.par_chunks(w)).for_each(|(row, s)| row[c * w..(c + 1) * w].copy_from_slice(s));
 }
 
 /// Index of k ∈ [−n, 2n) in a line of n samples reflected at both ends (half-sample
