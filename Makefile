@@ -11,7 +11,7 @@ export PATH := $(abspath $(VENV))/bin:$(PATH)
 # Keep Blender's user config out of $HOME during demos and tests.
 export BLENDER_USER_RESOURCES := $(abspath out/blender-user)
 
-.PHONY: all setup build demo test lint test-rust test-python examples addon bench bench-monastery bench-peers bench-lights scalebench skipbench raybench clean
+.PHONY: all setup build demo test lint test-rust test-python examples addon bench bench-monastery bench-peers bench-lights bench-denoise scalebench skipbench raybench clean
 
 all: demo
 
@@ -108,6 +108,20 @@ bench-lights: build
 	@for s in $(BENCH_SCENES); do \
 		$(BENCH) bench --scene out/bench/$$s.blend --budgets 1,2,4 --methods pt,gdpt,gdpssmlt \
 			--modes nee --max-bounces 4 --reference-spp 4096 --peers cycles --plot out/bench/$$s.png || exit 1; \
+	done
+
+# As artists render, denoiser on (issue 16): every method, `auto` (the default) and Cycles,
+# raw and each after its own OIDN, at 1, 2, 4, 8 s; relMSE, SMAPE, block error and FLIP, and
+# ratios to Cycles (+OIDN), on a door left ajar, a glass-and-mirror box, a multi-light scene
+# and the built-in gap. About 25 minutes.
+DENOISE_SCENES := out/bench/door_ajar.blend out/bench/glass_box.blend out/bench/area_point_sun_world.blend gap
+bench-denoise: build
+	$(PY) -m pip install -q -r requirements-bench.txt
+	$(PY) tools/make_bench_scenes.py out/bench
+	@for s in $(DENOISE_SCENES); do \
+		$(BENCH) bench --scene $$s --budgets 1,2,4,8 --methods auto,pt,gdpt,gdpssmlt --modes nee \
+			--reference-spp 16384 --peers cycles --denoise --plot out/bench-denoise-$$(basename $$s .blend).png \
+			|| exit 1; \
 	done
 
 # Time per mutation / per path as the scene grows from 10k to 10M triangles and threads 1 → all.

@@ -15,19 +15,8 @@ import time
 import numpy as np
 
 import gdmlt
-from gdmlt_bench.bench import rel_mse, scene_desc
+from gdmlt_bench.bench import block_error, rel_mse, scene_desc
 from gdmlt.oidn import denoise_image
-
-
-def block_error(img, ref, b=8):
-    """Mean relative difference of b×b block averages (luminance-free: channel mean)."""
-    h, w = ref.shape[0] // b * b, ref.shape[1] // b * b
-
-    def blocks(a):
-        return a[:h, :w].mean(2).reshape(h // b, b, w // b, b).mean((1, 3))
-
-    bi, br = blocks(img), blocks(ref)
-    return float(np.mean(np.abs(bi - br) / (br + 1e-2)))
 
 
 def variants(layers):

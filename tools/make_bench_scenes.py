@@ -11,6 +11,10 @@ Scenes (128², 4 bounces, saved with engine GDMLT):
   sphere (the many-lights case)
 - hdri_interior: a room with a window, lit only by an HDRI sky with a sun (an Environment
   Texture of a float image written next to the .blend and packed into it)
+- door_ajar: a dark room lit only through the 10 cm gap of a door left ajar onto a room lit
+  by an area light (the hard-light case; 8 bounces)
+- glass_box: a Cornell-style box lit by an area light under its ceiling, with a glass ball and
+  a mirror ball (caustics and specular paths; 8 bounces)
 """
 
 import math
@@ -204,6 +208,91 @@ def hdri_interior(bpy, out_dir: Path):
     return scene
 
 
+def door_ajar(bpy):
+    """Two rooms of 5 × 5 × 2.8 m and 5 × 3 m sharing a wall with a 0.9 × 2.1 m doorway. The door,
+    hinged at one jamb, is turned 6.4° into the far room, which an area light under its ceiling
+    lights: the camera's room gets light only through the 10 cm gap at the door's free edge.
+    Diffuse plaster, a Principled floor, a table and a ball; no world light."""
+    scene = _reset(bpy)
+    plaster = _material(bpy, "Plaster", (0.75, 0.72, 0.68), "DIFFUSE")
+    floor = _material(bpy, "Floor", (0.5, 0.35, 0.22), roughness=0.35)
+
+    def box(name, loc, size, mat, rot_z=0.0):
+        bpy.ops.mesh.primitive_cube_add(size=1.0, location=loc, rotation=(0, 0, rot_z))
+        ob = bpy.context.object
+        ob.name = name
+        ob.scale = size
+        bpy.ops.object.transform_apply(scale=True)
+        _add(bpy, scene, ob, mat)
+
+    # shell: x ∈ [-2.5, 2.5], y ∈ [-2.5, 5.5] (the far room beyond y = 2.5), z ∈ [0, 2.8]
+    box("Floor", (0, 1.5, -0.05), (5.2, 8.2, 0.1), floor)
+    box("Ceiling", (0, 1.5, 2.85), (5.2, 8.2, 0.1), plaster)
+    box("WallL", (-2.55, 1.5, 1.4), (0.1, 8.2, 2.8), plaster)
+    box("WallR", (2.55, 1.5, 1.4), (0.1, 8.2, 2.8), plaster)
+    box("WallNear", (0, -2.55, 1.4), (5.2, 0.1, 2.8), plaster)
+    box("WallFar", (0, 5.55, 1.4), (5.2, 0.1, 2.8), plaster)
+    # the shared wall at y = 2.5 (10 cm thick) with the doorway x ∈ [0.5, 1.4], z ∈ [0, 2.1]
+    box("WallDoorL", (-1.0, 2.55, 1.4), (3.0, 0.1, 2.8), plaster)
+    box("WallDoorR", (1.95, 2.55, 1.4), (1.1, 0.1, 2.8), plaster)
+    box("Lintel", (0.95, 2.55, 2.45), (0.9, 0.1, 0.7), plaster)
+    # the door: 0.9 × 0.04 × 2.1, hinged at (0.5, 2.6), turned by θ with 0.9·sin θ = 0.1
+    theta = math.asin(0.1 / 0.9)
+    hinge = np.array([0.5, 2.6])
+    centre = hinge + 0.45 * np.array([math.cos(theta), math.sin(theta)]) + 0.02 * np.array([-math.sin(theta),
+                                                                                              math.cos(theta)])
+    box("Door", (float(centre[0]), float(centre[1]), 1.05), (0.9, 0.04, 2.1),
+        _material(bpy, "DoorPaint", (0.6, 0.55, 0.5), roughness=0.4), rot_z=theta)
+    box("Table", (-0.6, 0.6, 0.375), (1.4, 0.8, 0.75), _material(bpy, "Wood", (0.45, 0.3, 0.18), roughness=0.3))
+    bpy.ops.mesh.primitive_uv_sphere_add(radius=0.35, location=(1.2, -0.3, 0.35), segments=32, ring_count=16)
+    bpy.ops.object.shade_smooth()
+    _add(bpy, scene, bpy.context.object, _material(bpy, "Ball", (0.8, 0.25, 0.15), roughness=0.4))
+    _light(bpy, scene, "AREA", "Lamp", (0.5, 4.2, 2.7), energy=2000.0, size=1.2)
+    _camera(bpy, scene, (-2.1, -2.2, 1.6), (82, 0, -28), lens=20)
+    _settings(scene, bounces=8)
+    return scene
+
+
+def glass_box(bpy):
+    """A 2 m box open towards the camera (white walls, red left, green right), a 0.5 m square
+    area light just under the ceiling, a glass ball (Glass BSDF, IOR 1.5) and a mirror ball
+    (Principled, metallic, roughness 0)."""
+    scene = _reset(bpy)
+    white = _material(bpy, "White", (0.73, 0.73, 0.73), "DIFFUSE")
+
+    def box(name, loc, size, mat):
+        bpy.ops.mesh.primitive_cube_add(size=1.0, location=loc)
+        ob = bpy.context.object
+        ob.name = name
+        ob.scale = size
+        bpy.ops.object.transform_apply(scale=True)
+        _add(bpy, scene, ob, mat)
+
+    box("Floor", (0, 0, -0.05), (2.2, 2.2, 0.1), white)
+    box("Ceiling", (0, 0, 2.05), (2.2, 2.2, 0.1), white)
+    box("Back", (0, 1.05, 1.0), (2.2, 0.1, 2.2), white)
+    box("Left", (-1.05, 0, 1.0), (0.1, 2.2, 2.2), _material(bpy, "Red", (0.63, 0.065, 0.05), "DIFFUSE"))
+    box("Right", (1.05, 0, 1.0), (0.1, 2.2, 2.2), _material(bpy, "Green", (0.14, 0.45, 0.09), "DIFFUSE"))
+    from make_test_scenes import empty_material
+
+    glass, nt, out = empty_material(bpy, "Glass")
+    g = nt.nodes.new("ShaderNodeBsdfGlass")
+    g.inputs["IOR"].default_value = 1.5
+    g.inputs["Roughness"].default_value = 0.0
+    nt.links.new(g.outputs[0], out.inputs["Surface"])
+    mirror = _material(bpy, "Mirror", (0.95, 0.95, 0.95), roughness=0.0)
+    mirror.node_tree.nodes["Principled BSDF"].inputs["Metallic"].default_value = 1.0
+    for name, loc, mat in (("GlassBall", (0.4, -0.2, 0.35), glass), ("MirrorBall", (-0.45, 0.35, 0.35), mirror)):
+        bpy.ops.mesh.primitive_uv_sphere_add(radius=0.35, location=loc, segments=48, ring_count=24)
+        bpy.ops.object.shade_smooth()
+        bpy.context.object.name = name
+        _add(bpy, scene, bpy.context.object, mat)
+    _light(bpy, scene, "AREA", "Lamp", (0, 0, 1.98), energy=20.0, size=0.5)
+    _camera(bpy, scene, (0, -3.4, 1.0), (90, 0, 0), lens=35)
+    _settings(scene, bounces=8)
+    return scene
+
+
 def main(argv):
     out = Path(argv[0] if argv else "out/bench").resolve()
     out.mkdir(parents=True, exist_ok=True)
@@ -219,7 +308,11 @@ def main(argv):
     bpy.ops.wm.save_as_mainfile(filepath=str(out / "hall.blend"))
     hdri_interior(bpy, out)
     bpy.ops.wm.save_as_mainfile(filepath=str(out / "hdri_interior.blend"))
-    print(f"wrote {len(LIGHT_SETS) + 2} scenes to {out}")
+    door_ajar(bpy)
+    bpy.ops.wm.save_as_mainfile(filepath=str(out / "door_ajar.blend"))
+    glass_box(bpy)
+    bpy.ops.wm.save_as_mainfile(filepath=str(out / "glass_box.blend"))
+    print(f"wrote {len(LIGHT_SETS) + 4} scenes to {out}")
 
 
 if __name__ == "__main__":

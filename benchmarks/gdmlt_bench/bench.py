@@ -23,6 +23,37 @@ def smape(img, ref):
     return float(np.mean(2 * np.abs(img - ref) / (np.abs(img) + np.abs(ref) + EPS)))
 
 
+def block_error(img, ref, b=8):
+    """Mean relative difference of b×b block averages (of the channel mean): the blotches
+    and low-frequency error that relMSE, a per-pixel measure, hides."""
+    h, w = ref.shape[0] // b * b, ref.shape[1] // b * b
+
+    def blocks(a):
+        return a[:h, :w].mean(2).reshape(h // b, b, w // b, b).mean((1, 3))
+
+    bi, br = blocks(img), blocks(ref)
+    return float(np.mean(np.abs(bi - br) / (br + EPS)))
+
+
+def flip_error(img, ref):
+    """Mean HDR-FLIP (NVIDIA's perceptual difference, PyPI `flip-evaluator`; linear inputs,
+    its default 67 pixels per degree and exposure range), or NaN without the package."""
+    try:
+        import flip_evaluator
+    except ImportError:
+        return float("nan")
+    pos = lambda a: np.ascontiguousarray(np.maximum(np.nan_to_num(a), 0), np.float32)  # noqa: E731
+    return float(flip_evaluator.evaluate(pos(ref), pos(img), "HDR", inputsRGB=False, applyMagma=False)[1])
+
+
+METRICS = ("relMSE", "SMAPE", "block", "FLIP")
+
+
+def metrics(img, ref):
+    """(relMSE, SMAPE, block error, FLIP) of `img` against `ref`."""
+    return rel_mse(img, ref), smape(img, ref), block_error(img, ref), flip_error(img, ref)
+
+
 def scene_desc(scene: str, size):
     """(scene dict, label) of a built-in name or a .blend file (gdmlt.blend.scene_desc), its
     export warnings printed as comments of the table."""
@@ -37,10 +68,12 @@ def scene_desc(scene: str, size):
 PEERS = ("cycles", "luxcore", "luxcore-mlt", "mitsuba")
 
 
-def peer_rows(peer, scene, desc, budgets, nee, max_bounces, threads, size):
+def peer_rows(peer, scene, desc, budgets, nee, max_bounces, threads, size, denoise=False):
     """Images of a peer renderer at each budget, or a reason it was skipped. Cycles renders
     the .blend itself (or the built-in scene rebuilt in Blender); LuxCore and Mitsuba render
-    the translation of the scene arrays (gdmlt.peers), when the scene is simple enough."""
+    the translation of the scene arrays (gdmlt.peers), when the scene is simple enough. With
+    `denoise`, Cycles also returns its own denoised images of the same renders (imgs is then
+    a pair: raw, denoised)."""
     from . import peers
 
     try:
@@ -51,9 +84,9 @@ def peer_rows(peer, scene, desc, budgets, nee, max_bounces, threads, size):
         blend = scene if str(scene).lower().endswith(".blend") else None
         if blend is None and simple is None:
             return None, f"skipped: {why}"
-        imgs, times, _ = peers.cycles_render(budgets, max_bounces, nee, threads, desc=None if blend else desc,
-                                             blend=blend, size=size)
-        return imgs, f"cycles wall time per budget (sync included): {', '.join(f'{t:.2f}' for t in times)} s"
+        imgs, times, _, *den = peers.cycles_render(budgets, max_bounces, nee, threads, desc=None if blend else desc,
+                                                   blend=blend, size=size, denoise=denoise)
+        return (imgs, den[0]) if denoise else imgs, f"cycles wall time per budget (sync included): {', '.join(f'{t:.2f}' for t in times)} s"
     if simple is None:
         return None, f"skipped: {why}"
     if peer.startswith("luxcore"):
@@ -117,9 +150,14 @@ def run(scene="cornell", size=None, budgets=(1.0, 2.0, 4.0), methods=("pt", "gdp
 
         if not available():
             raise RuntimeError("--denoise needs pyoidn (pip install pyoidn)")
-    rows = []
+    rows = []  # (name, nee, [metrics(img, ref) per budget])
     denoise_time = []
     notes = []
+
+    def add_row(name, nee, cells):
+        rows.append((name, nee, cells))
+        out(f"{name:14} {str(nee):5} " + " ".join(f"{c[0]:14.4g} {c[1]:7.4f}" for c in cells))
+
     for nee in modes:
         for m in methods:
             cells, dcells = [], []
@@ -135,36 +173,61 @@ def run(scene="cornell", size=None, budgets=(1.0, 2.0, 4.0), methods=("pt", "gdp
                     res = gdmlt.render(sc, method=m, **opts)
                 layers = res["layers"]
                 img = layers["Combined"]
-                cells.append((rel_mse(img, ref), smape(img, ref)))
+                cells.append(metrics(img, ref))
                 if denoise:
                     t1 = time.perf_counter()
                     d = denoise_image(img, layers.get("Denoising Albedo"), layers.get("Denoising Normal"))
                     denoise_time.append(time.perf_counter() - t1)
-                    dcells.append((rel_mse(d, ref), smape(d, ref)))
-            for name, cs in [(m, cells)] + ([(m + "+oidn", dcells)] if denoise else []):
-                rows.append((name, nee, cs))
-                out(f"{name:14} {str(nee):5} " + " ".join(f"{r:14.4g} {s:7.4f}" for r, s in cs))
+                    dcells.append(metrics(d, ref))
+            add_row(m, nee, cells)
+            if denoise:
+                add_row(m + "+oidn", nee, dcells)
         for peer in peers:
             try:
-                imgs, note = peer_rows(peer, scene, desc, budgets, nee, max_bounces, threads, size)
+                imgs, note = peer_rows(peer, scene, desc, budgets, nee, max_bounces, threads, size,
+                                       denoise=denoise and peer == "cycles")
             except Exception as e:  # noqa: BLE001 — a peer that fails is reported, the bench goes on
                 imgs, note = None, f"failed: {e}"
             if imgs is None:
                 out(f"# {peer} ({'NEE' if nee else 'naive'}): {note}")
                 continue
-            cs = [(rel_mse(i, ref), smape(i, ref)) for i in imgs]
-            rows.append((peer, nee, cs))
-            out(f"{peer:14} {str(nee):5} " + " ".join(f"{r:14.4g} {s:7.4f}" for r, s in cs))
+            raw, den = imgs if denoise and peer == "cycles" else (imgs, None)
+            add_row(peer, nee, [metrics(i, ref) for i in raw])
+            if den is not None:  # Cycles' own denoiser on the same renders
+                add_row(peer + "+oidn", nee, [metrics(i, ref) for i in den])
             if note:
                 out(f"# {note}")
     for n in notes:
         out(f"# {n}")
     if denoise_time:
         out(f"# denoiser time per image: {np.median(denoise_time):.2f} s (median, not charged to the budget)")
+    summary(rows, budgets, out)
     if plot:
         draw(rows, budgets, f"{label}: relMSE against time", plot)
         out(f"# plot: {plot}")
     return rows
+
+
+def summary(rows, budgets, out=print):
+    """Every metric as its own table, then each row's relMSE and block error as ratios to
+    the Cycles row of the same light mode (Cycles+OIDN for denoised rows), when there is one."""
+    head = f"{'':14} {'nee':5} " + " ".join(f"{f'{b:g} s':>10}" for b in budgets)
+    for k, metric in enumerate(METRICS):
+        out(f"## {metric}")
+        out(head)
+        for name, nee, cells in rows:
+            out(f"{name:14} {str(nee):5} " + " ".join(f"{c[k]:10.4g}" for c in cells))
+    peer = {(name, nee): cells for name, nee, cells in rows if name.startswith("cycles")}
+    if not peer:
+        return
+    for k, metric in ((0, "relMSE"), (2, "block")):
+        out(f"## {metric} ÷ Cycles' (÷ Cycles+OIDN's for denoised rows)")
+        out(head)
+        for name, nee, cells in rows:
+            ref = peer.get(("cycles+oidn" if name.endswith("+oidn") else "cycles", nee))
+            if ref is None or name.startswith("cycles"):
+                continue
+            out(f"{name:14} {str(nee):5} " + " ".join(f"{c[k] / max(r[k], 1e-30):10.3g}" for c, r in zip(cells, ref)))
 
 
 def draw(rows, budgets, title, path):

@@ -389,12 +389,19 @@ def _cycles_child(inp: str, outp: str):
             mat.cycles.emission_sampling = "NONE"
         if scene.world is not None:
             scene.world.cycles.sampling_method = "NONE"
+    if cfg.get("denoise"):
+        # Cycles as artists render: its default denoiser (OIDN, albedo + normal guides,
+        # "Accurate" prefilter); the raw image of the same samples is the Noisy Image pass
+        scene.cycles.use_denoising = True
+        scene.cycles.denoiser = "OPENIMAGEDENOISE"
+        scene.cycles.denoising_input_passes = "RGB_ALBEDO_NORMAL"
+        scene.cycles.denoising_prefilter = "ACCURATE"
+        bpy.context.view_layer.cycles.denoising_store_passes = True
     img = scene.render.image_settings
-    img.file_format, img.color_depth, img.color_mode = "OPEN_EXR", "32", "RGB"
+    img.media_type = "MULTI_LAYER_IMAGE"  # Blender 5: a multi-layer EXR
+    img.file_format, img.color_depth = "OPEN_EXR_MULTILAYER", "32"
     scene.render.use_file_extension = False
-    images, times = [], []
-    w = scene.render.resolution_x * scene.render.resolution_percentage // 100
-    h = scene.render.resolution_y * scene.render.resolution_percentage // 100
+    images, denoised, times = [], [], []
     for k, budget in enumerate(cfg["budgets"]):
         scene.cycles.time_limit = budget
         path = str(Path(outp).with_suffix(f".{k}.exr"))
@@ -402,20 +409,40 @@ def _cycles_child(inp: str, outp: str):
         t = time.perf_counter()
         bpy.ops.render.render(write_still=True)
         times.append(time.perf_counter() - t)
-        im = bpy.data.images.load(path)
-        px = np.empty(w * h * 4, np.float32)
-        im.pixels.foreach_get(px)
-        bpy.data.images.remove(im)
-        images.append(px.reshape(h, w, 4)[::-1, :, :3].copy())
-    np.savez(outp, images=np.stack(images), times=np.array(times), samples=np.zeros(len(times)))
+        layers = _exr_layers(path)
+        if cfg.get("denoise"):
+            images.append(layers["Noisy Image"])
+            denoised.append(layers["Combined"])
+        else:
+            images.append(layers["Combined"])
+    np.savez(outp, images=np.stack(images), times=np.array(times), samples=np.zeros(len(times)),
+             **({"denoised": np.stack(denoised)} if denoised else {}))
 
 
-def cycles_render(budgets, max_bounces: int, nee: bool, threads=0, desc=None, blend=None, size=None, seed=1):
+def _exr_layers(path: str) -> dict:
+    """{pass name: H×W×3 RGB, top row first} of a multi-layer EXR that Blender wrote (one
+    part per pass, "ViewLayer.Noisy Image" → "Noisy Image")."""
+    import OpenEXR
+
+    out = {}
+    with OpenEXR.File(path) as f:
+        for part in f.parts:
+            a = np.asarray(next(iter(part.channels.values())).pixels, np.float32)
+            if a.ndim == 3 and a.shape[2] >= 3:
+                out[part.name().split(".", 1)[1]] = a[..., :3].copy()
+    return out
+
+
+def cycles_render(budgets, max_bounces: int, nee: bool, threads=0, desc=None, blend=None, size=None, seed=1,
+                  denoise=False):
     """Cycles images after each time limit (one render per budget, Cycles' own time limit),
     of a .blend file or of a scene dict that `simple_scene` accepts (rebuilt in Blender by
-    gdmlt.blendscene). Runs in a child process (bpy)."""
+    gdmlt.blendscene). Runs in a child process (bpy). Returns (images, times, samples), and
+    with `denoise` also Cycles' own denoised images of the same renders (the raw ones are
+    then its Noisy Image pass)."""
     cfg = dict(budgets=list(budgets), max_bounces=max_bounces, nee=nee, threads=threads, seed=seed,
-               blend=str(Path(blend).resolve()) if blend else None, size=list(size) if size else None)
+               blend=str(Path(blend).resolve()) if blend else None, size=list(size) if size else None,
+               denoise=bool(denoise))
     arrays = {}
     if desc is not None:
         simple_scene(desc)  # refuses what the rebuilt scene would not reproduce
@@ -431,10 +458,11 @@ def cycles_render(budgets, max_bounces: int, nee: bool, threads=0, desc=None, bl
             arrays[f"p{i}"] = np.asarray(m["positions"], np.float32)
             arrays[f"t{i}"] = np.asarray(m["indices"], np.int64).reshape(-1, 3)
             arrays[f"m{i}"] = np.asarray(m.get("material_ids", np.zeros(len(arrays[f"t{i}"]))), np.int64).reshape(-1)
-    return _run_child("cycles", cfg, arrays)
+    out = _run_child("cycles", cfg, arrays, keys=("images", "times", "samples") + (("denoised",) if denoise else ()))
+    return out
 
 
-def _run_child(kind: str, cfg: dict, arrays: dict):
+def _run_child(kind: str, cfg: dict, arrays: dict, keys=("images", "times", "samples")):
     with tempfile.TemporaryDirectory() as tmp:
         inp, outp = Path(tmp) / "in.npz", Path(tmp) / "out.npz"
         np.savez(inp, config=json.dumps(cfg, default=lambda o: o.item() if hasattr(o, "item") else str(o)), **arrays)
@@ -445,7 +473,7 @@ def _run_child(kind: str, cfg: dict, arrays: dict):
         if r.returncode != 0 or not outp.exists():
             raise RuntimeError(f"{kind} child failed ({r.returncode}): {r.stderr.strip()[-600:]}")
         out = np.load(outp)
-        return out["images"], out["times"], out["samples"]
+        return tuple(out[k] for k in keys)
 
 
 if __name__ == "__main__":

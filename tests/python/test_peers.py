@@ -66,3 +66,31 @@ def test_mitsuba_with_gdmlt_roulette_renders_what_gdmlt_renders(nee):
     blocks = lambda a: a.reshape(4, 8, 4, 8, 3).mean(axis=(1, 3))  # noqa: E731
     b, r = blocks(img), blocks(ref)
     assert np.abs(b - r).mean() < 0.05 * r.mean()
+
+
+def test_cycles_denoised_rows_are_cycles_own_oidn_of_the_same_render():
+    """bench --denoise compares with Cycles as artists render (its OIDN on): the raw image is
+    the Noisy Image pass of the render whose Combined is denoised — same light, less noise."""
+    desc = gdmlt.builtin_scene("cornell", 32, 32)
+    ref = gdmlt.render(gdmlt.Scene(desc), method="pt", spp=2048, seed=3, max_bounces=4)["layers"]["Combined"]
+    (raw,), _, _, (den,) = peers.cycles_render([0.3], 4, True, desc=desc, denoise=True)
+    assert raw.shape == den.shape == ref.shape
+    assert not np.array_equal(raw, den)
+    assert abs(den.mean() - raw.mean()) < 0.03 * raw.mean()
+    rms = lambda x: float(np.sqrt(np.mean((np.minimum(x, 1) - np.minimum(ref, 1)) ** 2)))  # noqa: E731
+    assert rms(den) < rms(raw)
+
+
+def test_block_error_sees_low_frequencies_that_relmse_weighs_like_noise():
+    from gdmlt_bench.bench import block_error, flip_error, rel_mse
+
+    rng = np.random.default_rng(1)
+    ref = np.full((64, 64, 3), 0.5, np.float32)
+    # ±10% noise, zero mean in every 8×8 block, against a 2% offset of whole blocks
+    noise = np.tile(np.where((np.indices((8, 8)).sum(0) % 2) == 0, 0.05, -0.05)[..., None], (8, 8, 3))
+    blotch = np.kron(rng.choice([-0.01, 0.01], (8, 8)), np.ones((8, 8)))[..., None] * np.ones(3)
+    assert rel_mse(ref + noise, ref) > 10 * rel_mse(ref + blotch, ref)
+    assert block_error(ref + noise, ref) < 1e-6
+    assert abs(block_error(ref + blotch, ref) - 0.01 / 0.51) < 1e-4
+    f = flip_error(ref + noise, ref)
+    assert np.isnan(f) or f > flip_error(ref, ref)
