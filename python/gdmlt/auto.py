@@ -18,12 +18,26 @@ The pilot (`choose`):
    (its fixed costs — the Metropolis bootstrap — counted against it, as the real render pays
    them too). The smallest `v·t` wins.
 
+With the denoiser on (Blender's Denoise, the CLI's default), what the user gets is each
+method's image *after* OIDN, and that ranks the methods differently: OIDN removes path
+tracing's white noise but hardly touches the low-frequency error the gradient-domain
+reconstruction leaves (docs/denoising.md). So when the raw ranking puts another method
+first, `choose(..., denoise=True)` denoises both pilot renders of it and of `pt` (a central
+crop of at most `DENOISE_CROP` pixels a side, one OIDN device for the four) and picks the
+lower relative variance of the denoised pair × seconds. (`pt` ranked first raw stays first:
+OIDN lowers its error at least as much as any other method's, on every scene measured.)
+Measured (`gdmlt bench --denoise`, 2026-12-02, 128², 1–8 s): `pt` + OIDN has the lowest
+error on a door left ajar, a glass-and-mirror box, a multi-light scene, the gap and the
+Cornell box (1.2–3.3× below `gdpt` + OIDN, equal on the box at 4 s), and the pilot's
+denoised variance ranked `pt` first on each (3 seeds: `gdpt`'s 1.2–6× `pt`'s), where the
+raw ranking had chosen `gdpt` on all but the multi-light scene.
+
 Budget: with a time limit, the pilot takes 5% of it (each of the six renders at least 0.02 s)
 and the chosen method renders for the rest. With samples only, the budget is the time `pt`
 would take for that many samples per pixel (measured by the pilot), so `auto` at 64 samples
 takes about as long as `pt` at 64 samples.
 
-Parameters (defaults once, here): `PILOT_FRACTION = 0.05`, `MIN_PILOT_RENDER = 0.02` s (measured: at 0.03 s the pilot was a quarter of a 1 s budget),
+Parameters (defaults once, here): `DENOISE_CROP = 96`, `PILOT_FRACTION = 0.05`, `MIN_PILOT_RENDER = 0.02` s (measured: at 0.03 s the pilot was a quarter of a 1 s budget),
 `CANDIDATES = ("pt", "gdpt", "gdpssmlt")` (`pssmlt` is left out: it measured behind
 `gdpssmlt` on every benchmark scene).
 """
@@ -36,6 +50,7 @@ import numpy as np
 CANDIDATES = ("pt", "gdpt", "gdpssmlt")
 PILOT_FRACTION = 0.05
 MIN_PILOT_RENDER = 0.02
+DENOISE_CROP = 96
 EPS = 1e-2
 
 
@@ -56,10 +71,33 @@ def relative_variance(a, b):
     return float(np.mean((a - b) ** 2 / (m ** 2 + EPS)) / 2.0)
 
 
-def choose(desc: dict, settings: dict, cancelled=lambda: False) -> dict:
+def _crop(img, n):
+    """The central n × n (at most) pixels of an (H, W, C) image."""
+    h, w = img.shape[:2]
+    y, x = max(0, (h - n) // 2), max(0, (w - n) // 2)
+    return np.ascontiguousarray(img[y:y + n, x:x + n])
+
+
+def _denoised_pair(layers_pair, device):
+    """The central crops of two renders' Combined layers after OIDN with each render's own
+    guides (not prefiltered: a third of the time, and the ranking measured the same)."""
+    from .oidn import ALBEDO, NORMAL, denoise_image
+
+    out = []
+    for layers in layers_pair:
+        guide = {k: _crop(layers[k], DENOISE_CROP) if k in layers else None for k in (ALBEDO, NORMAL)}
+        out.append(denoise_image(_crop(layers["Combined"], DENOISE_CROP), guide[ALBEDO], guide[NORMAL],
+                                 prefilter=False, device=device))
+    return out
+
+
+def choose(desc: dict, settings: dict, cancelled=lambda: False, denoise=False) -> dict:
     """Runs the pilot. Returns {"method", "budget" (seconds for the whole render, pilot
-    included), "pilot_seconds", "efficiency": {method: v·t}, "why"}."""
+    included), "pilot_seconds", "efficiency": {method: v·t}, "denoised": {method: v·t after
+    OIDN} (empty unless compared), "why"}. `denoise`: the final image will be denoised, so
+    the raw winner and pt are compared after OIDN (without OIDN installed: the raw ranking)."""
     import gdmlt
+    from . import oidn
 
     w, h = _image_size(desc["camera"])
     base = desc["camera"].get("window")
@@ -87,49 +125,71 @@ def choose(desc: dict, settings: dict, cancelled=lambda: False) -> dict:
                                        "clamp_indirect") if k in settings}
     seed = int(settings.get("seed", 0))
     t0 = time.perf_counter()
-    eff, pt_rate = {}, None
+    eff, pairs, pt_rate = {}, {}, None
     for m in candidates:
-        imgs, elapsed, samples = [], 0.0, 0
+        layers, elapsed, samples = [], 0.0, 0
         for s in (1, 2):
             if cancelled():
                 break
-            res = gdmlt.render(scene, method=m, spp=10 ** 7, time_limit=t_each, seed=(seed * 7919 + s * 104729 + 31 * CANDIDATES.index(m)) % 2 ** 63,
-                               **common)
-            imgs.append(res["layers"]["Combined"])
+            res = gdmlt.render(scene, method=m, spp=10 ** 7, time_limit=t_each,
+                               seed=(seed * 7919 + s * 104729 + 31 * CANDIDATES.index(m)) % 2 ** 63, **common)
+            layers.append(res["layers"])
             elapsed += res["stats"]["elapsed"]
             samples += res["stats"]["spp_min"]
-        if len(imgs) < 2:
+        if len(layers) < 2:
             break
-        v = relative_variance(*imgs)
+        v = relative_variance(layers[0]["Combined"], layers[1]["Combined"])
         # a render that finished no sample (its time ran out first) or two identical images
         # say nothing about the error: unknown, never "perfect"
         eff[m] = v * elapsed / 2 if samples > 0 and v > 0 else float("inf")
+        pairs[m] = (layers, elapsed)
         if m == "pt":
             pt_rate = elapsed / max(samples, 1) / (ww * wh)  # seconds per sample per pixel
-    pilot = time.perf_counter() - t0
     if not eff:
-        return {"method": "pt", "budget": limit, "pilot_seconds": pilot, "efficiency": {}, "why": "cancelled"}
+        return {"method": "pt", "budget": limit, "pilot_seconds": time.perf_counter() - t0, "efficiency": {},
+                "denoised": {}, "why": "cancelled"}
     best = min(eff, key=eff.get)
     if eff[best] == float("inf"):
         best = "pt"  # nothing measured: the method with the least fixed cost
+    # With the denoiser on: pt against the raw winner, both after OIDN (pt first already
+    # stays first: OIDN lowers its error at least as much as any other method's)
+    denoised = {}
+    if denoise and best != "pt" and eff.get("pt", float("inf")) < float("inf") and not cancelled() \
+            and oidn.available():
+        with oidn.session(common.get("threads", 0)) as device:
+            for m in ("pt", best):
+                layers, elapsed = pairs[m]
+                v = relative_variance(*_denoised_pair(layers, device))
+                denoised[m] = v * elapsed / 2 if v > 0 else float("inf")
+        best = min(denoised, key=denoised.get)
+    pilot = time.perf_counter() - t0
     if limit:
         budget = limit
     else:
         budget = max(pilot, float(settings.get("spp", 64)) * (pt_rate or 0.0) * w * h)
-    ranked = sorted(eff, key=eff.get)
-    why = (f"pilot {pilot:.2f} s on a {ww}×{wh} window: relative error × seconds "
-           + ", ".join(f"{m} {eff[m]:.3g}" for m in ranked)
-           + (f"; {best} is {eff[ranked[1]] / eff[best]:.1f}× ahead of {ranked[1]}"
-              if len(ranked) > 1 and 0 < eff[best] < float("inf") else ""))
-    return {"method": best, "budget": budget, "pilot_seconds": pilot, "efficiency": eff, "why": why}
+
+    def ranking(e):
+        r = sorted(e, key=e.get)
+        return ", ".join(f"{m} {e[m]:.3g}" for m in r), r
+
+    text, ranked = ranking(eff)
+    why = f"pilot {pilot:.2f} s on a {ww}×{wh} window: relative error × seconds {text}"
+    if denoised:
+        text, ranked = ranking(denoised)
+        why += f"; after denoising {text}"
+    final = denoised or eff
+    if len(ranked) > 1 and 0 < final[best] < float("inf"):
+        why += f"; {best} is {final[ranked[1]] / final[best]:.1f}× ahead of {ranked[1]}"
+    return {"method": best, "budget": budget, "pilot_seconds": pilot, "efficiency": eff, "denoised": denoised,
+            "why": why}
 
 
-def plan(desc: dict, settings: dict, cancelled=lambda: False):
+def plan(desc: dict, settings: dict, cancelled=lambda: False, denoise=False):
     """Runs the pilot; returns (the gdmlt.render settings for the rest of the render, the
-    pilot's findings as `choose` returns them)."""
+    pilot's findings as `choose` returns them). `denoise`: the image will be denoised."""
     settings = dict(settings)
     settings.pop("method", None)
-    pick = choose(desc, settings, cancelled)
+    pick = choose(desc, settings, cancelled, denoise)
     rest = max(pick["budget"] - pick["pilot_seconds"], MIN_PILOT_RENDER)
     opts = dict(settings, method=pick["method"], spp=10 ** 7, time_limit=rest)
     if settings.get("time_limit") and settings.get("spp"):
@@ -137,12 +197,13 @@ def plan(desc: dict, settings: dict, cancelled=lambda: False):
     return opts, pick
 
 
-def render(desc: dict, settings: dict, progress=None, preview=None, cancelled=lambda: False):
+def render(desc: dict, settings: dict, progress=None, preview=None, cancelled=lambda: False, denoise=False):
     """gdmlt.render with method "auto": the pilot, then the chosen method for the rest of the
-    budget. Returns the render's result with stats["auto"] = what `choose` found."""
+    budget. Returns the render's (raw) result with stats["auto"] = what `choose` found.
+    `denoise`: choose for an image that will be denoised."""
     import gdmlt
 
-    opts, pick = plan(desc, settings, cancelled)
+    opts, pick = plan(desc, settings, cancelled, denoise)
     extra = {k: v for k, v in (("progress", progress), ("preview", preview)) if v is not None}
     res = gdmlt.render(gdmlt.Scene(desc), **opts, **extra)
     res["stats"]["auto"] = pick

@@ -250,7 +250,7 @@ def render_desc(desc, settings: dict, denoise: bool, out: Path, png: bool, view=
     if settings["method"] == "auto":
         from .auto import plan
 
-        settings, pick = plan(desc, settings)
+        settings, pick = plan(desc, settings, denoise=denoise)
         print(f"gdmlt: method auto chose {pick['method']} ({pick['why']})", file=sys.stderr)
     import signal
 
@@ -415,7 +415,7 @@ def render_command(args, parser):
                              "another one, and partials of different methods do not merge")
             from .auto import plan
 
-            settings, pick = plan(src["desc"], settings)
+            settings, pick = plan(src["desc"], settings, denoise=denoise)
             print(f"gdmlt: method auto chose {pick['method']} ({pick['why']})", file=sys.stderr)
         if partial is not None:
             from .distributed import render_partial, save_partial

@@ -100,10 +100,17 @@ class _Device:
             flt.release()
 
 
-def denoise_image(color, albedo=None, normal=None, *, prefilter=True, threads=0, quality="high"):
+def session(threads=0):
+    """One OIDN device for several `denoise_image(..., device=)` calls (`with session() as d:`),
+    so that many small images (the automatic method's pilot) pay for it once."""
+    return _Device(_pyoidn(), threads)
+
+
+def denoise_image(color, albedo=None, normal=None, *, prefilter=True, threads=0, quality="high", device=None):
     """OIDN on one linear HDR image (H, W, 3) with optional albedo and normal guides; returns
     a new float32 image. Negative and non-finite values are not valid OIDN input: they are
-    clamped to 0 in the copy that is denoised."""
+    clamped to 0 in the copy that is denoised. `device`: a `session()` to run on (else one
+    is created for this call)."""
     pyoidn = _pyoidn()
     q = {"high": pyoidn.OIDN_QUALITY_HIGH, "balanced": pyoidn.OIDN_QUALITY_BALANCED,
          "fast": pyoidn.OIDN_QUALITY_FAST}[quality]
@@ -120,15 +127,18 @@ def denoise_image(color, albedo=None, normal=None, *, prefilter=True, threads=0,
         if g.shape != c.shape:
             raise ValueError(f"denoise: the {slot} guide is {g.shape[1]}×{g.shape[0]}, the image {c.shape[1]}×{c.shape[0]}")
     out = np.empty_like(c)
-    with _Device(pyoidn, threads) as dev:
-        for slot, g in guides.items():
-            if prefilter:
-                clean = np.empty_like(g)
-                dev.run({slot: g, "output": clean}, hdr=False, clean_aux=False, quality=q)
-                g = clean
-            images[slot] = g
-        images["output"] = out
-        dev.run(images, hdr=True, clean_aux=prefilter and bool(guides), quality=q)
+    if device is None:
+        with _Device(pyoidn, threads) as dev:
+            return denoise_image(c, guides.get("albedo"), guides.get("normal"), prefilter=prefilter,
+                                 quality=quality, device=dev)
+    for slot, g in guides.items():
+        if prefilter:
+            clean = np.empty_like(g)
+            device.run({slot: g, "output": clean}, hdr=False, clean_aux=False, quality=q)
+            g = clean
+        images[slot] = g
+    images["output"] = out
+    device.run(images, hdr=True, clean_aux=prefilter and bool(guides), quality=q)
     return out
 
 

@@ -105,3 +105,37 @@ def test_a_method_whose_pilot_did_no_work_is_not_chosen(cornell, monkeypatch):
     monkeypatch.setattr(gdmlt, "render", starved)
     pick = auto.choose(cornell, {"time_limit": 1.0, "max_bounces": 3})
     assert pick["efficiency"]["gdpssmlt"] == float("inf") and pick["method"] != "gdpssmlt"
+
+
+def test_with_the_denoiser_on_the_pilot_ranks_the_images_the_user_will_get(cornell, monkeypatch):
+    """White noise that OIDN removes (pt's kind) against a quarter of its raw variance in
+    8-pixel blotches that OIDN keeps (the gradient-domain methods' kind): the raw ranking
+    picks the blotches, the ranking for a denoised image picks the white noise. Each pilot
+    render's image is replaced (time equal for all), so the test is deterministic."""
+    pytest.importorskip("pyoidn")
+    real = gdmlt.render
+    rng = np.random.default_rng(11)
+
+    def synthetic(scene, method="pt", seed=0, **kw):
+        res = real(scene, method="pt", seed=seed, **dict(kw, time_limit=0.0, spp=1))
+        h, w, _ = res["layers"]["Combined"].shape
+        truth = np.linspace(0.4, 0.8, w, dtype=np.float32)[None, :, None] * np.ones((h, 1, 3), np.float32)
+        if method == "pt":
+            noise = 0.3 * rng.standard_normal((h, w, 1))
+        else:
+            coarse = rng.standard_normal(((h + 7) // 8, (w + 7) // 8, 1))
+            noise = 0.15 * np.kron(coarse, np.ones((8, 8, 1)))[:h, :w] if method == "gdpt" else 1.0
+        res["layers"]["Combined"] = (truth * (1 + noise)).astype(np.float32)
+        res["layers"]["Denoising Albedo"] = np.full((h, w, 3), 0.7, np.float32)
+        res["layers"]["Denoising Normal"] = np.tile(np.float32([0, 0, 1]), (h, w, 1))
+        res["stats"].update(elapsed=0.05, spp_min=4)
+        return res
+
+    monkeypatch.setattr(gdmlt, "render", synthetic)
+    settings = {"time_limit": 1.0, "max_bounces": 3, "seed": 2}
+    raw = auto.choose(cornell, settings)
+    assert raw["method"] == "gdpt" and raw["denoised"] == {}
+    den = auto.choose(cornell, settings, denoise=True)
+    assert set(den["denoised"]) == {"pt", "gdpt"} and den["method"] == "pt", den["why"]
+    assert den["denoised"]["pt"] < 0.5 * den["denoised"]["gdpt"]
+    assert "after denoising" in den["why"]
