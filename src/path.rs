@@ -11,7 +11,7 @@
 //! is direct lighting (light sampled at, or hit after, the first surface).
 
 use crate::accel::TriHit;
-use crate::bsdf::Scatter;
+use crate::bsdf::{Guide, Scatter};
 use crate::math::{is_finite_spectrum, power_heuristic, Frame, Spectrum};
 use crate::sampler::Sampler;
 use crate::scene::{CameraRay, Scene, SurfaceInteraction};
@@ -274,6 +274,7 @@ pub fn trace_path_from<S: Sampler>(
     let mut out = PathContribution::default();
     let mut st = PathState::new(primary.ray, cfg.nee && scene.has_lights());
     let mut pending_hit = Some(primary.hit); // the camera ray's, traced by the caller
+    let mut guide = Some(Spectrum::ONE); // the denoising guides' throughput, until they are written
     loop {
         // 1. the segment
         let hit = match pending_hit.take() {
@@ -323,9 +324,19 @@ pub fn trace_path_from<S: Sampler>(
             st.record_emission(&mut record, li, si.p, false, le, pdf_light);
         }
         let bsdf = scene.bsdf_at(&si);
-        if camera_ray {
-            out.albedo = bsdf.albedo();
-            out.normal = si.frame.n;
+        if let Some(t) = guide {
+            // the denoising guides: this surface, or through it if it is mirror-like
+            if camera_ray {
+                out.normal = si.frame.n; // kept if the guides find no surface further on
+            }
+            match bsdf.guide() {
+                Guide::Surface(albedo) => {
+                    out.albedo = t * albedo;
+                    out.normal = si.frame.n;
+                    guide = None;
+                }
+                Guide::Through(tint) => guide = Some(t * tint),
+            }
         }
         if let Some(p) = record.as_deref_mut() {
             p.vertices.push(Vertex::at(&si, -st.d, st.beta, st.prev_pdf));
@@ -674,6 +685,55 @@ mod tests {
     use super::*;
     use crate::sampler::IndependentSampler;
     use crate::scene::builtin::cornell_box;
+
+    /// The denoising guides look through mirrors, as Cycles' do: where the camera ray meets a
+    /// mirror ball, the albedo guide is the mirror's colour times the albedo of the first
+    /// surface that is not mirror-like along the reflections (the normal guide that
+    /// surface's); elsewhere the first surface is its own guide. (Before, every pixel's
+    /// guide was its first surface: the balls were flat grey to the denoiser.)
+    #[test]
+    fn denoising_guides_look_through_mirrors() {
+        use crate::bsdf::Guide;
+        let (w, h) = (32u32, 32u32);
+        let mut desc = crate::scene::builtin::cornell_spheres(w, h);
+        let mirror = desc.materials.iter().position(|m| m.name == "Mirror").unwrap() as u32;
+        for m in desc.meshes.iter_mut().filter(|m| m.name == "GlassSphere") {
+            m.material_ids.iter_mut().for_each(|id| *id = mirror); // both balls mirrors
+        }
+        let scene = Scene::build(&desc).unwrap();
+        let cfg = PathSettings::new(8, true);
+        let (mut through, mut surface) = (0, 0);
+        for (x, y) in (0..w).flat_map(|x| (0..h).map(move |y| (x, y))) {
+            let raster = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
+            let mut s = IndependentSampler::new(5, (y * w + x) as u64);
+            let c = trace_path(&scene, &cfg, raster, &mut s, None);
+            let ray = scene.camera.generate_ray(raster, Vec2::splat(0.5)); // no depth of field
+            let (mut o, mut d, mut tint, mut bounces) = (ray.origin, ray.dir, Spectrum::ONE, 0);
+            let expected = loop {
+                let Some(hit) = scene.intersect(o, d, 0.0, f32::INFINITY) else { break None };
+                let si = scene.interaction(&hit, d);
+                match scene.bsdf_at(&si).guide() {
+                    Guide::Surface(albedo) => break Some((tint * albedo, si.frame.n)),
+                    Guide::Through(t) => {
+                        tint *= t;
+                        bounces += 1;
+                        let n = si.frame.n;
+                        d = (d - 2.0 * d.dot(n) * n).normalize();
+                        o = si.spawn_origin(d);
+                    }
+                }
+            };
+            let Some((albedo, n)) = expected else { continue };
+            assert!((c.albedo - albedo).abs().max_element() < 1e-4, "pixel ({x}, {y}): {:?} vs {albedo:?}", c.albedo);
+            assert!((c.normal - n).length() < 1e-4, "pixel ({x}, {y})");
+            if bounces > 0 {
+                through += 1;
+            } else {
+                surface += 1;
+            }
+        }
+        assert!(through > 30 && surface > 300, "{through} pixels on the balls, {surface} elsewhere");
+    }
 
     /// The recorded events, weighted by the balance heuristic, estimate the same radiance as
     /// the path tracer's own (power-heuristic) sum: they must agree in the mean.

@@ -43,6 +43,7 @@ Parameters (defaults once, here): `DENOISE_CROP = 96`, `PILOT_FRACTION = 0.05`, 
 """
 
 import copy
+import threading
 import time
 
 import numpy as np
@@ -125,6 +126,9 @@ def choose(desc: dict, settings: dict, cancelled=lambda: False, denoise=False) -
                                        "clamp_indirect") if k in settings}
     seed = int(settings.get("seed", 0))
     t0 = time.perf_counter()
+    if denoise:  # loading OIDN's library takes ~0.25 s: during the pilot renders, not after them
+        loader = threading.Thread(target=oidn.available, daemon=True)
+        loader.start()
     eff, pairs, pt_rate = {}, {}, None
     for m in candidates:
         layers, elapsed, samples = [], 0.0, 0
@@ -154,6 +158,8 @@ def choose(desc: dict, settings: dict, cancelled=lambda: False, denoise=False) -
     # With the denoiser on: pt against the raw winner, both after OIDN (pt first already
     # stays first: OIDN lowers its error at least as much as any other method's)
     denoised = {}
+    if denoise:
+        loader.join()
     if denoise and best != "pt" and eff.get("pt", float("inf")) < float("inf") and not cancelled() \
             and oidn.available():
         with oidn.session(common.get("threads", 0)) as device:

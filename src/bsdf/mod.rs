@@ -92,6 +92,18 @@ pub enum Bsdf {
     },
 }
 
+/// Lobes at most this rough are mirror-like for the denoising guides (Cycles' threshold).
+pub const GUIDE_SPECULAR_ROUGHNESS: f32 = 0.075;
+
+/// What the denoising guides take from a surface (`Bsdf::guide`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Guide {
+    /// The surface is the guide: its albedo (and its normal).
+    Surface(Spectrum),
+    /// The guides look through it, their throughput multiplied by this colour.
+    Through(Spectrum),
+}
+
 impl Bsdf {
     /// The expected throughput of the pass-through lobe, τ·tint (zero without one): what a
     /// ray going straight through carries on, on average.
@@ -297,6 +309,38 @@ impl Bsdf {
         }
     }
 
+    /// How the denoising guides (albedo and normal passes) see this surface, as Cycles'
+    /// denoising features do: lobes at most `GUIDE_SPECULAR_ROUGHNESS` rough are mirror-like,
+    /// and when they carry 75% or more of the BSDF's weight the guides look through the surface
+    /// (along the path's own scattered ray), tinted by those lobes' colour — so that a denoiser
+    /// keeps what a mirror reflects or a window shows. Otherwise the surface is the guide.
+    pub fn guide(&self) -> Guide {
+        let sharp = |roughness: f32| roughness <= GUIDE_SPECULAR_ROUGHNESS;
+        let (rough_w, sharp_w, sharp_albedo) = match self {
+            Bsdf::Lambert(_) | Bsdf::Layered(_) => (1.0, 0.0, Spectrum::ZERO),
+            Bsdf::Conductor(b) if sharp(b.roughness) => (0.0, 1.0, b.f0),
+            Bsdf::Dielectric(b) if sharp(b.roughness) => (0.0, 1.0, b.tint),
+            Bsdf::Conductor(_) | Bsdf::Dielectric(_) => (1.0, 0.0, Spectrum::ZERO),
+            Bsdf::Principled { metal, glass, w, .. } => {
+                let (mut rough, mut sharp_w, mut albedo) = (w[0], 0.0, Spectrum::ZERO);
+                for (wk, r, a) in [(w[1], metal.roughness, metal.f0), (w[2], glass.roughness, glass.tint)] {
+                    if sharp(r) {
+                        sharp_w += wk;
+                        albedo += a * wk;
+                    } else {
+                        rough += wk;
+                    }
+                }
+                (rough, sharp_w, albedo)
+            }
+        };
+        if sharp_w > 0.0 && 4.0 * rough_w <= rough_w + sharp_w {
+            Guide::Through(sharp_albedo / sharp_w)
+        } else {
+            Guide::Surface(self.albedo())
+        }
+    }
+
     /// Diffuse-like albedo, written to the denoising albedo pass.
     pub fn albedo(&self) -> Spectrum {
         match self {
@@ -315,6 +359,35 @@ impl Bsdf {
 mod tests {
     use super::testing::{chi2_test, white_furnace};
     use super::*;
+
+    /// The denoising guides look through a surface when its mirror-like lobes (roughness ≤
+    /// 0.075) carry at least 75% of its weight, tinted by their colour; else it is the guide.
+    #[test]
+    fn guides_look_through_mostly_mirror_like_surfaces() {
+        let tinted = |w: [f32; 3], roughness: f32| match principled(w, roughness) {
+            Bsdf::Principled { diffuse, metal, glass, w, pass, pass_tint } => Bsdf::Principled {
+                diffuse,
+                metal: Conductor { f0: Spectrum::new(0.9, 0.6, 0.3), ..metal },
+                glass: Dielectric { tint: Spectrum::new(0.2, 0.4, 0.8), ..glass },
+                w,
+                pass,
+                pass_tint,
+            },
+            b => b,
+        };
+        let g = tinted([0.25, 0.75, 0.0], 0.0).guide();
+        assert!(
+            matches!(g, Guide::Through(t) if (t - Spectrum::new(0.9, 0.6, 0.3)).abs().max_element() < 1e-6),
+            "{g:?}"
+        );
+        assert!(matches!(tinted([0.3, 0.7, 0.0], 0.0).guide(), Guide::Surface(_)));
+        assert!(matches!(tinted([0.0, 1.0, 0.0], 0.2).guide(), Guide::Surface(_)), "a rough metal is the guide");
+        // clear glass (its roughness is the glass lobe's own), half mirror half glass
+        let g = tinted([0.0, 0.5, 0.5], 0.0).guide();
+        let Guide::Through(t) = g else { panic!("{g:?}") };
+        assert!((t - Spectrum::new(0.55, 0.5, 0.55)).abs().max_element() < 1e-6);
+        assert!(matches!(Bsdf::Lambert(Lambert { albedo: Spectrum::ONE }).guide(), Guide::Surface(_)));
+    }
 
     fn principled(w: [f32; 3], roughness: f32) -> Bsdf {
         Bsdf::Principled {
