@@ -875,9 +875,10 @@ fn write_exr(
 /// each float32 (H, W, 3): screened Poisson reconstruction (`norm` "l1" or "l2", weight
 /// `alpha`) plus the very-direct light, clipped at 0 — what gdpt/gdpssmlt write as Combined.
 /// Used to merge partial renders (gdmlt merge). `method` ("gdpt" or "gdpssmlt") picks the L1
-/// schedule that method's renders use.
+/// schedule that method's renders use; `irls` = (reweightings, CG steps each, regulariser
+/// decay) replaces it (for measuring schedules).
 #[pyfunction]
-#[pyo3(signature = (primal, dx, dy, direct, alpha=0.2, norm="l1", method="gdpssmlt"))]
+#[pyo3(signature = (primal, dx, dy, direct, alpha=0.2, norm="l1", method="gdpssmlt", irls=None))]
 #[allow(clippy::too_many_arguments)] // Python's keyword arguments
 fn reconstruct<'py>(
     py: Python<'py>,
@@ -888,14 +889,22 @@ fn reconstruct<'py>(
     alpha: f64,
     norm: &str,
     method: &str,
+    irls: Option<(usize, usize, f64)>,
 ) -> PyResult<Bound<'py, PyAny>> {
     let norm = crate::reconstruct::Norm::parse(norm)
         .ok_or_else(|| verr(format!("unknown reconstruction '{norm}' (expected l1 or l2)")))?;
-    let irls = match method {
+    let mut schedule = match method {
         "gdpt" => crate::reconstruct::IrlsParams::short(),
         "gdpssmlt" => crate::reconstruct::IrlsParams::default(),
         _ => return Err(verr(format!("unknown method '{method}' (expected gdpt or gdpssmlt)"))),
     };
+    if let Some((outer, cg, decay)) = irls {
+        if outer > 1000 || cg > 10_000 || !(decay.is_finite() && decay > 0.0 && decay <= 1.0) {
+            return Err(verr("irls must be (reweightings ≤ 1000, CG steps ≤ 10000, 0 < decay ≤ 1)"));
+        }
+        (schedule.outer_iterations, schedule.cg_iterations, schedule.decay) = (outer, cg, decay);
+    }
+    let irls = schedule;
     if !(alpha.is_finite() && alpha > 0.0) {
         return Err(verr("alpha must be a finite number > 0"));
     }

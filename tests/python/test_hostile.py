@@ -307,3 +307,20 @@ def test_an_infinite_emission_strength_is_refused_naming_the_material():
     light["emission"] = [3.4028234663852886e38] * 3
     with pytest.raises(ValueError, match=f"{light['name']}.*too large"):
         gdmlt.Scene(d)
+
+
+def test_reconstruct_takes_an_irls_schedule_and_refuses_a_bad_one():
+    """`irls` = (reweightings, CG steps, decay) replaces a method's L1 schedule (to measure
+    schedules, docs/benchmarks.md): gdpssmlt's own is (10, 6, 0.5); no reweighting is the
+    exact L2 solution; nonsense is a ValueError, not a hang or a panic."""
+    rng = np.random.default_rng(3)
+    p, dx, dy = (rng.random((12, 16, 3), dtype=np.float32) for _ in range(3))
+    d = np.zeros_like(p)
+    own = gdmlt.reconstruct(p, dx, dy, d, 0.2, "l1", method="gdpssmlt")
+    assert np.array_equal(gdmlt.reconstruct(p, dx, dy, d, 0.2, "l1", irls=(10, 6, 0.5)), own)
+    assert not np.array_equal(gdmlt.reconstruct(p, dx, dy, d, 0.2, "l1", irls=(10, 10, 0.5)), own)
+    l2 = gdmlt.reconstruct(p, dx, dy, d, 0.2, "l2")
+    assert np.allclose(gdmlt.reconstruct(p, dx, dy, d, 0.2, "l1", irls=(0, 6, 0.5)), l2, atol=1e-6)
+    for bad in ((10, 6, 0.0), (10, 6, float("nan")), (10, 10 ** 6, 0.5)):
+        with pytest.raises(ValueError, match="irls"):
+            gdmlt.reconstruct(p, dx, dy, d, 0.2, "l1", irls=bad)
