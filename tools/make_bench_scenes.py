@@ -70,6 +70,16 @@ def _add(bpy, scene, ob, mat=None):
     return ob
 
 
+def _box(bpy, scene, name, loc, size, mat, rot_z=0.0):
+    """A cube scaled to `size` (scale applied) at `loc`, turned by `rot_z` about Z."""
+    bpy.ops.mesh.primitive_cube_add(size=1.0, location=loc, rotation=(0, 0, rot_z))
+    ob = bpy.context.object
+    ob.name = name
+    ob.scale = size
+    bpy.ops.object.transform_apply(scale=True)
+    _add(bpy, scene, ob, mat)
+
+
 def _camera(bpy, scene, location, rotation_deg, lens=35):
     cam = bpy.data.cameras.new("Camera")
     cam.lens = lens
@@ -184,13 +194,8 @@ def hdri_interior(bpy, out_dir: Path):
     walls = _material(bpy, "Plaster", (0.75, 0.72, 0.68), "DIFFUSE")
     floor = _material(bpy, "Floor", (0.45, 0.3, 0.2), roughness=0.4)
 
-    def box(name, loc, size, mat):
-        bpy.ops.mesh.primitive_cube_add(size=1.0, location=loc)
-        ob = bpy.context.object
-        ob.name = name
-        ob.scale = size
-        bpy.ops.object.transform_apply(scale=True)
-        _add(bpy, scene, ob, mat)
+    def box(name, loc, size, mat, rot_z=0.0):
+        _box(bpy, scene, name, loc, size, mat, rot_z)
 
     box("Floor", (0, 0, -0.05), (6, 6, 0.1), floor)
     box("Ceiling", (0, 0, 3.05), (6, 6, 0.1), walls)
@@ -218,12 +223,7 @@ def door_ajar(bpy):
     floor = _material(bpy, "Floor", (0.5, 0.35, 0.22), roughness=0.35)
 
     def box(name, loc, size, mat, rot_z=0.0):
-        bpy.ops.mesh.primitive_cube_add(size=1.0, location=loc, rotation=(0, 0, rot_z))
-        ob = bpy.context.object
-        ob.name = name
-        ob.scale = size
-        bpy.ops.object.transform_apply(scale=True)
-        _add(bpy, scene, ob, mat)
+        _box(bpy, scene, name, loc, size, mat, rot_z)
 
     # shell: x ∈ [-2.5, 2.5], y ∈ [-2.5, 5.5] (the far room beyond y = 2.5), z ∈ [0, 2.8]
     box("Floor", (0, 1.5, -0.05), (5.2, 8.2, 0.1), floor)
@@ -260,13 +260,8 @@ def glass_box(bpy):
     scene = _reset(bpy)
     white = _material(bpy, "White", (0.73, 0.73, 0.73), "DIFFUSE")
 
-    def box(name, loc, size, mat):
-        bpy.ops.mesh.primitive_cube_add(size=1.0, location=loc)
-        ob = bpy.context.object
-        ob.name = name
-        ob.scale = size
-        bpy.ops.object.transform_apply(scale=True)
-        _add(bpy, scene, ob, mat)
+    def box(name, loc, size, mat, rot_z=0.0):
+        _box(bpy, scene, name, loc, size, mat, rot_z)
 
     box("Floor", (0, 0, -0.05), (2.2, 2.2, 0.1), white)
     box("Ceiling", (0, 0, 2.05), (2.2, 2.2, 0.1), white)
