@@ -100,6 +100,7 @@ def choose(desc: dict, settings: dict, cancelled=lambda: False, denoise=False) -
     import gdmlt
     from . import oidn
 
+    # 1. the candidates whose render of the whole frame fits in memory
     w, h = _image_size(desc["camera"])
     base = desc["camera"].get("window")
     candidates, refusal = [], None
@@ -111,6 +112,7 @@ def choose(desc: dict, settings: dict, cancelled=lambda: False, denoise=False) -
             refusal = refusal or e
     if not candidates:
         raise refusal
+    # 2. the pilot's window, its scene and settings
     pilot_desc = copy.copy(desc)
     pilot_desc["camera"] = dict(desc["camera"])
     x, y, ww, wh = _window(*(base[2:] if base else (w, h)))
@@ -129,6 +131,7 @@ def choose(desc: dict, settings: dict, cancelled=lambda: False, denoise=False) -
     if denoise:  # loading OIDN's library takes ~0.25 s: during the pilot renders, not after them
         loader = threading.Thread(target=oidn.available, daemon=True)
         loader.start()
+    # 3. two renders per candidate: relative variance × seconds
     eff, pairs, pt_rate = {}, {}, None
     for m in candidates:
         layers, elapsed, samples = [], 0.0, 0
@@ -155,39 +158,53 @@ def choose(desc: dict, settings: dict, cancelled=lambda: False, denoise=False) -
     best = min(eff, key=eff.get)
     if eff[best] == float("inf"):
         best = "pt"  # nothing measured: the method with the least fixed cost
-    # With the denoiser on: pt against the raw winner, both after OIDN (pt first already
-    # stays first: OIDN lowers its error at least as much as any other method's)
+    # 4. for an image that will be denoised: the raw winner against pt, after OIDN
     denoised = {}
     if denoise:
         loader.join()
-    if denoise and best != "pt" and eff.get("pt", float("inf")) < float("inf") and not cancelled() \
-            and oidn.available():
-        with oidn.session(common.get("threads", 0)) as device:
-            for m in ("pt", best):
-                layers, elapsed = pairs[m]
-                v = relative_variance(*_denoised_pair(layers, device))
-                denoised[m] = v * elapsed / 2 if v > 0 else float("inf")
-        best = min(denoised, key=denoised.get)
+        # pt first already stays first: OIDN lowers its error at least as much as any other's
+        if best != "pt" and eff.get("pt", float("inf")) < float("inf") and not cancelled() and oidn.available():
+            denoised = _after_denoising({m: pairs[m] for m in ("pt", best)}, common.get("threads", 0))
+            best = min(denoised, key=denoised.get)
+    # 5. the whole render's budget, and why
     pilot = time.perf_counter() - t0
     if limit:
         budget = limit
     else:
         budget = max(pilot, float(settings.get("spp", 64)) * (pt_rate or 0.0) * w * h)
+    why = _explain(best, eff, denoised, f"pilot {pilot:.2f} s on a {ww}×{wh} window")
+    return {"method": best, "budget": budget, "pilot_seconds": pilot, "efficiency": eff, "denoised": denoised,
+            "why": why}
 
+
+def _after_denoising(pairs: dict, threads: int) -> dict:
+    """{method: relative variance × seconds of its two pilot renders after OIDN} for
+    `pairs` = {method: (the two renders' layers, their seconds)}, on one OIDN device."""
+    from . import oidn
+
+    out = {}
+    with oidn.session(threads) as device:
+        for m, (layers, elapsed) in pairs.items():
+            v = relative_variance(*_denoised_pair(layers, device))
+            out[m] = v * elapsed / 2 if v > 0 else float("inf")
+    return out
+
+
+def _explain(best: str, eff: dict, denoised: dict, head: str) -> str:
+    """The pilot's findings in one line, for the log and Blender's status bar."""
     def ranking(e):
         r = sorted(e, key=e.get)
         return ", ".join(f"{m} {e[m]:.3g}" for m in r), r
 
     text, ranked = ranking(eff)
-    why = f"pilot {pilot:.2f} s on a {ww}×{wh} window: relative error × seconds {text}"
+    why = f"{head}: relative error × seconds {text}"
     if denoised:
         text, ranked = ranking(denoised)
         why += f"; after denoising {text}"
     final = denoised or eff
     if len(ranked) > 1 and 0 < final[best] < float("inf"):
         why += f"; {best} is {final[ranked[1]] / final[best]:.1f}× ahead of {ranked[1]}"
-    return {"method": best, "budget": budget, "pilot_seconds": pilot, "efficiency": eff, "denoised": denoised,
-            "why": why}
+    return why
 
 
 def plan(desc: dict, settings: dict, cancelled=lambda: False, denoise=False):
