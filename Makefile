@@ -75,13 +75,13 @@ bench: build
 	$(BENCH) bench --scene cornell --size 128 --budgets 1,2,4,8 --plot out/bench-cornell.png
 
 # The seed paper's setting: a large scene lit by one small light (pybullet's monastery),
-# naive and NEE, every method, also after OIDN; table + out/bench-monastery.png. About 5
-# minutes on 2 cores.
+# naive and NEE, every method and auto, also after OIDN, against Cycles raw and with its OIDN;
+# table + out/bench-monastery.png. About 8 minutes on 2 cores.
 bench-monastery: build
 	$(PY) -m pip install -q -r requirements-bench.txt
 	$(PY) tools/make_monastery.py out/monastery.blend --size 192 108
 	$(BENCH) bench --scene out/monastery.blend --budgets 1,2,4,8 --reference-spp 8192 \
-		--denoise --plot out/bench-monastery.png
+		--methods auto,pt,gdpt,pssmlt,gdpssmlt --denoise --peers cycles --plot out/bench-monastery.png
 
 # Ray throughput of the core's BVH against Embree on 1M triangles (prints a table).
 # Against the peers, in one run each (docs/benchmarks-history.md): path-tracing samples/s against
