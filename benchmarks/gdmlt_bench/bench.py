@@ -69,11 +69,11 @@ PEERS = ("cycles", "luxcore", "luxcore-mlt", "mitsuba")
 
 
 def peer_rows(peer, scene, desc, budgets, nee, max_bounces, threads, size, denoise=False):
-    """Images of a peer renderer at each budget, or a reason it was skipped. Cycles renders
-    the .blend itself (or the built-in scene rebuilt in Blender); LuxCore and Mitsuba render
-    the translation of the scene arrays (gdmlt.peers), when the scene is simple enough. With
-    `denoise`, Cycles also returns its own denoised images of the same renders (imgs is then
-    a pair: raw, denoised)."""
+    """(images at each budget, denoised images or None, note), or (None, None, the reason it
+    was skipped). Cycles renders the .blend itself (or the built-in scene rebuilt in Blender);
+    LuxCore and Mitsuba render the translation of the scene arrays (gdmlt.peers), when the
+    scene is simple enough. With `denoise`, Cycles also returns its own denoised images of the
+    same renders; the other peers never do."""
     from . import peers
 
     try:
@@ -83,17 +83,18 @@ def peer_rows(peer, scene, desc, budgets, nee, max_bounces, threads, size, denoi
     if peer == "cycles":
         blend = scene if str(scene).lower().endswith(".blend") else None
         if blend is None and simple is None:
-            return None, f"skipped: {why}"
+            return None, None, f"skipped: {why}"
         imgs, times, _, *den = peers.cycles_render(budgets, max_bounces, nee, threads, desc=None if blend else desc,
                                                    blend=blend, size=size, denoise=denoise)
-        return (imgs, den[0]) if denoise else imgs, f"cycles wall time per budget (sync included): {', '.join(f'{t:.2f}' for t in times)} s"
+        note = f"cycles wall time per budget (sync included): {', '.join(f'{t:.2f}' for t in times)} s"
+        return imgs, (den[0] if denoise else None), note
     if simple is None:
-        return None, f"skipped: {why}"
+        return None, None, f"skipped: {why}"
     if peer.startswith("luxcore"):
         imgs, times, samples = peers.luxcore_render(simple, budgets, max_bounces, nee,
                                                     sampler="METROPOLIS" if peer == "luxcore-mlt" else "SOBOL",
                                                     threads=threads)
-        return imgs, None
+        return imgs, None, None
     mi, dr = peers.import_mitsuba(threads)
     msc = peers.mitsuba_scene(mi, simple, max_bounces, nee)
     peers.mitsuba_render(mi, msc, 2)  # compile the kernels
@@ -111,7 +112,7 @@ def peer_rows(peer, scene, desc, budgets, nee, max_bounces, threads, size, denoi
         imgs.append(peers.mitsuba_render(mi, msc, spp, seed=1))
         used.append(time.perf_counter() - t)
         per_spp = used[-1] / spp  # Mitsuba has no time limit: refine the rate as it goes
-    return imgs, f"mitsuba time used per budget: {', '.join(f'{u:.2f}' for u in used)} s (spp set from a timed run)"
+    return imgs, None, f"mitsuba time used per budget: {', '.join(f'{u:.2f}' for u in used)} s (spp set from a timed run)"
 
 
 def run(scene="cornell", size=None, budgets=(1.0, 2.0, 4.0), methods=("pt", "gdpt", "pssmlt", "gdpssmlt"),
@@ -189,14 +190,13 @@ def run(scene="cornell", size=None, budgets=(1.0, 2.0, 4.0), methods=("pt", "gdp
                 add_row(m + "+oidn", nee, dcells)
         for peer in peers:
             try:
-                imgs, note = peer_rows(peer, scene, desc, budgets, nee, max_bounces, threads, size,
-                                       denoise=denoise and peer == "cycles")
+                raw, den, note = peer_rows(peer, scene, desc, budgets, nee, max_bounces, threads, size,
+                                           denoise=denoise and peer == "cycles")
             except Exception as e:  # noqa: BLE001 — a peer that fails is reported, the bench goes on
-                imgs, note = None, f"failed: {e}"
-            if imgs is None:
+                raw, den, note = None, None, f"failed: {e}"
+            if raw is None:
                 out(f"# {peer} ({'NEE' if nee else 'naive'}): {note}")
                 continue
-            raw, den = imgs if denoise and peer == "cycles" else (imgs, None)
             add_row(peer, nee, [metrics(i, ref) for i in raw])
             if den is not None:  # Cycles' own denoiser on the same renders
                 add_row(peer + "+oidn", nee, [metrics(i, ref) for i in den])

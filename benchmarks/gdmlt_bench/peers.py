@@ -409,7 +409,7 @@ def _cycles_child(inp: str, outp: str):
         t = time.perf_counter()
         bpy.ops.render.render(write_still=True)
         times.append(time.perf_counter() - t)
-        layers = _exr_layers(path)
+        layers = exr_layers(path)
         if cfg.get("denoise"):
             images.append(layers["Noisy Image"])
             denoised.append(layers["Combined"])
@@ -419,17 +419,21 @@ def _cycles_child(inp: str, outp: str):
              **({"denoised": np.stack(denoised)} if denoised else {}))
 
 
-def _exr_layers(path: str) -> dict:
-    """{pass name: H×W×3 RGB, top row first} of a multi-layer EXR that Blender wrote (one
-    part per pass, "ViewLayer.Noisy Image" → "Noisy Image")."""
+def exr_layers(path, rgb_only=True) -> dict:
+    """{pass name: H×W×C, top row first} of a multi-layer EXR that Blender wrote (one part
+    per pass, "ViewLayer.Noisy Image" → "Noisy Image"): its colour passes as RGB, or with
+    `rgb_only=False` every pass with all its channels (Depth as H×W×1)."""
     import OpenEXR
 
     out = {}
-    with OpenEXR.File(path) as f:
+    with OpenEXR.File(str(path)) as f:
         for part in f.parts:
             a = np.asarray(next(iter(part.channels.values())).pixels, np.float32)
-            if a.ndim == 3 and a.shape[2] >= 3:
-                out[part.name().split(".", 1)[1]] = a[..., :3].copy()
+            name = part.name().split(".", 1)[1]
+            if not rgb_only:
+                out[name] = a[..., None] if a.ndim == 2 else a
+            elif a.ndim == 3 and a.shape[2] >= 3:
+                out[name] = a[..., :3].copy()
     return out
 
 

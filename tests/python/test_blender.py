@@ -470,7 +470,7 @@ def test_clamping_agrees_with_cycles(bpy_mod, tmp_out, method):
 
 def _multilayer_passes(bpy, scene, path):
     """F12 into a multilayer EXR; {pass name: array (H, W, C)}, rows from the top."""
-    import OpenEXR
+    from gdmlt_bench.peers import exr_layers
 
     img = scene.render.image_settings
     img.media_type = "MULTI_LAYER_IMAGE"  # Blender 5: a multilayer EXR
@@ -479,12 +479,7 @@ def _multilayer_passes(bpy, scene, path):
     scene.render.filepath = str(path)
     scene.render.use_file_extension = False
     bpy.ops.render.render(write_still=True)
-    out = {}
-    with OpenEXR.File(str(path)) as f:
-        for part in f.parts:
-            a = np.asarray(next(iter(part.channels.values())).pixels, np.float32)
-            out[part.name().split(".", 1)[1]] = a[..., None] if a.ndim == 2 else a
-    return out
+    return exr_layers(path, rgb_only=False)
 
 
 def _passes_from_cycles_and_gdmlt(bpy, tmp_out, tag, method, spp, setup):
