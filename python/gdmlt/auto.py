@@ -143,12 +143,16 @@ def choose(desc: dict, settings: dict, cancelled=lambda: False, denoise=False) -
             layers.append(res["layers"])
             elapsed += res["stats"]["elapsed"]
             samples += res["stats"]["spp_min"]
+            if samples == 0:
+                break  # its fixed cost outlasts t_each (a Metropolis bootstrap): a second would too
+        if samples == 0 and layers:
+            eff[m] = float("inf")
+            continue
         if len(layers) < 2:
             break
         v = relative_variance(layers[0]["Combined"], layers[1]["Combined"])
-        # a render that finished no sample (its time ran out first) or two identical images
-        # say nothing about the error: unknown, never "perfect"
-        eff[m] = v * elapsed / 2 if samples > 0 and v > 0 else float("inf")
+        # two identical images say nothing about the error: unknown, never "perfect"
+        eff[m] = v * elapsed / 2 if v > 0 else float("inf")
         pairs[m] = (layers, elapsed)
         if m == "pt":
             pt_rate = elapsed / max(samples, 1) / (ww * wh)  # seconds per sample per pixel

@@ -92,10 +92,14 @@ def test_blender_automatic_method_renders_and_reports_its_choice(bpy_mod):
 
 def test_a_method_whose_pilot_did_no_work_is_not_chosen(cornell, monkeypatch):
     """A pilot render that finished no sample (two black images: zero difference) once made
-    its method look perfect (division by zero in the report, failed before)."""
+    its method look perfect (division by zero in the report, failed before). Nor is it
+    rendered a second time: at a 1 s budget gdpssmlt's bootstrap outlasts its 0.02-s pilot
+    renders, and the second one cost 4% of the budget for nothing (failed before: 2 renders)."""
     real = gdmlt.render
+    calls = []
 
     def starved(scene, method="pt", **kw):
+        calls.append(method)
         res = real(scene, method=method, **kw)
         if method == "gdpssmlt":
             res["layers"]["Combined"] = np.zeros_like(res["layers"]["Combined"])
@@ -105,6 +109,7 @@ def test_a_method_whose_pilot_did_no_work_is_not_chosen(cornell, monkeypatch):
     monkeypatch.setattr(gdmlt, "render", starved)
     pick = auto.choose(cornell, {"time_limit": 1.0, "max_bounces": 3})
     assert pick["efficiency"]["gdpssmlt"] == float("inf") and pick["method"] != "gdpssmlt"
+    assert calls.count("gdpssmlt") == 1 and calls.count("pt") == calls.count("gdpt") == 2, calls
 
 
 def test_with_the_denoiser_on_the_pilot_ranks_the_images_the_user_will_get(cornell, monkeypatch):
