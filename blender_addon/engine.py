@@ -239,7 +239,9 @@ class GDMLTRenderEngine(bpy.types.RenderEngine):
         if st["invalid_samples"]:
             warn(f"{st['invalid_samples']} samples were NaN/Inf and were dropped")
         extra = f" | acceptance {st['acceptance'] * 100:.0f}%" if st.get("chains") else ""
-        self.update_stats("GDMLT", f"{label} | {st['spp_max']} per pixel | render {st['elapsed']:.2f} s, "
+        from gdmlt.progress import samples_per_pixel
+
+        self.update_stats("GDMLT", f"{label} | {samples_per_pixel(st)} per pixel | render {st['elapsed']:.2f} s, "
                           f"export {export_time:.2f} s{extra}" + (" | denoised" if denoised else "") + (" | cancelled" if st["cancelled"] else ""))
 
     # ---- viewport (Rendered shading) ----

@@ -35,6 +35,17 @@ class GDMLTRenderSettings(bpy.types.PropertyGroup):
                          description="Light transport algorithm")
     samples: IntProperty(name="Samples", default=D["spp"], min=1, soft_max=4096,
                          description="Samples per pixel (mutations per pixel for Metropolis methods)")
+    use_adaptive_sampling: BoolProperty(name="Noise Threshold", default=D["adaptive_threshold"] > 0,
+                                        description="Adaptive sampling, as Cycles': pixels whose estimate has settled "
+                                                    "stop sampling and the time goes to the noisy ones (Path Tracing, "
+                                                    "and Automatic when it picks path tracing)")
+    adaptive_threshold: FloatProperty(name="Noise Threshold", default=D["adaptive_threshold"] or 0.01, min=0.0, max=1.0,
+                                      soft_min=0.001, precision=4, step=0.1,
+                                      description="Relative noise level at which a pixel stops sampling (Cycles' "
+                                                  "Noise Threshold; lower is cleaner and slower)")
+    adaptive_min_samples: IntProperty(name="Min Samples", default=D["adaptive_min_samples"], min=0, max=1 << 24,
+                                      description="Samples every pixel takes before adaptive sampling may stop it "
+                                                  "(0 = automatic: 64 at a threshold of 0.01)")
     preview_samples: IntProperty(name="Viewport", default=1024, min=0, soft_max=4096,
                                  description="Samples per pixel of the viewport's Rendered shading, one path-traced "
                                              "sample per pass (0 = unlimited)")

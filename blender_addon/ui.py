@@ -30,8 +30,16 @@ class GDMLT_PT_sampling(GDMLTRenderPanel, bpy.types.Panel):
         s = context.scene.gdmlt
         layout = self.split_layout()
         layout.prop(s, "method")
+        row = layout.row(heading="Noise Threshold")  # as Cycles' Render panel
+        row.prop(s, "use_adaptive_sampling", text="")
+        sub = row.row()
+        sub.active = s.use_adaptive_sampling and s.method in {"AUTO", "PT"}
+        sub.prop(s, "adaptive_threshold", text="")
         col = layout.column(align=True)
-        col.prop(s, "samples", text="Render Samples")
+        col.prop(s, "samples", text="Max Samples" if s.use_adaptive_sampling else "Render Samples")
+        sub = col.column(align=True)
+        sub.active = s.use_adaptive_sampling
+        sub.prop(s, "adaptive_min_samples")
         col.prop(s, "time_limit")
         layout.prop(s, "preview_samples", text="Viewport Samples")
         layout.prop(s, "seed")

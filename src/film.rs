@@ -55,6 +55,10 @@ pub struct FilmRow {
     pub transparent: Vec<f32>,
     pub count: Vec<u32>,
     pub invalid: u64,
+    /// Adaptive sampling only (empty otherwise): the sum of each pixel's odd-numbered
+    /// samples (its 2nd, 4th, …), and whether it goes on sampling (integrator/adaptive.rs).
+    pub half: Vec<[f32; 3]>,
+    pub active: Vec<bool>,
 }
 
 impl FilmRow {
@@ -67,6 +71,8 @@ impl FilmRow {
             transparent: vec![0.0; width],
             count: vec![0; width],
             invalid: 0,
+            half: Vec::new(),
+            active: Vec::new(),
         }
     }
 
@@ -89,6 +95,9 @@ impl FilmRow {
             }
         };
         acc(&mut self.color[x], c);
+        if !self.half.is_empty() && self.count[x] & 1 == 1 {
+            acc(&mut self.half[x], c);
+        }
         if is_finite_spectrum(radiance) {
             acc(&mut self.direct[x], direct);
         }
@@ -112,6 +121,14 @@ pub struct Film {
 impl Film {
     pub fn new(width: usize, height: usize) -> Film {
         Film { width, height, rows: vec![FilmRow::new(width); height] }
+    }
+
+    /// Keeps what adaptive sampling needs (a half buffer, every pixel active): 13 bytes a pixel.
+    pub fn enable_adaptive(&mut self) {
+        for r in &mut self.rows {
+            r.half = vec![[0.0; 3]; self.width];
+            r.active = vec![true; self.width];
+        }
     }
 
     pub fn invalid_samples(&self) -> u64 {

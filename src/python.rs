@@ -545,7 +545,7 @@ fn numpy_to_image(obj: &Bound<'_, PyAny>) -> PyResult<Image> {
 /// the calling thread; if it returns True the render stops and keeps what it has. Every
 /// setting left out (or None) takes `RenderSettings::default()`'s value (`DEFAULT_SETTINGS`).
 #[pyfunction]
-#[pyo3(signature = (scene, method=None, spp=None, time_limit=None, max_bounces=None, nee=None, seed=None, threads=None, reconstruction=None, alpha_rec=None, large_step_probability=None, alpha_target=None, chains=None, progress=None, preview=None, diffuse_bounces=None, glossy_bounces=None, transmission_bounces=None, transparent_bounces=None, clamp_direct=None, clamp_indirect=None, data_passes=None))]
+#[pyo3(signature = (scene, method=None, spp=None, time_limit=None, max_bounces=None, nee=None, seed=None, threads=None, reconstruction=None, alpha_rec=None, large_step_probability=None, alpha_target=None, chains=None, progress=None, preview=None, diffuse_bounces=None, glossy_bounces=None, transmission_bounces=None, transparent_bounces=None, clamp_direct=None, clamp_indirect=None, data_passes=None, adaptive_threshold=None, adaptive_min_samples=None))]
 #[allow(clippy::too_many_arguments)]
 fn render<'py>(
     py: Python<'py>,
@@ -571,6 +571,8 @@ fn render<'py>(
     clamp_direct: Option<f32>,
     clamp_indirect: Option<f32>,
     data_passes: Option<bool>,
+    adaptive_threshold: Option<f32>,
+    adaptive_min_samples: Option<u32>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let d = RenderSettings::default();
     let method = match method {
@@ -604,6 +606,8 @@ fn render<'py>(
         alpha_target: alpha_target.unwrap_or(d.alpha_target),
         chains: chains.unwrap_or(d.chains),
         data_passes: data_passes.unwrap_or(d.data_passes),
+        adaptive_threshold: adaptive_threshold.unwrap_or(d.adaptive_threshold),
+        adaptive_min_samples: adaptive_min_samples.unwrap_or(d.adaptive_min_samples),
         ..d
     };
     settings.validate().map_err(|e| verr(e.to_string()))?;
@@ -730,6 +734,8 @@ fn default_settings(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
     out.set_item("clamp_direct", shortest(d.path.clamp_direct))?;
     out.set_item("clamp_indirect", shortest(d.path.clamp_indirect))?;
     out.set_item("data_passes", d.data_passes)?;
+    out.set_item("adaptive_threshold", shortest(d.adaptive_threshold))?;
+    out.set_item("adaptive_min_samples", d.adaptive_min_samples)?;
     Ok(out)
 }
 

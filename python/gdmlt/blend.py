@@ -13,7 +13,8 @@ PROPERTY_OF = {"method": "method", "spp": "samples", "time_limit": "time_limit",
                "chains": "chains", "denoise": "use_denoising", "diffuse_bounces": "diffuse_bounces",
                "glossy_bounces": "glossy_bounces", "transmission_bounces": "transmission_bounces",
                "transparent_bounces": "transparent_max_bounces", "clamp_direct": "clamp_direct",
-               "clamp_indirect": "clamp_indirect"}
+               "clamp_indirect": "clamp_indirect", "adaptive_threshold": "adaptive_threshold",
+               "adaptive_min_samples": "adaptive_min_samples"}
 
 
 def settings_of(props) -> dict:
@@ -24,6 +25,8 @@ def settings_of(props) -> dict:
     for key, prop in PROPERTY_OF.items():
         value = getattr(props, prop)
         out[key] = value.lower() if key in ("method", "reconstruction") else value
+    if not props.use_adaptive_sampling:  # Cycles' checkbox beside the threshold
+        out["adaptive_threshold"] = 0.0
     return out
 
 

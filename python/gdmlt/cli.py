@@ -41,6 +41,7 @@ _bounces = _int_at_least(0, 1024)
 _threads = _int_at_least(0, 1024)
 _chains = _int_at_least(0, 1_000_000)
 _side = _int_at_least(1, 65536)
+_min_samples = _int_at_least(0, 1 << 24)
 
 
 def _nonneg_float(s):
@@ -59,6 +60,13 @@ def _pos_float(s):
     v = _nonneg_float(s)
     if v <= 0.0:
         raise argparse.ArgumentTypeError(f"must be > 0, got {s}")
+    return v
+
+
+def _unit_float(s):
+    v = _nonneg_float(s)
+    if v > 1.0:
+        raise argparse.ArgumentTypeError(f"must be at most 1, got {s}")
     return v
 
 
@@ -100,6 +108,13 @@ def build_parser():
                    help=f"screened-Poisson weight of the primal image in the reconstruction (default {D['alpha_rec']})")
     r.add_argument("--spp", type=_positive_int, help=f"samples (PT methods) or mutations (Metropolis methods) per pixel (default: the file's, else {D['spp']})")
     r.add_argument("--time", type=_nonneg_float, dest="time_limit", help="time limit in seconds, 0 = none; halts on whichever of --spp and --time comes first")
+    r.add_argument("--noise-threshold", type=_unit_float, dest="adaptive_threshold",
+                   help="pt: adaptive sampling, as Cycles' Noise Threshold: pixels whose estimate has settled to "
+                        "this relative error stop sampling and the rest get the time (0 = off, every pixel gets "
+                        f"--spp; default: the file's, else {D['adaptive_threshold']})")
+    r.add_argument("--adaptive-min-samples", type=_min_samples, dest="adaptive_min_samples",
+                   help="pt: samples every pixel takes before adaptive sampling may stop it (default 0 = automatic: "
+                        "64 at a threshold of 0.01)")
     r.add_argument("--max-bounces", type=_bounces, help=f"maximum bounces as in Cycles (0 = direct light; default {D['max_bounces']})")
     for kind in BOUNCE_KINDS:
         default = D[f"{kind}_bounces"]
@@ -169,6 +184,7 @@ def _settings(args):
         "reconstruction": args.reconstruction, "alpha_rec": args.alpha_rec,
         "alpha_target": args.alpha_target, "large_step_probability": args.large_step_probability,
         "chains": args.chains, "clamp_direct": args.clamp_direct, "clamp_indirect": args.clamp_indirect,
+        "adaptive_threshold": args.adaptive_threshold, "adaptive_min_samples": args.adaptive_min_samples,
         **{f"{k}_bounces": getattr(args, f"{k}_bounces") for k in BOUNCE_KINDS}}.items()
         if v is not None}
 
@@ -206,6 +222,7 @@ SETTING_PARSERS = {"method": _choice(*RENDER_METHODS), "spp": _positive_int, "ti
                    "clamp_direct": _nonneg_float, "clamp_indirect": _nonneg_float,
                    "reconstruction": _choice("l1", "l2"), "alpha_rec": _pos_float, "alpha_target": _pos_float,
                    "large_step_probability": _nonneg_float, "chains": _chains, "denoise": _flag,
+                   "adaptive_threshold": _unit_float, "adaptive_min_samples": _min_samples,
                    "width": _side, "height": _side}
 
 
@@ -453,7 +470,9 @@ def _report(args, out: Path, stats: dict, t0: float) -> int:
     png = out.with_suffix(".png")
     print(f"wrote {out}" + (f" and {png}" if not args.no_png and written_by_gdmlt(png) else ""))
     unit = "mutations" if stats.get("chains") else "samples"
-    print(f"render {stats.get('elapsed', 0.0):.2f} s ({stats.get('spp_max', '?')} {unit} per pixel"
+    from .progress import samples_per_pixel
+
+    print(f"render {stats.get('elapsed', 0.0):.2f} s ({samples_per_pixel(stats)} {unit} per pixel"
           f"{', method ' + stats['method'] if 'method' in stats else ''}), total {total:.2f} s")
     return 0
 

@@ -1,5 +1,5 @@
 """Progress reports during a render, shared by the command line and the Blender engine: how
-often a report is worth printing, and the time left."""
+often a report is worth printing, the time left, and the samples a render took."""
 
 
 class ProgressThrottle:
@@ -25,3 +25,10 @@ def seconds_left(fraction: float, elapsed: float):
     if not 0.02 <= fraction < 1.0 or elapsed <= 0:
         return None
     return elapsed * (1.0 - fraction) / fraction
+
+
+def samples_per_pixel(stats: dict) -> str:
+    """The samples per pixel of a finished render: "256", or "16–256" where adaptive sampling
+    (or a time limit in the middle of a pass) left pixels with different counts."""
+    lo, hi = stats.get("spp_min"), stats.get("spp_max", "?")
+    return f"{lo}–{hi}" if lo is not None and lo != hi else f"{hi}"

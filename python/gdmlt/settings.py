@@ -2,12 +2,12 @@
 
 `CORE` are `gdmlt.render`'s (the core's `RenderSettings::default()`, read from the core);
 `PRODUCT` are what a user gets from the command line, the Blender add-on's properties and
-`gdmlt export`: the core's, with the automatic method, 64 samples per pixel and denoising
-on (Cycles' default). The names are `gdmlt.render`'s keyword arguments (plus `denoise`);
+`gdmlt export`: the core's, with the automatic method, 64 samples per pixel, adaptive
+sampling at a noise threshold of 0.01 and denoising on (Cycles' defaults). The names are `gdmlt.render`'s keyword arguments (plus `denoise`);
 `gdmlt.blend.PROPERTY_OF` maps them to the add-on's `scene.gdmlt` properties.
 """
 
 from ._core import DEFAULT_SETTINGS as _CORE_DEFAULTS
 
 CORE = dict(_CORE_DEFAULTS)
-PRODUCT = dict(CORE, method="auto", spp=64, denoise=True)
+PRODUCT = dict(CORE, method="auto", spp=64, adaptive_threshold=0.01, denoise=True)

@@ -2,6 +2,7 @@
 //! construction itself lives in path.rs. This module holds what they share: settings,
 //! halting, progress and cancellation, and the output.
 
+pub mod adaptive;
 pub mod gdpt;
 pub mod memory;
 pub mod mlt;
@@ -72,6 +73,10 @@ pub struct RenderSettings {
     pub chain_start: ChainStart,
     /// Add the Depth and Position passes (passes.rs).
     pub data_passes: bool,
+    /// `pt`: adaptive sampling's noise threshold (adaptive.rs; 0 = off, every pixel gets
+    /// `spp`) and the samples every pixel takes before any stops (0 = automatic).
+    pub adaptive_threshold: f32,
+    pub adaptive_min_samples: u32,
 }
 
 /// Where Metropolis chains start.
@@ -101,6 +106,8 @@ impl Default for RenderSettings {
             chains: 0,
             chain_start: ChainStart::Proportional,
             data_passes: false,
+            adaptive_threshold: 0.0,
+            adaptive_min_samples: 0,
         }
     }
 }
@@ -140,6 +147,12 @@ impl RenderSettings {
         // lit wall has F = 0 there: biased), so the target keeps a share of the primal
         if !(self.alpha_target.is_finite() && self.alpha_target > 0.0) {
             return Err(RenderError::Settings("target alpha must be a finite number > 0".into()));
+        }
+        if !(self.adaptive_threshold.is_finite() && (0.0..=1.0).contains(&self.adaptive_threshold)) {
+            return Err(RenderError::Settings("noise threshold must be in [0, 1] (0 = adaptive sampling off)".into()));
+        }
+        if self.adaptive_min_samples > 1 << 24 {
+            return Err(RenderError::Settings("adaptive min samples must be at most 16777216".into()));
         }
         if self.chains > 1_000_000 {
             return Err(RenderError::Settings("chains must be at most 1000000".into()));

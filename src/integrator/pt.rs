@@ -3,6 +3,7 @@
 //! film row, and each sample's random stream depends only on (seed, pixel, sample index),
 //! so the image is the same for any thread count.
 
+use super::adaptive::{self, AdaptiveSampling};
 use super::{RenderControl, RenderOutput, RenderSettings, RenderStats};
 use crate::film::{Film, FilmRow};
 use crate::path::{trace_path_from, Primary};
@@ -22,60 +23,72 @@ pub fn pixel_sampler(seed: u64, pixel: usize, sample: u32) -> SobolSampler {
 /// neighbouring pixels) look through nearly the same point, so their rays share a traversal.
 const PACKET: usize = 8;
 
-/// Renders samples [from, to) of every pixel of one row, in the order (pixel, sample); the
-/// camera rays of each run of `PACKET` such samples are traced as one packet.
-fn render_row(
-    scene: &Scene,
-    settings: &RenderSettings,
-    control: &RenderControl,
-    y: usize,
-    row: &mut FilmRow,
-    from: u32,
-    to: u32,
-) {
+/// Renders `n` more samples of every pixel of one row that is still sampling (all of them
+/// unless adaptive sampling stopped some), in the order (pixel, sample): a pixel's samples
+/// continue its own sequence (indices count..count + n). The camera rays of each run of
+/// `PACKET` such samples are traced as one packet.
+fn render_row(scene: &Scene, settings: &RenderSettings, control: &RenderControl, y: usize, row: &mut FilmRow, n: u32) {
     let w = row.count.len();
-    let mut work = (0..w).flat_map(|x| (from..to).map(move |s| (x, s)));
+    // each sampling pixel's first sample index in this pass
+    let first: Vec<Option<u32>> =
+        (0..w).map(|x| row.active.get(x).copied().unwrap_or(true).then_some(row.count[x])).collect();
+    let mut work = first
+        .iter()
+        .enumerate()
+        .filter_map(|(x, c)| c.map(|c| (x, c)))
+        .flat_map(|(x, c)| (c..c + n).map(move |s| (x, s)));
     let mut rays = [CameraRay::default(); PACKET];
     let mut batch: [(usize, Vec2, SobolSampler); PACKET] =
         std::array::from_fn(|_| (0, Vec2::ZERO, SobolSampler::new(0, 0, 0)));
+    let mut traced = 0u64;
     loop {
-        let mut n = 0;
+        let mut k_n = 0;
         for ((slot, ray), (x, s)) in batch.iter_mut().zip(rays.iter_mut()).zip(work.by_ref()) {
             let mut sampler = pixel_sampler(settings.seed, y * w + x, s);
             let raster = scene.camera.pixel_raster(x as f32, y as f32, sampler.next_2d());
             let lens = sampler.next_2d();
             *ray = scene.camera.generate_ray(raster, lens);
             *slot = (x, lens, sampler);
-            n += 1;
+            k_n += 1;
         }
-        if n == 0 {
+        if k_n == 0 {
             break;
         }
-        let hits = scene.intersect_camera_rays(&rays[..n]);
-        for (k, (x, lens, sampler)) in batch.iter_mut().enumerate().take(n) {
+        let hits = scene.intersect_camera_rays(&rays[..k_n]);
+        for (k, (x, lens, sampler)) in batch.iter_mut().enumerate().take(k_n) {
             let primary = Primary { lens: *lens, ray: rays[k], hit: hits[k] };
             // PT needs no recorded vertices or events: nothing is recorded on its hot path.
             let c = trace_path_from(scene, &settings.path, primary, sampler, None);
             row.add(*x, &c);
         }
+        traced += k_n as u64;
     }
-    control.work_done.fetch_add(w as u64 * (to - from) as u64, Ordering::Relaxed);
+    control.work_done.fetch_add(traced, Ordering::Relaxed);
 }
 
 pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl) -> RenderOutput {
     let (w, h) = (scene.camera.width as usize, scene.camera.height as usize);
     let mut film = Film::new(w, h);
+    let adaptive = AdaptiveSampling::new(settings.adaptive_threshold, settings.adaptive_min_samples);
+    if adaptive.is_some() {
+        film.enable_adaptive();
+    }
     control.work_total.store(w as u64 * h as u64 * settings.spp as u64, Ordering::Relaxed);
     // Passes over the whole image, growing so that each takes a fraction of a second:
-    // the halt checks, progress and intermediate results stay responsive.
+    // the halt checks, progress and intermediate results stay responsive. With adaptive
+    // sampling a pass also ends at each convergence check, and the render ends when no
+    // pixel is left sampling.
     let mut done = 0u32;
     let mut batch = 1u32;
     while done < settings.spp && !control.should_stop() {
-        let to = (done + batch).min(settings.spp);
+        let mut to = (done + batch).min(settings.spp);
+        if let Some(a) = &adaptive {
+            to = a.pass_end(done, to);
+        }
         let t0 = std::time::Instant::now();
         film.rows.par_iter_mut().enumerate().for_each(|(y, row)| {
             if !control.should_stop() {
-                render_row(scene, settings, control, y, row, done, to);
+                render_row(scene, settings, control, y, row, to - done);
             }
         });
         done = to;
@@ -83,6 +96,11 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl)
         let dt = t0.elapsed().as_secs_f64();
         if dt < 0.1 {
             batch = (batch * 2).min(64);
+        }
+        if let Some(a) = adaptive.filter(|a| a.checks_at(done)) {
+            if adaptive::update_active(&mut film, a.threshold) == 0 {
+                break;
+            }
         }
     }
     let (spp_min, spp_max) = film.sample_count_range();
@@ -126,7 +144,7 @@ mod tests {
         let w = 13;
         for y in 0..5 {
             let mut packets = FilmRow::new(w);
-            render_row(&scene, &settings, &control, y, &mut packets, 0, 3);
+            render_row(&scene, &settings, &control, y, &mut packets, 3);
             let mut single = FilmRow::new(w);
             for x in 0..w {
                 for s in 0..3 {

@@ -275,6 +275,7 @@ def open_scene(bpy, name, engine, spp, seed, keep=None):
     else:
         scene.render.engine = "GDMLT"
         scene.gdmlt.samples, scene.gdmlt.seed = spp, seed
+        scene.gdmlt.use_adaptive_sampling = False  # every pixel `spp` samples, as the Cycles reference
     return scene
 
 

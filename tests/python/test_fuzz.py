@@ -19,7 +19,8 @@ from conftest import read_exr
 NUMBERS = st.sampled_from(["0", "1", "-1", "3", "0.5", "1e20", "-1e-9", "nan", "inf", "abc", "", "2" * 25,
                            str(2 ** 64), str(2 ** 32), "65537"])
 OPTIONS = st.sampled_from(["--spp", "--time", "--max-bounces", "--seed", "--threads", "--chains", "--alpha-rec",
-                           "--alpha-target", "--large-step", "--width", "--height", "--recon", "--method"])
+                           "--alpha-target", "--large-step", "--width", "--height", "--recon", "--method",
+                           "--noise-threshold", "--adaptive-min-samples"])
 
 
 @settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])

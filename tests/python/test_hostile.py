@@ -38,6 +38,9 @@ def test_a_time_limit_beyond_any_clock_renders_to_the_sample_count(tmp_path):
     ["--max-bounces", str(10 ** 12)],
     ["--chains", str(10 ** 12)],
     ["--threads", "-1"],
+    ["--noise-threshold", "2"],
+    ["--noise-threshold", "-0.01"],
+    ["--adaptive-min-samples", str(2 ** 40)],
 ])
 def test_out_of_range_numbers_are_usage_errors_not_tracebacks(tmp_path, args):
     r = _cli("render", "cornell", "-o", str(tmp_path / "x.exr"), *args)
