@@ -163,20 +163,25 @@ def choose(desc: dict, settings: dict, cancelled=lambda: False, denoise=False) -
     if eff[best] == float("inf"):
         best = "pt"  # nothing measured: the method with the least fixed cost
     # 4. for an image that will be denoised: the raw winner against pt, after OIDN
-    denoised = {}
+    denoised, note = {}, ""
     if denoise:
-        loader.join()
+        # with a time limit, OIDN's loading (cold: up to a second) is waited for at most as
+        # long as the pilot renders took, so that it cannot eat a short budget
+        loader.join(timeout=max(0.05, time.perf_counter() - t0) if limit else None)
         # pt first already stays first: OIDN lowers its error at least as much as any other's
-        if best != "pt" and eff.get("pt", float("inf")) < float("inf") and not cancelled() and oidn.available():
-            denoised = _after_denoising({m: pairs[m] for m in ("pt", best)}, common.get("threads", 0))
-            best = min(denoised, key=denoised.get)
+        if best != "pt" and eff.get("pt", float("inf")) < float("inf") and not cancelled():
+            if loader.is_alive():
+                best, note = "pt", "; OIDN still loading: pt, first after denoising on every scene measured"
+            elif oidn.available():
+                denoised = _after_denoising({m: pairs[m] for m in ("pt", best)}, common.get("threads", 0))
+                best = min(denoised, key=denoised.get)
     # 5. the whole render's budget, and why
     pilot = time.perf_counter() - t0
     if limit:
         budget = limit
     else:
         budget = max(pilot, float(settings.get("spp", 64)) * (pt_rate or 0.0) * w * h)
-    why = _explain(best, eff, denoised, f"pilot {pilot:.2f} s on a {ww}×{wh} window")
+    why = _explain(best, eff, denoised, f"pilot {pilot:.2f} s on a {ww}×{wh} window") + note
     return {"method": best, "budget": budget, "pilot_seconds": pilot, "efficiency": eff, "denoised": denoised,
             "why": why}
 
