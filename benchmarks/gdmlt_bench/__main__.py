@@ -9,7 +9,7 @@ pathbench, raybench, reconbench, scalebench, skipbench."""
 import argparse
 import sys
 
-from gdmlt.cli import BUILTIN, RENDER_METHODS, _nonneg_int, _pos_float, _positive_int
+from gdmlt.cli import BUILTIN, RENDER_METHODS, _nonneg_int, _pos_float, _positive_int, _unit_float
 
 
 def build_parser():
@@ -67,6 +67,9 @@ def build_parser():
     b.add_argument("--alpha-target", type=float, help="GDPSSMLT's α_target for every run")
     b.add_argument("--threads", type=_nonneg_int, default=0)
     b.add_argument("--plot", help="write a PNG of relMSE against time (needs matplotlib)")
+    b.add_argument("--adaptive", type=_unit_float, default=0.0, metavar="THRESHOLD",
+                   help="adaptive sampling at this noise threshold for GDMLT's pt and auto and for Cycles, as "
+                        "artists render (Blender's default 0.01; default 0 = off, every pixel sampled alike)")
     b.add_argument("--denoise", action="store_true",
                    help="also report every render after Intel Open Image Denoise (needs pyoidn)")
     b.add_argument("--peers", default="",
@@ -107,6 +110,8 @@ def main(argv=None):
             parser.error("--size takes N or W H")
         size = None if not args.size else (args.size[0], args.size[-1])
         extra = {} if args.alpha_target is None else {"alpha_target": args.alpha_target}
+        if args.adaptive:
+            extra["adaptive_threshold"] = args.adaptive
         from .bench import PEERS
 
         peers = tuple(x.strip() for x in args.peers.split(",") if x.strip())

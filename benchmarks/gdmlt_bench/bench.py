@@ -68,12 +68,12 @@ def scene_desc(scene: str, size):
 PEERS = ("cycles", "luxcore", "luxcore-mlt", "mitsuba")
 
 
-def peer_rows(peer, scene, desc, budgets, nee, max_bounces, threads, size, denoise=False):
+def peer_rows(peer, scene, desc, budgets, nee, max_bounces, threads, size, denoise=False, adaptive=0.0):
     """(images at each budget, denoised images or None, note), or (None, None, the reason it
     was skipped). Cycles renders the .blend itself (or the built-in scene rebuilt in Blender);
     LuxCore and Mitsuba render the translation of the scene arrays (gdmlt.peers), when the
     scene is simple enough. With `denoise`, Cycles also returns its own denoised images of the
-    same renders; the other peers never do."""
+    same renders; the other peers never do. `adaptive`: Cycles' noise threshold (0 = off)."""
     from . import peers
 
     try:
@@ -85,7 +85,7 @@ def peer_rows(peer, scene, desc, budgets, nee, max_bounces, threads, size, denoi
         if blend is None and simple is None:
             return None, None, f"skipped: {why}"
         imgs, times, _, *den = peers.cycles_render(budgets, max_bounces, nee, threads, desc=None if blend else desc,
-                                                   blend=blend, size=size, denoise=denoise)
+                                                   blend=blend, size=size, denoise=denoise, adaptive=adaptive)
         note = f"cycles wall time per budget (sync included): {', '.join(f'{t:.2f}' for t in times)} s"
         return imgs, (den[0] if denoise else None), note
     if simple is None:
@@ -191,7 +191,8 @@ def run(scene="cornell", size=None, budgets=(1.0, 2.0, 4.0), methods=("pt", "gdp
         for peer in peers:
             try:
                 raw, den, note = peer_rows(peer, scene, desc, budgets, nee, max_bounces, threads, size,
-                                           denoise=denoise and peer == "cycles")
+                                           denoise=denoise and peer == "cycles",
+                                           adaptive=extra.get("adaptive_threshold", 0.0))
             except Exception as e:  # noqa: BLE001 — a peer that fails is reported, the bench goes on
                 raw, den, note = None, None, f"failed: {e}"
             if raw is None:

@@ -389,6 +389,11 @@ def _cycles_child(inp: str, outp: str):
             mat.cycles.emission_sampling = "NONE"
         if scene.world is not None:
             scene.world.cycles.sampling_method = "NONE"
+    if cfg.get("adaptive"):
+        # as artists render: Cycles' adaptive sampling (automatic minimum samples)
+        scene.cycles.use_adaptive_sampling = True
+        scene.cycles.adaptive_threshold = cfg["adaptive"]
+        scene.cycles.adaptive_min_samples = 0
     if cfg.get("denoise"):
         # Cycles as artists render: its default denoiser (OIDN, albedo + normal guides,
         # "Accurate" prefilter); the raw image of the same samples is the Noisy Image pass
@@ -438,15 +443,16 @@ def exr_layers(path, rgb_only=True) -> dict:
 
 
 def cycles_render(budgets, max_bounces: int, nee: bool, threads=0, desc=None, blend=None, size=None, seed=1,
-                  denoise=False):
+                  denoise=False, adaptive=0.0):
     """Cycles images after each time limit (one render per budget, Cycles' own time limit),
     of a .blend file or of a scene dict that `simple_scene` accepts (rebuilt in Blender by
     gdmlt.blendscene). Runs in a child process (bpy). Returns (images, times, samples), and
     with `denoise` also Cycles' own denoised images of the same renders (the raw ones are
-    then its Noisy Image pass)."""
+    then its Noisy Image pass). `adaptive`: adaptive sampling at that noise threshold, as
+    artists render (0 = off: every pixel sampled alike)."""
     cfg = dict(budgets=list(budgets), max_bounces=max_bounces, nee=nee, threads=threads, seed=seed,
                blend=str(Path(blend).resolve()) if blend else None, size=list(size) if size else None,
-               denoise=bool(denoise))
+               denoise=bool(denoise), adaptive=float(adaptive))
     arrays = {}
     if desc is not None:
         simple_scene(desc)  # refuses what the rebuilt scene would not reproduce

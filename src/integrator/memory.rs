@@ -4,7 +4,7 @@
 //! The per-pixel figures are the films and accumulation buffers each method keeps, f32
 //! throughout, plus the reconstruction's workspace (peak resident memory above the built
 //! scene, `gdmlt_bench scalebench --memory`, 1024² and 1920×1080 Cornell box, one sample,
-//! L1; 2026-12-02): `pt` 105 B, `gdpt` 155 B, `pssmlt` 69 B, `gdpssmlt` 164 B per pixel,
+//! L1; 2026-12-02): `pt` 105 B (+13 B with adaptive sampling), `gdpt` 155 B, `pssmlt` 69 B, `gdpssmlt` 164 B per pixel,
 //! the same on 1 and 2 threads (the Metropolis methods keep one image whatever the thread
 //! count; their bootstrap (≤ 4 MB) and splat logs (≤ 6 MB on up to 16 threads) do not grow
 //! with the image).
