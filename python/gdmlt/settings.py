@@ -3,8 +3,9 @@
 `CORE` are `gdmlt.render`'s (the core's `RenderSettings::default()`, read from the core);
 `PRODUCT` are what a user gets from the command line, the Blender add-on's properties and
 `gdmlt export`: the core's, with the automatic method, 64 samples per pixel, adaptive
-sampling at a noise threshold of 0.01 and denoising on (Cycles' defaults). The names are `gdmlt.render`'s keyword arguments (plus `denoise`);
-`gdmlt.blend.PROPERTY_OF` maps them to the add-on's `scene.gdmlt` properties.
+sampling at a noise threshold of 0.01 and denoising on (Cycles' defaults). The names are
+`gdmlt.render`'s keyword arguments (plus `denoise`); `gdmlt.blend.PROPERTY_OF` maps them to
+the add-on's `scene.gdmlt` properties.
 """
 
 from ._core import DEFAULT_SETTINGS as _CORE_DEFAULTS

@@ -24,7 +24,7 @@ def test_settled_pixels_stop_and_the_image_keeps_its_mean():
     assert abs(a.mean() / u.mean() - 1) < 0.02, (a.mean(), u.mean())
     # at the threshold's upper end every pixel stops at the minimum
     loose = gdmlt.render(scene, method="pt", spp=256, seed=1, adaptive_threshold=1.0, adaptive_min_samples=16)
-    assert loose["stats"]["spp_max"] <= 32 and loose["stats"]["elapsed"] < uniform["stats"]["elapsed"]
+    assert loose["stats"]["spp_max"] <= 32, loose["stats"]
 
 
 def test_the_command_line_takes_a_noise_threshold_and_reports_the_samples_range(tmp_path, capsys):
