@@ -154,12 +154,17 @@ mod tests {
             }
         }
         film.rows[2].half[4] = [3.0; 3]; // pixel (4, 2) disagrees with itself
-        assert_eq!(update_active(&mut film, 0.01), 6);
+        assert_eq!(update_active(&mut film, 0.01), 9);
         for (y, row) in film.rows.iter().enumerate() {
             for x in 0..6 {
                 let near = (3..=5).contains(&x) && (1..=3).contains(&y);
                 assert_eq!(row.active[x], near, "pixel ({x}, {y})");
             }
         }
+        // at a corner the neighbourhood is cut by the image's edge
+        film.rows[2].half[4] = [1.0; 3];
+        film.rows[0].half[0] = [3.0; 3];
+        assert_eq!(update_active(&mut film, 0.01), 4);
+        assert!(film.rows[1].active[1] && !film.rows[2].active[0] && !film.rows[0].active[2]);
     }
 }
