@@ -13,7 +13,9 @@
 //! within ±2% where it was −10% to −20%, relMSE equal or lower for gdpt, up to 1.2× for
 //! gdpssmlt.
 
-use super::cg::{Problem, RowPlanar, Weights, Workspace, BAND};
+#[cfg(test)]
+use super::cg::BAND;
+use super::cg::{Problem, RowPlanar, Weights, Workspace};
 use super::dct::solve_l2;
 use rayon::prelude::*;
 
@@ -36,7 +38,7 @@ impl Default for IrlsParams {
     /// fewer reweightings lose: 4 × 10 is 5–15% worse than 10 × 10, 20 × 50 2–3% better.
     /// Fewer CG steps per reweighting lose less (same renders, 8 bounces, relMSE ÷ 10 × 10's,
     /// fifth session): 10 × 6 1.02, 10 × 5 1.03, 13 × 4 1.03, 8 × 8 1.02, 6 × 10 1.03, 20 × 2 1.13;
-    /// 10 × 6 takes 0.96–1.18 s at 1920×1080 where 10 × 10 took 1.45–1.6 s (2 cores), so it is
+    /// 10 × 6 took 0.96–1.18 s at 1920×1080 where 10 × 10 took 1.45–1.6 s (2 cores), so it is
     /// the default: at 1080p the half second it saves buys more samples than the 2% it costs
     /// within a render of up to about 20 s.
     fn default() -> Self {
@@ -57,11 +59,19 @@ impl IrlsParams {
     }
 }
 
-/// The IRLS weights of the residual rows at `sol`: 1/(‖e‖_RGB + reg) (the last column's x rows
-/// and the last row's y rows do not exist: 0). Not normalised: a common factor of all row
-/// weights leaves the weighted minimiser unchanged (the reference implementation's
-/// normalisation to mean 1 was a pass over the image for nothing).
-fn irls_weights(p: &Problem, sol: &RowPlanar, reg: f32, wts: &mut Weights) {
+/// The IRLS weight of a residual row, from its RGB norm: 1/(‖e‖_RGB + reg). Not normalised:
+/// a common factor of all row weights leaves the weighted minimiser unchanged (the reference
+/// implementation's normalisation to mean 1 was a pass over the image for nothing).
+#[inline]
+fn irls_weight(norm: f32, reg: f32) -> f32 {
+    1.0 / (norm + reg)
+}
+
+/// The IRLS weights of the residual rows at `sol`, written out on their own (the last
+/// column's x rows and the last row's y rows do not exist: 0). The solve computes them inside
+/// its set-up pass (`Problem::solve_reweighted_in`); this is its reference in the tests.
+#[cfg(test)]
+pub(super) fn irls_weights(p: &Problem, sol: &RowPlanar, reg: f32, wts: &mut Weights) {
     let (w, h) = (p.width(), p.height());
     let Weights { g, x: wx, y: wy } = wts;
     g.par_chunks_mut(BAND * w).zip(wx.par_chunks_mut(BAND * w).zip(wy.par_chunks_mut(BAND * w))).enumerate().for_each(
@@ -89,14 +99,14 @@ fn irls_weights(p: &Problem, sol: &RowPlanar, reg: f32, wts: &mut Weights) {
                     }
                 }
                 for (o, e) in gr.iter_mut().zip(&eg) {
-                    *o = 1.0 / (e.sqrt() + reg);
+                    *o = irls_weight(e.sqrt(), reg);
                 }
                 for (o, e) in xr[..w - 1].iter_mut().zip(&ex) {
-                    *o = 1.0 / (e.sqrt() + reg);
+                    *o = irls_weight(e.sqrt(), reg);
                 }
                 if y + 1 < h {
                     for (o, e) in yr.iter_mut().zip(&ey) {
-                        *o = 1.0 / (e.sqrt() + reg);
+                        *o = irls_weight(e.sqrt(), reg);
                     }
                 }
             }
@@ -112,14 +122,10 @@ pub fn solve_l1(p: &Problem, params: &IrlsParams, stop: &(dyn Fn() -> bool + Syn
     if params.outer_iterations == 0 || stop() {
         return sol; // stopped before the first reweighting: the exact L2 solution
     }
+    // the L2 solution, for its low frequencies: result = L1 + B(L2) − B(L1) = L1 + B(L2 − L1)
+    // (B is linear), one blur at the end
     let r = params.low_frequency_radius;
-    let lows = (r > 0).then(|| {
-        let mut b = RowPlanar::zeros(w, h);
-        for c in 0..3 {
-            b.set_channel(c, &box_blur(&sol.channel(c), w, h, r));
-        }
-        b
-    });
+    let l2 = (r > 0).then(|| sol.clone());
     let mut reg = params.reg0;
     // allocated once: fresh pages every reweighting cost as much as a CG step
     let mut wts = Weights::ones(w, h);
@@ -128,17 +134,23 @@ pub fn solve_l1(p: &Problem, params: &IrlsParams, stop: &(dyn Fn() -> bool + Syn
         if k > 0 && stop() {
             break;
         }
-        irls_weights(p, &sol, reg as f32, &mut wts);
-        p.solve_in(&mut ws, &wts, &mut sol, params.cg_iterations, 1e-10, stop);
+        let regf = reg as f32;
+        p.solve_reweighted_in(&mut ws, &mut wts, &mut sol, |n| irls_weight(n, regf), params.cg_iterations, 1e-10, stop);
         reg *= params.decay;
     }
     drop((wts, ws));
-    if let Some(lows) = lows {
+    if let Some(l2) = l2 {
         for c in 0..3 {
-            let b1 = box_blur(&sol.channel(c), w, h, r);
-            sol.data.par_chunks_mut(3 * w).zip(b1.par_chunks(w)).enumerate().for_each(|(y, (row, b1))| {
-                for ((v, &l2), &l1) in row[c * w..(c + 1) * w].iter_mut().zip(lows.row(y, c)).zip(b1) {
-                    *v += l2 - l1;
+            let mut diff = l2.channel(c);
+            diff.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
+                for (v, &l1) in row.iter_mut().zip(sol.row(y, c)) {
+                    *v -= l1;
+                }
+            });
+            let low = box_blur(&diff, w, h, r);
+            sol.data.par_chunks_mut(3 * w).zip(low.par_chunks(w)).for_each(|(row, low)| {
+                for (v, &l) in row[c * w..(c + 1) * w].iter_mut().zip(low) {
+                    *v += l;
                 }
             });
         }

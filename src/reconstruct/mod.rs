@@ -220,6 +220,50 @@ mod tests {
         assert!(err < 2e-5 * scale, "‖Ax − b‖∞ = {err} (‖b‖∞ = {scale})");
     }
 
+    /// IRLS's fused reweighting and set-up pass gives the weights 1/(‖e‖_RGB + reg) of
+    /// their definition (`irls_weights`, written from the residual rows) bit for bit, and the
+    /// residual r = b − A·x of the normal equations under them; across bands, the last one a
+    /// single row.
+    #[test]
+    fn the_fused_reweighting_is_the_weights_and_residual_of_their_definitions() {
+        let (w, h) = (19, 2 * cg::BAND + 1);
+        let mut s = IndependentSampler::new(11, 4);
+        let mut rnd = || -> Vec<f64> { (0..w * h).map(|_| s.next_1d() as f64 * 2.0 - 1.0).collect() };
+        let ch: Vec<[Vec<f64>; 4]> = (0..3).map(|_| [rnd(), rnd(), rnd(), rnd()]).collect();
+        let planes = |k: usize| RowPlanar::from_planes([&ch[0][k], &ch[1][k], &ch[2][k]], w, h);
+        let p = Problem::new(0.3, planes(0), planes(1), planes(2));
+        let mut x = planes(3);
+        let reg = 0.05f32;
+        let mut want = Weights::ones(w, h);
+        irls::irls_weights(&p, &x, reg, &mut want);
+        let (mut got, mut ws) = (Weights::ones(w, h), cg::Workspace::new(w, h));
+        let x0 = x.clone();
+        p.solve_reweighted_in(&mut ws, &mut got, &mut x, |n| 1.0 / (n + reg), 0, 1e-10, &|| false);
+        assert_eq!(x, x0, "no CG step was asked for");
+        assert_eq!((&got.g, &got.x, &got.y), (&want.g, &want.x, &want.y));
+        let (ax, b) = p.operator_and_rhs(&want, &x);
+        let scale = b.data.iter().fold(0.0f32, |m, v| m.max(v.abs()));
+        for (i, ((r, a), b)) in ws.residual().data.iter().zip(&ax.data).zip(&b.data).enumerate() {
+            assert!((r - (b - a)).abs() < 1e-5 * scale, "entry {i}: r {r} vs b − Ax {}", b - a);
+        }
+    }
+
+    /// An L1 solve returns the same image bit for bit on one thread and on two (the bands'
+    /// dot products are summed in band order; each band recomputes its neighbours' rows).
+    #[test]
+    fn l1_ignores_the_thread_count() {
+        let (w, h) = (23, 3 * cg::BAND + 2);
+        let img = test_image(w, h);
+        let (mut dx, dy) = gradients(&img, w, h);
+        dx[7 * w + 5] += 2.0;
+        let p = grey(w, h, 0.2, &img, &dx, &dy);
+        let solve = |threads: usize| {
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+            pool.install(|| solve_l1(&p, &IrlsParams::default(), &|| false))
+        };
+        assert_eq!(solve(1), solve(2));
+    }
+
     /// An L1 solve asked to stop (Esc) returns its current iterate: the exact L2 solution when
     /// stopped before the first reweighting, something between L2 and the full L1 after a few
     /// CG steps; it asks once per outer iteration and once per CG step.
