@@ -7,6 +7,7 @@ of instanced triangles). Lights follow Cycles' conventions; the conversion to ra
 happens in the core. Everything unsupported is reported as a warning with a fallback.
 """
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -591,7 +592,8 @@ def _light(ob, matrix, warnings):
                                     light.spot_blend, soft, visible)
     if light.type == "AREA":
         return scenedict.area_light(name, m.astype(np.float32), light.shape, light.size, light.size_y, power,
-                                    getattr(light, "normalize", True), visible)
+                                    getattr(light, "normalize", True), visible,
+                                    float(getattr(light, "spread", math.pi)))
     if light.type == "SUN":
         plus_z = tuple((-np.array(minus_z)).tolist())
         return scenedict.sun_light(name, plus_z, tuple((color * light.energy * scale).tolist()), light.angle, visible)

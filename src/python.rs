@@ -228,6 +228,7 @@ fn parse_light(d: &Bound<'_, PyDict>) -> PyResult<LightDesc> {
                 size_y: get_or(d, "size_y", size_x, &ctx)?,
                 power,
                 normalize: get_or(d, "normalize", true, &ctx)?,
+                spread: get_or(d, "spread", std::f32::consts::PI, &ctx)?,
                 visible_camera,
                 name,
             }

@@ -134,6 +134,24 @@ def smooth_room(bpy):
     return scene
 
 
+def softbox(bpy):
+    """Blender's area light Spread: a disk light narrowed to a 40° cone and tilted 35°, so that
+    the edge of its pool of light crosses the floor and a wall, above a ball."""
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    scene = bpy.context.scene
+    grey = _diffuse(bpy, "Grey", (0.7, 0.7, 0.7))
+    _room(bpy, scene, grey, smooth=False)
+    _uv_sphere(bpy, scene, "Ball", (0.2, 0.3, 0.3), 0.3, 24, 12, grey, smooth=True)
+    light = bpy.data.lights.new("Softbox", "AREA")
+    light.shape, light.size, light.energy, light.spread = "DISK", 0.5, 80.0, math.radians(40.0)
+    ob = bpy.data.objects.new("Softbox", light)
+    ob.location = (-0.4, 0.1, 1.4)
+    ob.rotation_euler = (math.radians(-35.0), math.radians(20.0), 0.0)
+    scene.collection.objects.link(ob)
+    _camera_and_world(bpy, scene)
+    return scene
+
+
 def bulb(bpy, roughness):
     """Issue 14 §2–3: an emitting sphere inside a glass sphere (smooth or rough), the only
     light of the room; the camera sees the filament through the glass."""
@@ -184,6 +202,7 @@ def hdri(bpy):
 # get the multiples in `samples`)
 SCENES = {
     "smooth_room": (smooth_room, 512, 16),
+    "softbox": (softbox, 512, 16),
     "bulb_smooth": (lambda bpy: bulb(bpy, 0.0), 1024, 32),
     "bulb_rough": (lambda bpy: bulb(bpy, 0.35), 1024, 32),
     "all_lights": (checked_in("lights", {"Area", "Point", "Spot", "Sun", "World"}), 512, 16),

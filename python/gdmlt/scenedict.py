@@ -5,6 +5,8 @@ valid is said once, by the core's parsers (`src/python.rs`, filling `src/scene/d
 which also warn about any key they do not read.
 """
 
+import math
+
 # The material of triangles without one (and every material's starting point): a grey
 # diffuse-ish Principled BSDF, as Blender's default surface.
 DEFAULT_MATERIAL = {"name": "(default)", "base_color": (0.8, 0.8, 0.8), "emission": (0.0, 0.0, 0.0),
@@ -31,12 +33,15 @@ def spot_light(name, position, direction, power, radius, spot_size, spot_blend, 
                 direction=tuple(direction), spot_size=float(spot_size), spot_blend=float(spot_blend))
 
 
-def area_light(name, matrix, shape, size, size_y, power, normalize=True, visible_camera=False) -> dict:
+def area_light(name, matrix, shape, size, size_y, power, normalize=True, visible_camera=False,
+               spread=math.pi) -> dict:
     """An area light emitting along its local −Z: `shape` SQUARE, RECTANGLE, DISK or ELLIPSE,
-    `matrix` its object matrix (4×4 float32, scale included)."""
+    `matrix` its object matrix (4×4 float32, scale included); `spread` Blender's Spread, the
+    full angle of its emission cone in radians (π: Lambertian; narrower keeps the power, as
+    Cycles' soft-box model)."""
     return {"type": "AREA", "name": name, "matrix": matrix, "shape": shape, "size": float(size),
             "size_y": float(size_y), "power": tuple(power), "normalize": bool(normalize),
-            "visible_camera": bool(visible_camera)}
+            "visible_camera": bool(visible_camera), "spread": float(spread)}
 
 
 def sun_light(name, direction, irradiance, angle, visible_camera=False) -> dict:

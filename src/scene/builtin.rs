@@ -219,6 +219,7 @@ pub fn cornell_mixed_lights(width: u32, height: u32) -> SceneDesc {
             size_y: 0.2,
             power: [20.0, 20.0, 25.0],
             normalize: true,
+            spread: std::f32::consts::PI,
             visible_camera: false,
         },
         LightDesc::Point {

@@ -160,6 +160,7 @@ pub enum LightDesc {
     },
     /// Area light: `to_world` (row-major 4×4, may carry scale) maps the local light whose
     /// extent is size_x × size_y in the xy plane and which emits towards local −Z.
+    /// `spread`: Blender's Spread, the full angle of the emission cone [rad] (π: Lambertian).
     Area {
         name: String,
         to_world: [[f32; 4]; 4],
@@ -168,6 +169,7 @@ pub enum LightDesc {
         size_y: f32,
         power: [f32; 3],
         normalize: bool,
+        spread: f32,
         visible_camera: bool,
     },
     /// Sun: `direction` points from the scene towards the sun; `irradiance` = Strength × colour

@@ -19,12 +19,47 @@ pub enum LightShape {
     /// axis). Implemented as the factor d²/(d²+r²) on the sphere's radiance, applied
     /// identically to light samples and to rays that hit the sphere, so MIS stays exact.
     Sphere { center: Vec3, radius: f32, spot: Option<Spot>, soft_falloff: bool },
-    /// Planar emitter: centre, half-axes (world, carrying scale), normal = emitting side.
-    Planar { center: Vec3, axis_u: Vec3, axis_v: Vec3, normal: Vec3, disk: bool, area: f32 },
+    /// Planar emitter: centre, half-axes (world, carrying scale), normal = emitting side;
+    /// `spread` narrows its emission (None: Lambertian).
+    Planar { center: Vec3, axis_u: Vec3, axis_v: Vec3, normal: Vec3, disk: bool, area: f32, spread: Option<Spread> },
     /// Distant light towards `dir` (unit, pointing at the light); `cos_half` of its cone.
     Distant { dir: Vec3, cos_half: f32, frame: Frame },
     /// Emissive triangle `prim` of the scene mesh.
     Triangle { prim: u32 },
+}
+
+/// Blender's area light Spread, as Cycles models it: a soft box whose grid of slats lets
+/// through the fraction max(0, 1 − tan θ / tan h) of the light leaving at angle θ from the
+/// normal (h = half the spread), renormalised so that the light's power is unchanged:
+/// radiance × N·max(0, tan h − tan θ) with N = 1/(tan h − h), since
+/// ∫ (tan h − tan θ) cos θ dω over θ < h = π(tan h − h). (Small h: N → 3/h³, used below
+/// 0.05 rad where tan h − h loses its digits.) The light is sampled by area as before: the
+/// factor is part of the radiance, identical for light samples and for rays that hit it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Spread {
+    pub tan_half: f32,
+    pub normalize: f32,
+}
+
+impl Spread {
+    /// None for a spread of π or more (Lambertian); below a hundredth of a degree the cone
+    /// is held there (Cycles' zero spread is a delta beam, which no area sample can meet).
+    pub fn new(spread: f32) -> Option<Spread> {
+        let h = (spread.min(PI) * 0.5).max(1e-4) as f64;
+        if h >= std::f64::consts::FRAC_PI_2 - 1e-6 {
+            return None;
+        }
+        let t = h.tan();
+        let normalize = if h > 0.05 { 1.0 / (t - h) } else { 3.0 / (h * h * h) };
+        Some(Spread { tan_half: t as f32, normalize: normalize as f32 })
+    }
+
+    /// The factor on the radiance leaving at cos θ from the normal (cos θ > 0).
+    #[inline]
+    pub fn attenuation(&self, cos_theta: f32) -> f32 {
+        let tan = (1.0 - cos_theta * cos_theta).max(0.0).sqrt() / cos_theta;
+        ((self.tan_half - tan) * self.normalize).max(0.0)
+    }
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -136,12 +171,13 @@ impl Light {
                 };
                 Ok(Self::sphere(name, v(*position), *radius, v(*power), Some(spot), *soft_falloff, *visible_camera))
             }
-            LightDesc::Area { name, to_world, shape, size_x, size_y, power, normalize, visible_camera } => {
+            LightDesc::Area { name, to_world, shape, size_x, size_y, power, normalize, spread, visible_camera } => {
                 check(
                     name,
                     to_world.iter().flatten().all(|x| x.is_finite()) && finite3(power),
                     "NaN or Inf in matrix or power",
                 )?;
+                check(name, spread.is_finite() && *spread >= 0.0, "spread must be a finite angle ≥ 0")?;
                 let m = super::camera::matrix_from_rows(to_world);
                 let sy = match shape {
                     AreaShape::Square | AreaShape::Disk => *size_x,
@@ -166,6 +202,7 @@ impl Light {
                         normal,
                         disk,
                         area,
+                        spread: Spread::new(*spread),
                     },
                     emission: radiance,
                     visible_camera: *visible_camera,
@@ -333,7 +370,7 @@ impl Light {
                 }
                 Some(LightSample { p: lp, n, wi, dist, radiance: radiance * att, pdf, is_delta: *radius == 0.0 })
             }
-            LightShape::Planar { center, axis_u, axis_v, normal, disk, area } => {
+            LightShape::Planar { center, axis_u, axis_v, normal, disk, area, spread } => {
                 let q = if *disk { square_to_disk_concentric(u) } else { u * 2.0 - Vec2::ONE };
                 let lp = *center + *axis_u * q.x + *axis_v * q.y;
                 let to = lp - p;
@@ -347,12 +384,16 @@ impl Light {
                 if cos_l <= 0.0 {
                     return None; // behind the one-sided emitter
                 }
+                let att = spread.map_or(1.0, |s| s.attenuation(cos_l));
+                if att <= 0.0 {
+                    return None; // outside the spread's cone
+                }
                 Some(LightSample {
                     p: lp,
                     n: *normal,
                     wi,
                     dist,
-                    radiance: self.emission,
+                    radiance: self.emission * att,
                     pdf: d2 / (cos_l * area),
                     is_delta: false,
                 })
@@ -405,7 +446,7 @@ impl Light {
                 let soft = soft_falloff_factor(*soft_falloff, o, *center, *radius);
                 Some((t, self.emission * (att * soft), sphere_cone_pdf(o, *center, *radius)))
             }
-            LightShape::Planar { center, axis_u, axis_v, normal, disk, area } => {
+            LightShape::Planar { center, axis_u, axis_v, normal, disk, area, spread } => {
                 let denom = d.dot(*normal);
                 if denom >= 0.0 {
                     return None; // back side or parallel: lights are one-sided
@@ -422,7 +463,7 @@ impl Light {
                     return None;
                 }
                 let pdf = t * t / (-denom * area);
-                Some((t, self.emission, pdf))
+                Some((t, self.emission * spread.map_or(1.0, |s| s.attenuation(-denom)), pdf))
             }
             LightShape::Distant { dir, cos_half, .. } => {
                 if *cos_half >= 1.0 || tmax < f32::INFINITY || d.dot(*dir) < *cos_half {
@@ -466,6 +507,7 @@ mod tests {
             size_y: 1.0,
             power: [-10.0, 10.0, 10.0],
             normalize: true,
+            spread: std::f32::consts::PI,
             visible_camera: false,
         };
         let e = Light::from_desc(&area).expect_err("refused").to_string();
@@ -502,6 +544,7 @@ mod tests {
             size_y: 0.5,
             power: [10.0, 10.0, 10.0],
             normalize: true,
+            spread: std::f32::consts::PI,
             visible_camera: false,
         };
         let l = Light::from_desc(&d).unwrap();
@@ -510,5 +553,73 @@ mod tests {
         // it emits downwards: a ray going up from below hits it, a ray going down does not
         assert!(l.intersect(Vec3::ZERO, Vec3::Z, f32::INFINITY).is_some());
         assert!(l.intersect(Vec3::new(0.0, 0.0, 6.0), -Vec3::Z, f32::INFINITY).is_none());
+    }
+
+    /// Spread (Cycles' soft-box model) keeps the light's power: ∫ f(θ) cos θ dω = π over the
+    /// hemisphere for spreads from 170° down to 0.5° (midpoint rule in θ, the integrand's kink
+    /// at θ = h included), is 0 beyond half the spread, and is Lambertian (None) at 180°.
+    #[test]
+    fn spread_keeps_the_power_and_cuts_at_its_half_angle() {
+        assert_eq!(Spread::new(PI), None);
+        assert_eq!(Spread::new(4.0), None);
+        for deg in [170.0f64, 120.0, 90.0, 45.0, 10.0, 5.73, 2.0, 0.5] {
+            let spread = Spread::new(deg.to_radians() as f32).unwrap();
+            let h = deg.to_radians() / 2.0;
+            let n = 200_000;
+            let integral: f64 = (0..n)
+                .map(|k| {
+                    let t = h * (k as f64 + 0.5) / n as f64; // f is 0 past h
+                    spread.attenuation(t.cos() as f32) as f64 * t.cos() * t.sin() * 2.0 * std::f64::consts::PI * h
+                        / n as f64
+                })
+                .sum();
+            assert!((integral / std::f64::consts::PI - 1.0).abs() < 2e-3, "{deg}°: ∫ f cos dω = {integral}");
+            assert_eq!(spread.attenuation((h + 1e-3).cos() as f32), 0.0, "{deg}°: light beyond the cone");
+            assert!(spread.attenuation(1.0) > 1.0, "{deg}°: the axis is brighter than Lambertian");
+        }
+    }
+
+    /// With a spread, a light sample and a ray that hits the same point carry the same
+    /// radiance and pdf (MIS stays exact); light leaving outside the cone is dropped.
+    #[test]
+    fn spread_light_samples_and_hits_agree() {
+        let d = LightDesc::Area {
+            name: "Softbox".into(),
+            to_world: [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 2.0], [0.0, 0.0, 0.0, 1.0]],
+            shape: AreaShape::Disk,
+            size_x: 0.5,
+            size_y: 0.5,
+            power: [10.0, 10.0, 10.0],
+            normalize: true,
+            spread: 60f32.to_radians(),
+            visible_camera: false,
+        };
+        let l = Light::from_desc(&d).unwrap();
+        let mut s = crate::sampler::IndependentSampler::new(5, 0);
+        use crate::sampler::Sampler;
+        let (mut inside, mut outside) = (0, 0);
+        for k in 0..400 {
+            // shading points on the floor 2 below the light, from its axis to 3 m off it
+            let p = Vec3::new(3.0 * k as f32 / 400.0, 0.0, 0.0);
+            match l.sample(p, s.next_2d()) {
+                Some(ls) => {
+                    // … and wholly outside it from x > 2·tan 30° + 0.25
+                    assert!(p.x < 1.41, "{p}: a sample outside the cone");
+                    inside += 1;
+                    let (t, radiance, pdf) = l.intersect(p, ls.wi, f32::INFINITY).expect("the sampled point is hit");
+                    assert!((t - ls.dist).abs() < 1e-4 * ls.dist);
+                    assert!((radiance - ls.radiance).abs().max_element() < 1e-4 * ls.radiance.max_element());
+                    assert!((pdf - ls.pdf).abs() < 1e-3 * ls.pdf, "pdf {pdf} vs {}", ls.pdf);
+                    assert!(ls.radiance.max_element() > 0.0);
+                }
+                None => {
+                    // the disk (radius 0.25, 2 above) is wholly inside the 30° cone seen from
+                    // x < 2·tan 30° − 0.25
+                    assert!(p.x > 0.9, "{p}: no sample inside the cone");
+                    outside += 1;
+                }
+            }
+        }
+        assert!(inside > 50 && outside > 50, "{inside} inside the cone, {outside} outside");
     }
 }
