@@ -163,7 +163,7 @@ class GDMLTRenderEngine(bpy.types.RenderEngine):
             from gdmlt.auto import plan
 
             self.update_stats("GDMLT", "Automatic method: measuring each method on this scene")
-            settings, chosen = plan(desc, settings, self.esc_pressed, denoise=denoise)
+            settings, chosen = plan(desc, settings, self.esc_pressed, denoise=denoise, scene=core_scene)
             self.report({"INFO"}, f"GDMLT: automatic method chose {chosen['method']} ({chosen['why']})")
         method = settings.pop("method", s.method.lower())
         label = method.upper() + (" (auto)" if chosen else "")

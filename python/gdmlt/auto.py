@@ -9,7 +9,8 @@ is right for both, and users should not have to know.
 The pilot (`choose`):
 1. **A window of the image**: the central quarter of each side (at least 16 × 16 pixels, the
    whole image when it is smaller), so that each pilot render gets many samples per pixel
-   in a short time on pixels that are typical of the frame.
+   in a short time on pixels that are typical of the frame — seen through the render's own
+   scene (`Scene.set_camera`), not a second build of it.
 2. **Two independent renders per candidate** (`pt`, `gdpt`, `gdpssmlt`; seeds differ) of
    `t` seconds each, with the render's own bounce and NEE settings.
 3. **Error per second**: half the mean relative squared difference of the two renders,
@@ -92,13 +93,15 @@ def _denoised_pair(layers_pair, device):
     return out
 
 
-def choose(desc: dict, settings: dict, cancelled=lambda: False, denoise=False) -> dict:
+def choose(desc: dict, settings: dict, cancelled=lambda: False, denoise=False, scene=None) -> dict:
     """Runs the pilot. Returns {"method", "budget" (seconds for the whole render, pilot
     included), "pilot_seconds", "efficiency": {method: v·t}, "denoised": {method: v·t after
     OIDN} (empty unless compared), "why"}. `denoise`: the final image will be denoised, so
-    the raw winner and pt are compared after OIDN (without OIDN installed: the raw ranking)."""
+    the raw winner and pt are compared after OIDN (without OIDN installed: the raw ranking).
+    `scene`: the render's own `gdmlt.Scene` of `desc`, if built already: the pilot looks
+    through it at its window and gives the camera back (a second build, BVH included, can
+    cost as much as the pilot on a heavy scene)."""
     import gdmlt
-    from . import oidn
 
     # 1. the candidates whose render of the whole frame fits in memory
     w, h = _image_size(desc["camera"])
@@ -119,7 +122,21 @@ def choose(desc: dict, settings: dict, cancelled=lambda: False, denoise=False) -
     if base:
         x, y = x + base[0], y + base[1]
     pilot_desc["camera"]["window"] = [x, y, ww, wh]
-    scene = gdmlt.Scene(pilot_desc)
+    if scene is None:
+        return _choose_in(gdmlt.Scene(pilot_desc), desc, settings, cancelled, denoise, candidates, (w, h, ww, wh))
+    scene.set_camera(pilot_desc["camera"])
+    try:
+        return _choose_in(scene, desc, settings, cancelled, denoise, candidates, (w, h, ww, wh))
+    finally:
+        scene.set_camera(desc["camera"])
+
+
+def _choose_in(scene, desc, settings, cancelled, denoise, candidates, sizes):
+    """`choose`'s steps 3–5 on `scene`, which looks at the pilot's window."""
+    import gdmlt
+    from . import oidn
+
+    w, h, ww, wh = sizes
     limit = float(settings.get("time_limit") or 0.0)
     t_each = max(MIN_PILOT_RENDER, PILOT_FRACTION * limit / (2 * len(candidates))) if limit else 0.1
     common = {k: settings[k] for k in ("max_bounces", "nee", "threads", "reconstruction", "alpha_rec",
@@ -216,12 +233,13 @@ def _explain(best: str, eff: dict, denoised: dict, head: str) -> str:
     return why
 
 
-def plan(desc: dict, settings: dict, cancelled=lambda: False, denoise=False):
+def plan(desc: dict, settings: dict, cancelled=lambda: False, denoise=False, scene=None):
     """Runs the pilot; returns (the gdmlt.render settings for the rest of the render, the
-    pilot's findings as `choose` returns them). `denoise`: the image will be denoised."""
+    pilot's findings as `choose` returns them). `denoise`: the image will be denoised;
+    `scene`: the render's own scene of `desc`, if built (see `choose`)."""
     settings = dict(settings)
     settings.pop("method", None)
-    pick = choose(desc, settings, cancelled, denoise)
+    pick = choose(desc, settings, cancelled, denoise, scene)
     rest = max(pick["budget"] - pick["pilot_seconds"], MIN_PILOT_RENDER)
     opts = dict(settings, method=pick["method"], spp=10 ** 7, time_limit=rest)
     if settings.get("time_limit") and settings.get("spp"):
@@ -235,8 +253,9 @@ def render(desc: dict, settings: dict, progress=None, preview=None, cancelled=la
     `denoise`: choose for an image that will be denoised."""
     import gdmlt
 
-    opts, pick = plan(desc, settings, cancelled, denoise)
+    scene = gdmlt.Scene(desc)
+    opts, pick = plan(desc, settings, cancelled, denoise, scene)
     extra = {k: v for k, v in (("progress", progress), ("preview", preview)) if v is not None}
-    res = gdmlt.render(gdmlt.Scene(desc), **opts, **extra)
+    res = gdmlt.render(scene, **opts, **extra)
     res["stats"]["auto"] = pick
     return res

@@ -264,10 +264,11 @@ def render_desc(desc, settings: dict, denoise: bool, out: Path, png: bool, view=
     from .passes import needs_core_pass, select
 
     settings = dict(settings, data_passes=needs_core_pass(passes))
+    scene = gdmlt.Scene(desc)
     if settings["method"] == "auto":
         from .auto import plan
 
-        settings, pick = plan(desc, settings, denoise=denoise)
+        settings, pick = plan(desc, settings, denoise=denoise, scene=scene)
         print(f"gdmlt: method auto chose {pick['method']} ({pick['why']})", file=sys.stderr)
     import signal
 
@@ -279,7 +280,7 @@ def render_desc(desc, settings: dict, denoise: bool, out: Path, png: bool, view=
     main = threading.current_thread() is threading.main_thread()  # (signals only go there)
     previous = signal.signal(signal.SIGINT, lambda *_: setattr(line, "interrupted", True)) if main else None
     try:
-        res = gdmlt.render(gdmlt.Scene(desc), **settings, progress=line)
+        res = gdmlt.render(scene, **settings, progress=line)
     finally:
         if main:
             signal.signal(signal.SIGINT, previous)

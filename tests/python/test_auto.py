@@ -154,3 +154,26 @@ def test_with_the_denoiser_on_the_pilot_ranks_the_images_the_user_will_get(corne
     t = time.perf_counter()
     cold = auto.choose(cornell, settings, denoise=True)
     assert time.perf_counter() - t < 1.5 and cold["method"] == "pt" and "still loading" in cold["why"], cold
+
+
+def test_auto_builds_the_scene_once_and_renders_the_whole_frame(cornell, monkeypatch):
+    """The pilot looks at its window through the render's own scene (`Scene.set_camera`)
+    rather than building a second one — on a heavy scene a second build (BVH included) costs
+    as much as a pilot — and gives the whole frame's camera back for the render. Failed
+    before: two builds per auto render (the pilot's window scene and the frame's)."""
+    built = []
+    real = gdmlt.Scene
+
+    def counting(desc):
+        built.append(desc["camera"].get("window"))
+        return real(desc)
+
+    monkeypatch.setattr(gdmlt, "Scene", counting)
+    res = auto.render(cornell, {"method": "auto", "spp": 4, "max_bounces": 3, "seed": 2})
+    assert len(built) == 1, f"{len(built)} scene builds (windows {built})"
+    assert res["layers"]["Combined"].shape[:2] == (48, 48)
+    assert res["stats"]["auto"]["method"] in auto.CANDIDATES
+    # and the frame's image is the one a plain render of the chosen method gives
+    plain = gdmlt.render(real(cornell), method=res["stats"]["method"], spp=4, max_bounces=3, seed=2)
+    assert np.isfinite(res["layers"]["Combined"]).all()
+    assert res["layers"]["Combined"].mean() == pytest.approx(plain["layers"]["Combined"].mean(), rel=0.3)
