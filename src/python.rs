@@ -940,6 +940,13 @@ fn write_png(path: std::path::PathBuf, image: &Bound<'_, PyAny>) -> PyResult<()>
     crate::output::write_png(&path, &img).map_err(|e| PyRuntimeError::new_err(e.to_string()))
 }
 
+/// How many paths the Metropolis methods' bootstrap traces before their first mutation on a
+/// `width × height` image (their fixed cost; `gdmlt.auto` weighs it before a pilot render).
+#[pyfunction]
+fn bootstrap_paths(width: u32, height: u32) -> usize {
+    integrator::mlt::bootstrap_samples(width as usize, height as usize)
+}
+
 /// Raises ValueError when a `width × height` render with `method` would need more memory
 /// than this process may allocate (what `render` checks first; `gdmlt.auto` asks before its
 /// pilot, which renders only a window of the frame).
@@ -979,6 +986,7 @@ fn init_module(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(reconstruct, m)?)?;
     m.add_function(wrap_pyfunction!(cpu_supports_x86_64_v3, m)?)?;
     m.add_function(wrap_pyfunction!(check_memory, m)?)?;
+    m.add_function(wrap_pyfunction!(bootstrap_paths, m)?)?;
     m.add("METHODS", vec!["pt", "gdpt", "pssmlt", "gdpssmlt"])?;
     m.add("DEFAULT_SETTINGS", default_settings(m.py())?)?;
     // The path builder's Russian roulette starts after this many bounces (benchmarks set

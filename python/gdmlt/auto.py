@@ -33,12 +33,15 @@ Cornell box (1.2–3.3× below `gdpt` + OIDN, equal on the box at 4 s), and the 
 denoised variance ranked `pt` first on each (3 seeds: `gdpt`'s 1.2–6× `pt`'s), where the
 raw ranking had chosen `gdpt` on all but the multi-light scene.
 
-Budget: with a time limit, the pilot takes 5% of it (each of the six renders at least 0.02 s)
+Budget: with a time limit, the pilot takes 5% of it (each of the six renders at least 0.01 s)
 and the chosen method renders for the rest. With samples only, the budget is the time `pt`
 would take for that many samples per pixel (measured by the pilot), so `auto` at 64 samples
 takes about as long as `pt` at 64 samples.
 
-Parameters (defaults once, here): `DENOISE_CROP = 96`, `PILOT_FRACTION = 0.05`, `MIN_PILOT_RENDER = 0.02` s (measured: at 0.03 s the pilot was a quarter of a 1 s budget),
+Parameters (defaults once, here): `DENOISE_CROP = 96`, `PILOT_FRACTION = 0.05`, `MIN_PILOT_RENDER = 0.01` s (measured 2026-12-03, 128² cornell, veil and lights, 3 seeds: the pilot
+4.4–5.0% of a 1 s budget, where 0.02 s made it 8.5–8.9%, and the same choice in all 9),
+`BOOTSTRAP_MARGIN = 1.5` (gdpssmlt is not tried when its bootstrap, predicted from `gdpt`'s
+pilot speed, would outlast a pilot render by this factor),
 `CANDIDATES = ("pt", "gdpt", "gdpssmlt")` (`pssmlt` is left out: it measured behind
 `gdpssmlt` on every benchmark scene).
 """
@@ -51,7 +54,8 @@ import numpy as np
 
 CANDIDATES = ("pt", "gdpt", "gdpssmlt")
 PILOT_FRACTION = 0.05
-MIN_PILOT_RENDER = 0.02
+MIN_PILOT_RENDER = 0.01
+BOOTSTRAP_MARGIN = 1.5
 DENOISE_CROP = 96
 EPS = 1e-2
 
@@ -149,8 +153,18 @@ def _choose_in(scene, desc, settings, cancelled, denoise, candidates, sizes):
         loader = threading.Thread(target=oidn.available, daemon=True)
         loader.start()
     # 3. two renders per candidate: relative variance × seconds
-    eff, pairs, pt_rate = {}, {}, None
+    eff, pairs, rate, skipped = {}, {}, {}, ""
     for m in candidates:
+        if m == "gdpssmlt" and "gdpt" in rate:
+            # its bootstrap traces bootstrap_paths gradient-domain paths before the first
+            # mutation, each about a gdpt sample: when that alone outlasts a pilot render by
+            # half again, the render would end with no mutation (measured: 0.06 s of a 0.15 s
+            # pilot for nothing), so it is not run
+            boot = gdmlt.bootstrap_paths(ww, wh) * rate["gdpt"]  # rate: seconds per path
+            if boot > BOOTSTRAP_MARGIN * t_each:
+                eff[m] = float("inf")
+                skipped = f"; gdpssmlt not tried: its bootstrap (≈{boot:.2f} s) outlasts a pilot render"
+                continue
         layers, elapsed, samples = [], 0.0, 0
         for s in (1, 2):
             if cancelled():
@@ -171,8 +185,7 @@ def _choose_in(scene, desc, settings, cancelled, denoise, candidates, sizes):
         # two identical images say nothing about the error: unknown, never "perfect"
         eff[m] = v * elapsed / 2 if v > 0 else float("inf")
         pairs[m] = (layers, elapsed)
-        if m == "pt":
-            pt_rate = elapsed / max(samples, 1) / (ww * wh)  # seconds per sample per pixel
+        rate[m] = elapsed / max(samples, 1) / (ww * wh)  # seconds per sample per pixel
     if not eff:
         return {"method": "pt", "budget": limit, "pilot_seconds": time.perf_counter() - t0, "efficiency": {},
                 "denoised": {}, "why": "cancelled"}
@@ -197,8 +210,8 @@ def _choose_in(scene, desc, settings, cancelled, denoise, candidates, sizes):
     if limit:
         budget = limit
     else:
-        budget = max(pilot, float(settings.get("spp", 64)) * (pt_rate or 0.0) * w * h)
-    why = _explain(best, eff, denoised, f"pilot {pilot:.2f} s on a {ww}×{wh} window") + note
+        budget = max(pilot, float(settings.get("spp", 64)) * rate.get("pt", 0.0) * w * h)
+    why = _explain(best, eff, denoised, f"pilot {pilot:.2f} s on a {ww}×{wh} window") + note + skipped
     return {"method": best, "budget": budget, "pilot_seconds": pilot, "efficiency": eff, "denoised": denoised,
             "why": why}
 

@@ -39,7 +39,8 @@ use std::sync::atomic::Ordering;
 /// few mutations does not pay for a large bootstrap, and a large one gets enough starts).
 pub const BOOTSTRAP_SAMPLES: (usize, usize) = (16_384, 1 << 20);
 
-fn bootstrap_samples(w: usize, h: usize) -> usize {
+/// The bootstrap's size for a w × h image: 16 per pixel, within `BOOTSTRAP_SAMPLES`.
+pub fn bootstrap_samples(w: usize, h: usize) -> usize {
     (16 * w * h).clamp(BOOTSTRAP_SAMPLES.0, BOOTSTRAP_SAMPLES.1)
 }
 /// The bootstrap's states, by F: chain starts are drawn ∝ F. 4 bytes a state (F, and f64
