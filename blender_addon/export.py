@@ -17,6 +17,22 @@ from gdmlt.scenedict import DEFAULT_MATERIAL
 GEOMETRY_TYPES = {"MESH", "CURVE", "SURFACE", "META", "FONT", "CURVES", "POINTCLOUD", "VOLUME"}
 # Object types GDMLT cannot render yet: left out of the scene with a warning naming the object.
 NOT_RENDERED = {"CURVES": "hair curves", "POINTCLOUD": "point clouds", "VOLUME": "volumes"}
+# Object › Visibility › Ray Visibility: every ray sees every object and light in GDMLT (a
+# light's camera visibility excepted, which is rendered)
+RAY_VISIBILITY = (("camera", "visible_camera"), ("diffuse", "visible_diffuse"), ("glossy", "visible_glossy"),
+                  ("transmission", "visible_transmission"), ("shadow", "visible_shadow"))
+
+
+def _visibility_warnings(ob, what, warnings, skip=()):
+    """Warnings for the ray visibility, holdout and shadow catcher settings of `ob`, which
+    GDMLT does not render (each ray type sees it; it is rendered as an ordinary object)."""
+    off = [name for name, attr in RAY_VISIBILITY if name not in skip and not getattr(ob, attr, True)]
+    if off:
+        warnings.append(f"{what} '{ob.name}': ray visibility ({', '.join(off)} off) is not rendered; "
+                        "every ray sees it")
+    for attr, label in (("is_holdout", "holdout"), ("is_shadow_catcher", "shadow catcher")):
+        if getattr(ob, attr, False):
+            warnings.append(f"{what} '{ob.name}': {label} is not rendered; it is rendered as an ordinary object")
 
 
 class ExportCancelled(Exception):
@@ -711,6 +727,7 @@ def export_scene(depsgraph, test_break=lambda: False, need_camera=True):
             raise ExportCancelled()
         ob = inst.object
         if ob.type == "LIGHT":
+            _visibility_warnings(ob, "light", warnings, skip=("camera", "shadow"))
             l = _light(ob, _matrix(inst.matrix_world), warnings)
             if l is not None:
                 lights.append(l)
@@ -720,6 +737,7 @@ def export_scene(depsgraph, test_break=lambda: False, need_camera=True):
         if ob.type in NOT_RENDERED:
             warnings.append(f"object '{ob.name}': {NOT_RENDERED[ob.type]} are not rendered yet; it is left out")
             continue
+        _visibility_warnings(ob, "object", warnings)
         key = (ob.name, ob.data.name if ob.data is not None else "") if inst.is_instance else None
         arrays = cache.get(key) if key else None
         if arrays is None:
