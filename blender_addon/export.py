@@ -23,13 +23,19 @@ RAY_VISIBILITY = (("camera", "visible_camera"), ("diffuse", "visible_diffuse"), 
                   ("transmission", "visible_transmission"), ("shadow", "visible_shadow"))
 
 
-def _visibility_warnings(ob, what, warnings, skip=()):
+def _visibility_warnings(ob, what, warnings, light=False):
     """Warnings for the ray visibility, holdout and shadow catcher settings of `ob`, which
-    GDMLT does not render (each ray type sees it; it is rendered as an ordinary object)."""
+    GDMLT does not render (each ray type sees it; it is rendered as an ordinary object). For
+    a light only its diffuse, glossy and transmission visibility mean something (its camera
+    visibility is rendered; Blender keeps holdout and shadow-catcher flags on lights that
+    Cycles ignores)."""
+    skip = ("camera", "shadow") if light else ()
     off = [name for name, attr in RAY_VISIBILITY if name not in skip and not getattr(ob, attr, True)]
     if off:
         warnings.append(f"{what} '{ob.name}': ray visibility ({', '.join(off)} off) is not rendered; "
                         "every ray sees it")
+    if light:
+        return
     for attr, label in (("is_holdout", "holdout"), ("is_shadow_catcher", "shadow catcher")):
         if getattr(ob, attr, False):
             warnings.append(f"{what} '{ob.name}': {label} is not rendered; it is rendered as an ordinary object")
@@ -114,9 +120,6 @@ class Textures:
         if node.projection != ("EQUIRECTANGULAR" if env else "FLAT"):
             warnings.append(f"{what}: texture '{node.name}' projection {node.projection} is not supported "
                             f"(rendered as {'EQUIRECTANGULAR' if env else 'FLAT'})")
-        if env and node.inputs["Vector"].is_linked:
-            warnings.append(f"{what}: the Vector input of texture '{node.name}' is ignored; the world direction "
-                            f"is used")
         if ext not in ("REPEAT", "EXTEND", "CLIP"):
             warnings.append(f"{what}: Image Texture '{node.name}' extension {ext} is rendered as REPEAT")
             ext = "REPEAT"
@@ -617,16 +620,54 @@ def _light(ob, matrix, warnings):
     return None
 
 
+def _world_rotation(node, warnings, what):
+    """The rotation (row-major 3×3, world direction → the texture's frame) that an Environment
+    Texture's Vector input applies: None when unlinked or fed the Generated direction itself;
+    a Mapping node of Point or Vector type on the Generated direction looks the texture up at
+    R·d (R its Euler XYZ rotation), of Texture type at R⁻¹·d. Its Scale counts only when
+    uniform and positive (the lookup normalises the direction) and its Location not at all
+    for a Vector mapping; anything else: the world direction, with a warning."""
+    sock = node.inputs["Vector"]
+    if not sock.is_linked:
+        return None
+
+    def generated(link):
+        return link.from_node.type == "TEX_COORD" and link.from_socket.name == "Generated"
+
+    link = sock.links[0]
+    if generated(link):
+        return None
+    m = link.from_node
+    if m.type == "MAPPING" and m.vector_type in ("POINT", "TEXTURE", "VECTOR") and m.inputs["Vector"].is_linked \
+            and generated(m.inputs["Vector"].links[0]) \
+            and not any(m.inputs[k].is_linked for k in ("Location", "Rotation", "Scale") if k in m.inputs):
+        from mathutils import Euler
+
+        scale = tuple(m.inputs["Scale"].default_value)
+        loc = tuple(m.inputs["Location"].default_value) if m.vector_type != "VECTOR" else (0.0, 0.0, 0.0)
+        if max(scale) - min(scale) > 1e-6 * max(abs(s) for s in scale) or min(scale) <= 0.0 or any(loc):
+            warnings.append(f"{what}: Mapping '{m.name}' on the environment: only its rotation is rendered "
+                            f"(a location or a non-uniform or negative scale is left out)")
+        rot = Euler(tuple(m.inputs["Rotation"].default_value), "XYZ").to_matrix()
+        if m.vector_type == "TEXTURE":
+            rot = rot.transposed()
+        return np.array([list(row) for row in rot], dtype=np.float32)
+    warnings.append(f"{what}: the Vector input of texture '{node.name}' ({m.type}) is not supported; the world "
+                    f"direction is used (supported: Generated, and a Mapping node on it)")
+    return None
+
+
 def _world(scene, warnings, textures):
-    """(colour × strength, or strength alone with an environment texture; texture index or None)."""
+    """(colour × strength, or strength alone with an environment texture; texture index or
+    None; the texture's rotation or None)."""
     world = scene.world
-    black = ((0.0, 0.0, 0.0), None)
+    black = ((0.0, 0.0, 0.0), None, None)
     if world is None:
         return black
     tree = world.node_tree
     node_out = tree.get_output_node("CYCLES") if tree is not None else None
     if node_out is None:
-        return tuple(world.color[:3]), None
+        return tuple(world.color[:3]), None, None
     what = f"world '{world.name}'"
     _warn_unrendered_outputs(node_out, warnings, what)
     surface = node_out.inputs.get("Surface")
@@ -640,11 +681,12 @@ def _world(scene, warnings, textures):
     color_in = node.inputs["Color"]
     if color_in.is_linked and color_in.links[0].from_node.type == "TEX_ENVIRONMENT" \
             and color_in.links[0].from_socket.name == "Color":
-        tex = textures.add(color_in.links[0].from_node, warnings, what)
+        env = color_in.links[0].from_node
+        tex = textures.add(env, warnings, what)
         if tex is not None:
-            return (strength, strength, strength), tex
+            return (strength, strength, strength), tex, _world_rotation(env, warnings, what)
     col = _input_value(node, "Color", warnings, what, (0.05, 0.05, 0.05, 1))[:3]
-    return tuple(c * strength for c in col), None
+    return tuple(c * strength for c in col), None, None
 
 
 def _warn_unrendered_outputs(node_out, warnings, what):
@@ -727,7 +769,7 @@ def export_scene(depsgraph, test_break=lambda: False, need_camera=True):
             raise ExportCancelled()
         ob = inst.object
         if ob.type == "LIGHT":
-            _visibility_warnings(ob, "light", warnings, skip=("camera", "shadow"))
+            _visibility_warnings(ob, "light", warnings, light=True)
             l = _light(ob, _matrix(inst.matrix_world), warnings)
             if l is not None:
                 lights.append(l)
@@ -766,11 +808,13 @@ def export_scene(depsgraph, test_break=lambda: False, need_camera=True):
         name = ob.name if not inst.is_instance else f"{inst.parent.name if inst.parent else ''}/{ob.name}"
         meshes.append(scenedict.mesh(name, np.ascontiguousarray(pos), np.ascontiguousarray(tris, dtype=np.uint32),
                                      np.ascontiguousarray(nrm), mat_ids, uvs, ob.pass_index))
-    world, world_texture = _world(scene, warnings, textures)
+    world, world_texture, world_rotation = _world(scene, warnings, textures)
     if scene.render.use_motion_blur:
         warnings.append("motion blur is not rendered yet: the frame is rendered at its shutter's start")
     desc = {"meshes": meshes, "materials": materials, "textures": textures.items, "lights": lights,
             "world": world, "world_texture": world_texture}
+    if world_rotation is not None:
+        desc["world_rotation"] = world_rotation
     if need_camera:
         desc["camera"] = camera_dict(scene, scene.camera.evaluated_get(depsgraph))
     # the same warning once

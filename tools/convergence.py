@@ -198,6 +198,19 @@ def hdri(bpy):
     return scene
 
 
+def hdri_rotated(bpy):
+    """The HDRI world turned as artists turn it: Texture Coordinate (Generated) → Mapping
+    (Point, rotation X 25°, Z 130°) → Environment Texture."""
+    scene = hdri(bpy)
+    nt = scene.world.node_tree
+    env = next(n for n in nt.nodes if n.type == "TEX_ENVIRONMENT")
+    coord, mapping = nt.nodes.new("ShaderNodeTexCoord"), nt.nodes.new("ShaderNodeMapping")
+    mapping.inputs["Rotation"].default_value = (math.radians(25.0), 0.0, math.radians(130.0))
+    nt.links.new(coord.outputs["Generated"], mapping.inputs["Vector"])
+    nt.links.new(mapping.outputs["Vector"], env.inputs["Vector"])
+    return scene
+
+
 # name: (builder, Cycles samples per seed, GDMLT pt samples per seed; the other methods
 # get the multiples in `samples`)
 SCENES = {
@@ -210,6 +223,7 @@ SCENES = {
     "textures": (checked_in("textures"), 512, 16),
     "mix": (checked_in("mix"), 512, 16),
     "hdri": (hdri, 512, 16),
+    "hdri_rotated": (hdri_rotated, 512, 16),
 }
 
 

@@ -1137,3 +1137,45 @@ def test_every_png_is_its_exr_through_the_scenes_view_transform(bpy_mod, tmp_out
         got = np.asarray(Image.open(out.with_suffix(".png")), np.int32)[..., :3]
         assert got.shape == ref.shape and ref.mean() > 20
         assert np.abs(got - ref).max() <= 1, (src.suffix, view, np.abs(got - ref).max())
+
+
+def test_a_mapping_node_turns_the_environment_as_in_cycles(bpy_mod):
+    """Generated → Mapping → Environment Texture: a Point or Vector mapping looks the image up
+    at R·d, a Texture mapping at R⁻¹·d (R the Euler XYZ rotation), a plain Generated link at d;
+    a location or an uneven scale is left out with a warning. (That Cycles and every method
+    agree with a Point mapping is the convergence test's hdri_rotated scene.)"""
+    import mathutils
+    from gdmlt_blender import export
+
+    bpy = bpy_mod
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    scene = bpy.context.scene
+    world = bpy.data.worlds.new("W")
+    world.use_nodes = True
+    scene.world = world
+    nt = world.node_tree
+    env = nt.nodes.new("ShaderNodeTexEnvironment")
+    env.image = bpy.data.images.new("Sky", 8, 4, float_buffer=True)
+    nt.links.new(env.outputs["Color"], nt.nodes["Background"].inputs["Color"])
+    coord, mapping = nt.nodes.new("ShaderNodeTexCoord"), nt.nodes.new("ShaderNodeMapping")
+    euler = (0.3, -0.5, 2.0)
+    mapping.inputs["Rotation"].default_value = euler
+    nt.links.new(coord.outputs["Generated"], mapping.inputs["Vector"])
+    nt.links.new(mapping.outputs["Vector"], env.inputs["Vector"])
+    r = np.array(mathutils.Euler(euler, "XYZ").to_matrix())
+
+    def exported():
+        desc, warnings = export.export_scene(bpy.context.evaluated_depsgraph_get(), need_camera=False)
+        return desc.get("world_rotation"), warnings
+
+    for kind, want in (("POINT", r), ("VECTOR", r), ("TEXTURE", r.T)):
+        mapping.vector_type = kind
+        got, warnings = exported()
+        assert np.allclose(got, want, atol=1e-6), (kind, got, want)
+        assert not [w for w in warnings if "Mapping" in w or "Vector input" in w], warnings
+    mapping.vector_type = "POINT"
+    mapping.inputs["Location"].default_value = (1.0, 0.0, 0.0)
+    got, warnings = exported()
+    assert np.allclose(got, r, atol=1e-6) and any("only its rotation" in w for w in warnings)
+    nt.links.new(coord.outputs["Generated"], env.inputs["Vector"])
+    assert exported()[0] is None

@@ -2,7 +2,7 @@
 scenes built the way artists build them in Blender, with Cycles rendered in the same test:
 a smooth-shaded low-poly room, an area light narrowed by Spread, a bulb in smooth and in rough glass, every Blender light type
 with a coloured world, mirror / glass / layered plastic, image textures (sRGB and Non-Color,
-alpha), Mix and Add shaders, and an HDRI world alone (tools/convergence.py builds and
+alpha), Mix and Add shaders, and an HDRI world alone, as it is and turned by a Mapping node (tools/convergence.py builds and
 compares them; `python tools/convergence.py` regenerates docs/convergence.md the same way).
 Tolerances come from the noise measured in the same test: the seed-to-seed spread of each
 renderer's block means, and of GDMLT's image means (six seeds).
@@ -24,8 +24,9 @@ def test_every_method_converges_to_cycles(bpy_mod, tmp_out, name):
     within 2.5× the noise of the two (plus 1%), and the image mean within 4σ plus 1.5%.
     Failed before the shading-normal fix (smooth_room: pt −5.3%, block difference 8.6× the
     noise), the η² fix (bulbs: every method −55% to −62%) and NEE through transmission
-    (bulb_rough: pt NEE 6% below naive) and Spread (softbox: every method −21%, block difference 183%;
-    gdpt and gdpssmlt still −16% until the shift mapping's light re-evaluation applied it too). The textures and HDRI scenes failed for gdpt without
+    (bulb_rough: pt NEE 6% below naive) Spread (softbox: every method −21%, block difference 183%;
+    gdpt and gdpssmlt still −16% until the shift mapping's light re-evaluation applied it too) and the environment's
+    Mapping rotation (hdri_rotated: every method −9%, block difference 100%). The textures and HDRI scenes failed for gdpt without
     NEE until the mean's noise was measured from the seeds' image means: the reconstruction
     correlates blocks, and the independent-block σ understated it 3×; at 4× the samples both
     agree (6 seeds, L1 and L2)."""
