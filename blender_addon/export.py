@@ -133,6 +133,18 @@ class Textures:
         return self.index[key]
 
 
+def _mapping_on(link, is_source):
+    """The Mapping node of a texture's Vector `link` when it is one GDMLT renders (Point,
+    Texture or Vector type, its parameters unlinked) fed by `is_source` (the texture's own
+    coordinates); else None."""
+    m = link.from_node
+    if m.type == "MAPPING" and m.vector_type in ("POINT", "TEXTURE", "VECTOR") and m.inputs["Vector"].is_linked \
+            and is_source(m.inputs["Vector"].links[0]) \
+            and not any(m.inputs[k].is_linked for k in ("Location", "Rotation", "Scale") if k in m.inputs):
+        return m
+    return None
+
+
 def _uv_transform(node, warnings, what):
     """The affine map of UV coordinates an Image Texture's Vector input applies, as the core's
     texture transform (m0..m5: u' = m0·u + m1·v + m2, v' = m3·u + m4·v + m5): None for the
@@ -156,10 +168,8 @@ def _uv_transform(node, warnings, what):
     link = sock.links[0]
     if uv_source(link):
         return None
-    m = link.from_node
-    if m.type == "MAPPING" and m.vector_type in ("POINT", "TEXTURE", "VECTOR") and m.inputs["Vector"].is_linked \
-            and uv_source(m.inputs["Vector"].links[0]) \
-            and not any(m.inputs[k].is_linked for k in ("Location", "Rotation", "Scale") if k in m.inputs):
+    m = _mapping_on(link, uv_source)
+    if m is not None:
         from mathutils import Euler, Matrix, Vector
 
         rot = Euler(tuple(m.inputs["Rotation"].default_value), "XYZ").to_matrix()
@@ -173,7 +183,7 @@ def _uv_transform(node, warnings, what):
             lin = rot @ Matrix.Diagonal(tuple(scale))
             t = loc
         return (lin[0][0], lin[0][1], t[0], lin[1][0], lin[1][1], t[1])
-    warnings.append(f"{what}: the Vector input of texture '{node.name}' ({m.type}) is not supported; the active "
+    warnings.append(f"{what}: the Vector input of texture '{node.name}' ({link.from_node.type}) is not supported; the active "
                     f"render UV map is used (supported: UV, UV Map, and a Mapping node on those)")
     return None
 
@@ -637,10 +647,8 @@ def _world_rotation(node, warnings, what):
     link = sock.links[0]
     if generated(link):
         return None
-    m = link.from_node
-    if m.type == "MAPPING" and m.vector_type in ("POINT", "TEXTURE", "VECTOR") and m.inputs["Vector"].is_linked \
-            and generated(m.inputs["Vector"].links[0]) \
-            and not any(m.inputs[k].is_linked for k in ("Location", "Rotation", "Scale") if k in m.inputs):
+    m = _mapping_on(link, generated)
+    if m is not None:
         from mathutils import Euler
 
         scale = tuple(m.inputs["Scale"].default_value)
@@ -652,7 +660,7 @@ def _world_rotation(node, warnings, what):
         if m.vector_type == "TEXTURE":
             rot = rot.transposed()
         return np.array([list(row) for row in rot], dtype=np.float32)
-    warnings.append(f"{what}: the Vector input of texture '{node.name}' ({m.type}) is not supported; the world "
+    warnings.append(f"{what}: the Vector input of texture '{node.name}' ({link.from_node.type}) is not supported; the world "
                     f"direction is used (supported: Generated, and a Mapping node on it)")
     return None
 

@@ -116,14 +116,20 @@ def _camera_and_world(bpy, scene):
     scene.gdmlt.max_bounces = BOUNCES
 
 
+def _grey_room(bpy, smooth):
+    """An empty file holding a grey room (`_room`): (scene, its grey material)."""
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    scene = bpy.context.scene
+    grey = _diffuse(bpy, "Grey", (0.7, 0.7, 0.7))
+    _room(bpy, scene, grey, smooth=smooth)
+    return scene, grey
+
+
 def smooth_room(bpy):
     """Issue 14 §1: a low-poly smooth-shaded room and sphere lit by an area light. Shading
     normals there disagree with the geometric ones: rays arrive below the shading
     hemisphere while above the surface."""
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    scene = bpy.context.scene
-    grey = _diffuse(bpy, "Grey", (0.7, 0.7, 0.7))
-    _room(bpy, scene, grey, smooth=True)
+    scene, grey = _grey_room(bpy, smooth=True)
     _uv_sphere(bpy, scene, "Ball", (0.3, 0.2, 0.35), 0.35, 6, 4, grey, smooth=True)
     light = bpy.data.lights.new("Area", "AREA")
     light.energy, light.size = 60.0, 0.6
@@ -137,10 +143,7 @@ def smooth_room(bpy):
 def softbox(bpy):
     """Blender's area light Spread: a disk light narrowed to a 40° cone and tilted 35°, so that
     the edge of its pool of light crosses the floor and a wall, above a ball."""
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    scene = bpy.context.scene
-    grey = _diffuse(bpy, "Grey", (0.7, 0.7, 0.7))
-    _room(bpy, scene, grey, smooth=False)
+    scene, grey = _grey_room(bpy, smooth=False)
     _uv_sphere(bpy, scene, "Ball", (0.2, 0.3, 0.3), 0.3, 24, 12, grey, smooth=True)
     light = bpy.data.lights.new("Softbox", "AREA")
     light.shape, light.size, light.energy, light.spread = "DISK", 0.5, 80.0, math.radians(40.0)
