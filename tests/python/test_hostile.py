@@ -64,6 +64,24 @@ def test_negative_light_power_is_refused_naming_the_light():
         gdmlt.Scene(d)
 
 
+@pytest.mark.parametrize("spread", [float("nan"), float("inf"), -0.1])
+def test_a_broken_area_light_spread_is_refused_naming_the_light(spread):
+    """A NaN, infinite or negative Spread is a ValueError naming the light (a spread of 0,
+    Cycles' delta beam, is held at a hundredth of a degree; above π it is Lambertian)."""
+    import numpy as np
+
+    from gdmlt import scenedict
+
+    d = gdmlt.builtin_scene("cornell", 16, 16)
+    d["lights"] = [scenedict.area_light("Softbox", np.eye(4, dtype=np.float32), "SQUARE", 0.5, 0.5,
+                                        (10.0, 10.0, 10.0), spread=spread)]
+    with pytest.raises(ValueError, match="Softbox.*spread"):
+        gdmlt.Scene(d)
+    for fine in (0.0, 4.0):
+        d["lights"][0]["spread"] = fine
+        gdmlt.Scene(d)
+
+
 def test_usd_stored_settings_go_through_the_cli_checks(tmp_path):
     """[9] customLayerData skipped the CLI's validation (spp 'abc', threads -1 → tracebacks)."""
     pxr = pytest.importorskip("pxr")
