@@ -21,6 +21,7 @@ pub mod reconstruct;
 pub mod sampler;
 pub mod scene;
 pub mod shift;
+pub mod sobol;
 #[cfg(test)]
 pub(crate) mod test_stats;
 

@@ -62,13 +62,13 @@ impl Sampler for IndependentSampler {
 /// path's lens sample (2). The path builder then draws `path::SAMPLES_PER_VERTEX` per vertex.
 pub const PIXEL_DIMENSIONS: u32 = 4;
 
-/// Owen-scrambled Sobol points (Burley 2020, the `sobol_burley` crate; Cycles' pattern
-/// family), "padded": the stream is cut into 4-D sets, each its own independently shuffled
+/// Owen-scrambled Sobol points (Burley 2020, `crate::sobol`; Cycles' pattern family),
+/// "padded": the stream is cut into 4-D sets, each its own independently shuffled
 /// and scrambled 4-D Sobol sequence over the pixel's samples, so each set is stratified
 /// whatever the others do. The sets follow what the path builder draws: {pixel position,
 /// lens}, then per vertex {light choice, light point (2), lobe} and {BSDF direction (2),
 /// roulette, unused}, so every 2-D pair it uses lies inside one set. Sample indices past
-/// 2^16 (the crate's limit) draw independent numbers instead.
+/// 2^16 (the table's size) draw independent numbers instead.
 #[derive(Clone, Debug)]
 pub struct SobolSampler {
     index: u32,
@@ -82,7 +82,8 @@ pub struct SobolSampler {
 impl SobolSampler {
     /// Sample `index` of the pixel whose stream is `stream` (seed and pixel mixed in).
     pub fn new(seed: u64, stream: u64, index: u32) -> Self {
-        let fallback = (index >= 1 << 16).then(|| IndependentSampler::new(seed, stream ^ ((index as u64) << 40)));
+        let fallback =
+            (index >= crate::sobol::TABLE_SIZE).then(|| IndependentSampler::new(seed, stream ^ ((index as u64) << 40)));
         SobolSampler {
             index,
             seed: mix64(seed ^ mix64(stream)) as u32,
@@ -115,7 +116,7 @@ impl Sampler for SobolSampler {
         self.dim += 1;
         if set != self.set {
             let set_seed = mix64(((self.seed as u64) << 32) | set as u64) as u32;
-            self.cache = sobol_burley::sample_4d(self.index, 0, set_seed);
+            self.cache = crate::sobol::sample_4d(self.index, set_seed);
             self.set = set;
         }
         self.cache[k].min(1.0 - f32::EPSILON / 2.0)
