@@ -1,8 +1,7 @@
 //! Owen-scrambled 4-D Sobol points with a shuffled index (Burley 2020, "Practical Hash-based
-//! Owen Scrambling"), computed from a table of the first 2^16 points of Sobol's first four
-//! dimensions instead of a matrix–vector product per point: a table lookup and five hashes
-//! per 4-D point (measured 21 ns against 47 ns for the `sobol_burley` crate's `sample_4d`,
-//! which took a fifth of a path tracer's time).
+//! Owen Scrambling"). Sobol points are linear in the index's bits over GF(2), so a point is
+//! the xor of two table entries, one for the index's low byte and one for its high byte
+//! (two 4 KB tables, in L1 cache), instead of a matrix–vector product per point.
 //!
 //! - Sobol dimensions 0–3 (Joe & Kuo 2008 direction numbers: van der Corput; x + 1;
 //!   x² + x + 1 with m = 1, 3; x³ + x + 1 with m = 1, 3, 1), natural (not Gray-code) order.
@@ -15,57 +14,88 @@
 //!
 //! The hash is Laine and Karras' (2011) multiply–xor construction with the constants of
 //! pbrt-v4's fast Owen scrambler: each step changes a bit by the bits below it only.
+//! Why: the `sobol_burley` crate's `sample_4d` (42 ns a 4-D point, x86-64-v3) took a fifth
+//! of a path tracer's time (perf, 128² lights scene). Measured in renders (old and new core
+//! in one process, in turn, 2026-12-03): `pt` 64 spp on the lights scene 0.527 → 0.469 s
+//! (min of 8; median 0.552 → 0.494), `gdpt` 32 spp on the Cornell box 0.607 → 0.552 s (min of
+//! 6; median 0.651 → 0.631). A single 1 MB table of all 2^16 points was 20 ns a point alone
+//! but no faster in a render, where its lookups missed the cache.
 
-use std::sync::OnceLock;
-
-/// Points per table (and the largest sample index a 4-D set serves).
+/// The largest sample index + 1 a 4-D set serves.
 pub const TABLE_SIZE: u32 = 1 << 16;
-
-/// The first `TABLE_SIZE` points of Sobol's dimensions 0–3, as 32-bit fractions.
-fn table() -> &'static [[u32; 4]] {
-    static TABLE: OnceLock<Vec<[u32; 4]>> = OnceLock::new();
-    TABLE.get_or_init(|| {
-        let v = direction_numbers();
-        // natural order by Gray code: point i ^ (i >> 1) follows point (i − 1) ^ ((i − 1) >> 1)
-        // by one column; filled in natural order from the Gray-code walk
-        let mut t = vec![[0u32; 4]; TABLE_SIZE as usize];
-        let mut x = [0u32; 4];
-        for i in 1..TABLE_SIZE {
-            let c = i.trailing_zeros() as usize; // the bit that changes between gray(i − 1) and gray(i)
-            for d in 0..4 {
-                x[d] ^= v[d][c];
-            }
-            t[(i ^ (i >> 1)) as usize] = x;
-        }
-        t
-    })
-}
 
 /// Direction numbers v[d][k] (32-bit, most significant bit first) of dimensions 0–3 for index
 /// bits k < 16.
-fn direction_numbers() -> [[u32; 16]; 4] {
+const fn direction_numbers() -> [[u32; 16]; 4] {
     // (degree s, coefficients a, initial m_1..m_s) of each dimension's primitive polynomial
-    const POLYS: [(usize, u32, &[u32]); 3] = [(1, 0, &[1]), (2, 1, &[1, 3]), (3, 1, &[1, 3, 1])];
+    const S: [usize; 3] = [1, 2, 3];
+    const A: [u32; 3] = [0, 1, 1];
+    const M: [[u32; 3]; 3] = [[1, 0, 0], [1, 3, 0], [1, 3, 1]];
     let mut v = [[0u32; 16]; 4];
-    for (k, vk) in v[0].iter_mut().enumerate() {
-        *vk = 1 << (31 - k);
+    let mut k = 0;
+    while k < 16 {
+        v[0][k] = 1 << (31 - k);
+        k += 1;
     }
-    for (d, &(s, a, m)) in POLYS.iter().enumerate() {
-        let vd = &mut v[d + 1];
-        for k in 0..s {
-            vd[k] = m[k] << (31 - k);
-        }
-        for k in s..16 {
-            let mut x = vd[k - s] ^ (vd[k - s] >> s);
-            for j in 1..s {
-                if (a >> (s - 1 - j)) & 1 == 1 {
-                    x ^= vd[k - j];
+    let mut d = 0;
+    while d < 3 {
+        let s = S[d];
+        let mut k = 0;
+        while k < 16 {
+            v[d + 1][k] = if k < s {
+                M[d][k] << (31 - k)
+            } else {
+                let mut x = v[d + 1][k - s] ^ (v[d + 1][k - s] >> s);
+                let mut j = 1;
+                while j < s {
+                    if (A[d] >> (s - 1 - j)) & 1 == 1 {
+                        x ^= v[d + 1][k - j];
+                    }
+                    j += 1;
                 }
-            }
-            vd[k] = x;
+                x
+            };
+            k += 1;
         }
+        d += 1;
     }
     v
+}
+
+/// BYTES[h][b]: the xor of the direction numbers of the set bits of byte b, as the index's
+/// low (h = 0) or high (h = 1) byte.
+static BYTES: [[[u32; 4]; 256]; 2] = {
+    let v = direction_numbers();
+    let mut t = [[[0u32; 4]; 256]; 2];
+    let mut h = 0;
+    while h < 2 {
+        let mut b = 0;
+        while b < 256 {
+            let mut d = 0;
+            while d < 4 {
+                let mut x = 0u32;
+                let mut k = 0;
+                while k < 8 {
+                    if (b >> k) & 1 == 1 {
+                        x ^= v[d][8 * h + k];
+                    }
+                    k += 1;
+                }
+                t[h][b][d] = x;
+                d += 1;
+            }
+            b += 1;
+        }
+        h += 1;
+    }
+    t
+};
+
+/// Point `index` (< `TABLE_SIZE`) of Sobol's dimensions 0–3, as 32-bit fractions.
+#[inline]
+fn sobol4(index: u32) -> [u32; 4] {
+    let (lo, hi) = (&BYTES[0][(index & 0xff) as usize], &BYTES[1][((index >> 8) & 0xff) as usize]);
+    std::array::from_fn(|d| lo[d] ^ hi[d])
 }
 
 /// Laine–Karras hash of `v` keyed by `seed`: each output bit depends on the input bits at
@@ -106,7 +136,7 @@ pub fn owen_scramble(v: u32, seed: u32) -> u32 {
 /// Point `index` (< `TABLE_SIZE`) of the 4-D sequence keyed by `seed`, in [0,1)^4.
 #[inline]
 pub fn sample_4d(index: u32, seed: u32) -> [f32; 4] {
-    let p = table()[shuffle_index(index, hash(seed ^ 0x79c6_8e4a)) as usize];
+    let p = sobol4(shuffle_index(index, hash(seed ^ 0x79c6_8e4a)));
     let s = seed.wrapping_mul(0x9c8f_2d3b);
     const LANES: [u32; 4] = [0x912f_69ba, 0x174f_18ab, 0x691e_72ca, 0xb40c_c1b8];
     std::array::from_fn(|d| crate::sampler::u32_to_unit_f32(owen_scramble(p[d], hash(s ^ LANES[d]))))
@@ -120,11 +150,11 @@ mod tests {
     /// dimensions 0 and 1 form a (0, 2)-sequence: every elementary interval of area 2^−8
     /// (2^−i × 2^−(8−i)) holds one of the first 256 points, and of each aligned block of 256.
     #[test]
-    fn the_table_is_sobol() {
-        let t = table();
+    fn the_tables_give_sobol() {
+        let t: Vec<[u32; 4]> = (0..TABLE_SIZE).map(sobol4).collect();
         for d in 0..4 {
             let mut seen = vec![false; TABLE_SIZE as usize];
-            for p in t {
+            for p in &t {
                 let k = (p[d] >> 16) as usize;
                 assert!(!seen[k], "dimension {d}: two points in interval {k}");
                 seen[k] = true;
