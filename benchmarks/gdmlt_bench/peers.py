@@ -122,6 +122,10 @@ def import_mitsuba(threads: int = 0):
             if Path(c).exists():
                 os.environ["DRJIT_LIBLLVM_PATH"] = c
                 break
+        else:
+            # Dr.Jit would load whatever libLLVM it finds; with Debian's LLVM 14/15 its code
+            # generation aborts the process ("Cannot select"), which nothing can catch
+            raise Unsupported("Mitsuba's LLVM backend needs libLLVM 19 (apt-get install libllvm19)")
     try:
         import drjit as dr
         import mitsuba as mi
