@@ -201,6 +201,10 @@ pub struct Event {
     /// shift does not re-create such segments from a free offset vertex (it fails there,
     /// on both sides alike).
     pub through_transparent: bool,
+    /// The light is direct (`PathContribution::direct`): the segment leaves the camera or a
+    /// vertex reached before any scattering (crossings of transparent surfaces are not
+    /// scatterings).
+    pub direct: bool,
 }
 
 /// A recorded path (reused between samples: no allocation once warm).
@@ -219,6 +223,10 @@ pub struct PathContribution {
     pub radiance: Spectrum,
     /// Emission seen directly by the camera ray (docs/algorithm.md §4: never differenced).
     pub very_direct: Spectrum,
+    /// Direct light, `very_direct` included: what the same path gives with `max_bounces` 0
+    /// (Cycles' "direct lighting"): light reached after at most one scattering, and light
+    /// samples taken before any (`Event::direct`). The Metropolis methods render it apart.
+    pub direct: Spectrum,
     /// Albedo and normal of the first surface, for denoising passes.
     pub albedo: Spectrum,
     pub normal: Vec3,
@@ -298,7 +306,7 @@ pub fn trace_path_from<S: Sampler>(
             crossed += le * st.mis(pdf_light);
             st.record_emission(&mut record, li, z, inf, le, pdf_light);
         });
-        add(&mut out, cfg.clamp(st.beta * crossed, st.depth), camera_ray);
+        add(&mut out, cfg.clamp(st.beta * crossed, st.depth), camera_ray, st.direct_emission());
 
         // 3. a miss: the world, or the film's transparency
         let Some(hit) = hit else {
@@ -310,7 +318,7 @@ pub fn trace_path_from<S: Sampler>(
             }
             let (le, pdf_light) = scene.world_eval(st.prev_p, st.d);
             if le.max_element() > 0.0 {
-                add(&mut out, cfg.clamp(st.beta * le * st.mis(pdf_light), st.depth), camera_ray);
+                add(&mut out, cfg.clamp(st.beta * le * st.mis(pdf_light), st.depth), camera_ray, st.direct_emission());
                 st.record_emission(&mut record, scene.env_light(), st.d, true, le, pdf_light);
             }
             break;
@@ -319,7 +327,7 @@ pub fn trace_path_from<S: Sampler>(
         // 4. the surface: its emission, the vertex
         let si: SurfaceInteraction = scene.interaction(&hit, st.d);
         if let Some((le, pdf_light)) = scene.surface_emission(&si, st.prev_p, st.d) {
-            add(&mut out, cfg.clamp(st.beta * le * st.mis(pdf_light), st.depth), camera_ray);
+            add(&mut out, cfg.clamp(st.beta * le * st.mis(pdf_light), st.depth), camera_ray, st.direct_emission());
             let li = scene.triangle_light(si.prim).unwrap_or(u32::MAX);
             st.record_emission(&mut record, li, si.p, false, le, pdf_light);
         }
@@ -362,10 +370,10 @@ pub fn trace_path_from<S: Sampler>(
         if st.use_nee && !bsdf.is_delta() {
             let nee = next_event(scene, &si, &bsdf, wo, u_light_select, u_light);
             if let Some(e) = nee {
-                add(&mut out, cfg.clamp(st.beta * e.f * e.le * (e.weight / e.pdf_l), st.depth), false);
+                add(&mut out, cfg.clamp(st.beta * e.f * e.le * (e.weight / e.pdf_l), st.depth), false, st.depth == 0);
                 let numerator = st.beta * e.f * e.le;
                 if let (Some(p), true) = (record.as_deref_mut(), numerator.max_element() > 0.0) {
-                    p.events.push(Event { vertex: st.nvert, numerator, ..e.event });
+                    p.events.push(Event { vertex: st.nvert, numerator, direct: st.depth == 0, ..e.event });
                 }
             }
         }
@@ -437,6 +445,14 @@ impl PathState {
         }
     }
 
+    /// Emission found now is direct light: what the path cut at `max_bounces` 0 finds too —
+    /// before any scattering, or on the segment straight after the first (the cut path stops
+    /// at the next surface, transparent or not).
+    #[inline]
+    fn direct_emission(&self) -> bool {
+        self.depth == 0 || (self.depth == 1 && !self.passed)
+    }
+
     /// MIS weight of emission found by BSDF sampling whose light-sampling pdf is `pdf_light`.
     #[inline]
     fn mis(&self, pdf_light: f32) -> f32 {
@@ -488,6 +504,7 @@ impl PathState {
                 pdf_l: if self.use_nee && !self.prev_delta { pdf_l } else { 0.0 },
                 numerator,
                 through_transparent: self.passed,
+                direct: self.direct_emission(),
             });
         }
     }
@@ -614,6 +631,7 @@ fn next_event(
         pdf_l: ls.pdf,
         numerator: Spectrum::ZERO,
         through_transparent: crossed_transparent,
+        direct: false, // set by the caller
     };
     Some(NextEvent { le: radiance, f, pdf_l: ls.pdf, weight, event })
 }
@@ -673,10 +691,13 @@ pub fn camera_transparency(scene: &Scene, cam: &CameraRay, hit: Option<TriHit>, 
 }
 
 #[inline]
-fn add(out: &mut PathContribution, c: Spectrum, very_direct: bool) {
+fn add(out: &mut PathContribution, c: Spectrum, very_direct: bool, direct: bool) {
     out.radiance += c;
     if very_direct {
         out.very_direct += c;
+    }
+    if direct {
+        out.direct += c;
     }
 }
 
@@ -762,6 +783,49 @@ mod tests {
             }
             let (a, b) = (a / n as f64, b / n as f64);
             assert!((a - b).abs() < 0.01 * a, "nee={nee}: path tracer {a} vs events {b}");
+        }
+    }
+
+    /// `direct` is what the same path gives cut at `max_bounces` 0 (the Metropolis methods'
+    /// direct pass renders exactly that, their chains the rest): equal sample by sample, the
+    /// same primary samples driving both, on scenes with transparent crossings, mirrors and
+    /// glass, NEE and naive; and recorded events of both kinds occur.
+    #[test]
+    fn direct_light_is_the_path_cut_at_no_bounce() {
+        use crate::scene::builtin::{cornell_mixed_lights, cornell_spheres, cornell_veil};
+        for (k, desc) in
+            [cornell_box(16, 16), cornell_spheres(16, 16), cornell_veil(16, 16), cornell_mixed_lights(16, 16)]
+                .iter()
+                .enumerate()
+        {
+            let scene = Scene::build(desc).unwrap();
+            for nee in [true, false] {
+                let full = PathSettings::new(6, nee);
+                let cut = PathSettings { max_bounces: 0, ..full };
+                let mut path = Path::default();
+                let (mut direct, mut indirect) = (0usize, 0usize);
+                for i in 0..4000u64 {
+                    let raster = Vec2::new((i % 16) as f32, ((i / 16) % 16) as f32);
+                    let mut s = IndependentSampler::new(21, i);
+                    let raster = raster + s.next_2d();
+                    let c = trace_path(&scene, &full, raster, &mut s, Some(&mut path));
+                    let mut s = IndependentSampler::new(21, i);
+                    let raster2 = Vec2::new((i % 16) as f32, ((i / 16) % 16) as f32) + s.next_2d();
+                    assert_eq!(raster, raster2);
+                    let d = trace_path(&scene, &cut, raster, &mut s, None);
+                    assert_eq!(c.direct, d.radiance, "scene {k} nee={nee} path {i}");
+                    assert_eq!(d.direct, d.radiance, "scene {k} nee={nee} path {i}: the cut path is all direct");
+                    assert!((c.very_direct - c.direct).max_element() <= 0.0, "very direct light is direct");
+                    for e in path.events.iter().filter(|e| e.vertex != CAMERA_VERTEX) {
+                        if e.direct {
+                            direct += 1;
+                        } else {
+                            indirect += 1;
+                        }
+                    }
+                }
+                assert!(direct > 0 && indirect > 0, "scene {k} nee={nee}: {direct} direct, {indirect} indirect events");
+            }
         }
     }
 

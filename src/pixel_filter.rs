@@ -1,8 +1,9 @@
 //! The pixel filter: where inside (and around) its pixel a camera sample is taken. Filter
 //! importance sampling: the sample's offset from the pixel centre is drawn from the filter,
 //! so every sample has weight 1 and each pixel estimates the image convolved with the filter.
-//! Separable, as Cycles samples it (x and y each from the 1D filter). Used by `pt` and
-//! `gdpt`; the Metropolis methods keep a box (integrator/mlt.rs says why).
+//! Separable, as Cycles samples it (x and y each from the 1D filter). Every method takes
+//! its camera samples through it (the Metropolis chains map the fraction of their pixel
+//! coordinate, integrator/mlt.rs).
 //!
 //! Parameters (the scene's camera, `pixel_filter` and `filter_width`; defaults as Cycles'):
 //! * `BLACKMAN_HARRIS` (default), width 1.5 pixels: Cycles'

@@ -454,21 +454,28 @@ fn reconnect_event(scene: &Scene, e: &Event, xk: Vec3, f: &Free) -> Option<(Spec
 /// The contributions of a base path and its offset through `offset_raster` (None when the
 /// neighbour pixel is outside the image: the base then takes full weight).
 pub fn shift(scene: &Scene, base: &Path, offset_raster: Option<Vec2>) -> PairContribution {
-    pair_contribution(Offset::new(scene, base, offset_raster))
+    pair_contribution(Offset::new(scene, base, offset_raster), false)
+}
+
+/// The same for the base's indirect light only (events not `direct`): the Metropolis
+/// methods render direct light apart, by plain Monte Carlo.
+pub fn shift_indirect(scene: &Scene, base: &Path, offset_raster: Option<Vec2>) -> PairContribution {
+    pair_contribution(Offset::new(scene, base, offset_raster), true)
 }
 
 /// The same with the offset's camera ray (through the neighbour pixel, with the base's lens
 /// sample) already traced: `primary` = that ray and its hit, None outside the image. (GDPT
 /// traces a base path's camera ray and its four offsets' as one packet.)
 pub fn shift_from(scene: &Scene, base: &Path, primary: Option<(CameraRay, Option<TriHit>)>) -> PairContribution {
-    pair_contribution(Offset::from_primary(scene, base, primary))
+    pair_contribution(Offset::from_primary(scene, base, primary), false)
 }
 
-fn pair_contribution(mut offset: Offset<'_>) -> PairContribution {
+fn pair_contribution(mut offset: Offset<'_>, indirect_only: bool) -> PairContribution {
     let mut out = PairContribution::default();
     let base = offset.base;
-    // events come in vertex order (camera events, never differenced, are skipped)
-    for e in base.events.iter().filter(|e| e.vertex != CAMERA_VERTEX) {
+    // events come in vertex order (camera events, never differenced, are skipped; so are
+    // direct ones when asked)
+    for e in base.events.iter().filter(|e| e.vertex != CAMERA_VERTEX && !(indirect_only && e.direct)) {
         let pdf_x = e.pdf_b + e.pdf_l;
         if !(pdf_x > 0.0) {
             continue;
@@ -870,15 +877,21 @@ mod tests {
         ];
         // rows: along the ceiling beside the light (row 3), across the glass sphere and the
         // veil (row 11) and over the lacquered floor (row 13); channel: None = luminance
-        for (si, nee, row, channel) in [
-            (0, true, 3.0f32, None),
-            (0, true, 11.0, None),
-            (0, false, 11.0, None),
-            (0, true, 13.0, None),
-            (1, true, 3.0, None),
-            (1, false, 11.0, None),
-            (2, true, 8.0, Some(1)),
+        // indirect: the pairs of indirect light only (`shift_indirect`, the Metropolis
+        // methods'), against path tracing's radiance minus its direct light
+        for (si, nee, row, channel, indirect) in [
+            (0, true, 3.0f32, None, false),
+            (0, true, 11.0, None, false),
+            (0, false, 11.0, None, false),
+            (0, true, 13.0, None, false),
+            (1, true, 3.0, None, false),
+            (1, false, 11.0, None, false),
+            (2, true, 8.0, Some(1), false),
+            (0, true, 11.0, None, true),
+            (1, false, 11.0, None, true),
+            (1, true, 11.0, None, true),
         ] {
+            let pair = if indirect { shift_indirect } else { shift };
             let pick = |v: Spectrum| -> f64 { channel.map_or(crate::math::luminance(v), |c| v[c]) as f64 };
             let scene = &scenes[si];
             let cfg = PathSettings::new(6, nee);
@@ -890,15 +903,15 @@ mod tests {
                     let mut smp = IndependentSampler::new(77, i * 64 + x as u64);
                     let raster = Vec2::new(x as f32, row) + smp.next_2d();
                     let c = trace_path(scene, &cfg, raster, &mut smp, Some(&mut base));
-                    let l = pick(c.radiance - c.very_direct);
+                    let l = pick(c.radiance - if indirect { c.direct } else { c.very_direct });
                     let back = (x > 0).then(|| raster - Vec2::X);
-                    let b = pick(shift(scene, &base, back).base);
+                    let b = pick(pair(scene, &base, back).base);
                     acc[x][0] += l;
                     acc[x][1] += l * l;
                     acc[x][2] += b;
                     acc[x][3] += b * b;
                     if x + 1 < w {
-                        let o = pick(shift(scene, &base, Some(raster + Vec2::X)).offset);
+                        let o = pick(pair(scene, &base, Some(raster + Vec2::X)).offset);
                         acc[x + 1][4] += o;
                         acc[x + 1][5] += o * o;
                     }
@@ -911,7 +924,7 @@ mod tests {
                 let se = (var(a[0], a[1]) + var(a[2], a[3]) + var(a[4], a[5])).sqrt();
                 assert!(
                     (pt - gd).abs() <= 4.5 * se + 1e-6,
-                    "scene {si} nee={nee} row {row} {channel:?} pixel {x}: path tracing {pt} vs pair {gd} (se {se})"
+                    "scene {si} nee={nee} row {row} {channel:?} indirect={indirect} pixel {x}: path tracing {pt} vs pair {gd} (se {se})"
                 );
             }
         }

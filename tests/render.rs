@@ -23,8 +23,7 @@ fn run_method(
     seed: u64,
     threads: usize,
 ) -> RenderOutput {
-    // the methods are compared pixel by pixel: every one with the box filter the Metropolis
-    // methods use (pt and gdpt default to Blackman-Harris, src/pixel_filter.rs)
+    // the methods are compared pixel by pixel, every one with the same (box) pixel filter
     let mut desc = desc.clone();
     desc.camera.pixel_filter = "BOX".into();
     let scene = Scene::build(&desc).expect("scene builds");
@@ -275,11 +274,41 @@ fn assert_converges(what: &str, est: &[Vec<f64>], refv: &[f64], ref_frac: f64, f
 
 /// Gradient layers against E[dx] = D_x(I − very direct) of a PT reference, per 4×4 block.
 fn check_gradients(what: &str, runs: &[RenderOutput], reference: &RenderOutput, ref_frac: f64, factor: f64) {
+    let undifferenced = reference.layer("Very Direct").expect("PT writes its very-direct layer").clone();
+    check_gradients_of(what, runs, reference, &undifferenced, ref_frac, factor);
+}
+
+/// GDPSSMLT's gradients are those of the light its chains render: all but the direct light
+/// (its direct pass's, rendered here by `pt` cut at 0 bounces with the reference's samples).
+#[allow(clippy::too_many_arguments)]
+fn check_gdpssmlt_gradients(
+    what: &str,
+    desc: &SceneDesc,
+    runs: &[RenderOutput],
+    reference: &RenderOutput,
+    ref_spp: u32,
+    nee: bool,
+    ref_frac: f64,
+    factor: f64,
+) {
+    let direct = run_method(desc, Method::Pt, Norm::L2, ref_spp, nee, 0, 100, 0);
+    check_gradients_of(what, runs, reference, direct.layer("Combined").unwrap(), ref_frac, factor);
+}
+
+/// The runs' gradient layers against the finite differences of the reference's Combined
+/// minus `undifferenced` (the light a method adds without gradients).
+fn check_gradients_of(
+    what: &str,
+    runs: &[RenderOutput],
+    reference: &RenderOutput,
+    undifferenced: &Image,
+    ref_frac: f64,
+    factor: f64,
+) {
     let combined = reference.layer("Combined").unwrap();
     let (w, h) = (combined.width, combined.height);
     let green = |img: &Image| -> Vec<f64> { img.data.iter().skip(1).step_by(3).map(|&v| v as f64).collect() };
-    let indirect =
-        diff(&green(combined), &green(reference.layer("Very Direct").expect("PT writes its very-direct layer")));
+    let indirect = diff(&green(combined), &green(undifferenced));
     let (rdx, rdy) = gradients(&indirect, w, h);
     let blocks = |v: &[f64]| -> Vec<f64> {
         let img = Image { width: w, height: h, channels: 3, data: v.iter().flat_map(|&x| [x as f32; 3]).collect() };
@@ -415,7 +444,8 @@ fn metropolis_is_independent_of_thread_count() {
 
 /// PSSMLT and GDPSSMLT converge to the path-traced image (block means and image mean, with
 /// tolerances from the spread of K renders with different seeds), in both light modes; the
-/// PSSMLT normalisation b equals the luminance of the image mean, as it must.
+/// PSSMLT normalisation b equals the luminance of the mean of the light its chains render
+/// (all but the direct light), as it must.
 #[test]
 fn metropolis_methods_converge_to_the_path_traced_image() {
     let (w, h) = (16, 16);
@@ -432,11 +462,22 @@ fn metropolis_methods_converge_to_the_path_traced_image() {
             let est: Vec<Vec<f64>> = runs.iter().map(|r| block_means(&estimate(r), 4)).collect();
             assert_converges(&format!("{method:?} nee={nee}"), &est, &block_means(&reference, 4), ref_frac, 2.5);
             if method == Method::Gdpssmlt {
-                check_gradients(&format!("{method:?} nee={nee}"), &runs, &ref_out, ref_frac, 2.5);
+                check_gdpssmlt_gradients(
+                    &format!("{method:?} nee={nee}"),
+                    &desc,
+                    &runs,
+                    &ref_out,
+                    8192,
+                    nee,
+                    ref_frac,
+                    2.5,
+                );
             }
             if method == Method::Pssmlt {
-                let m = reference.mean();
-                let lum = 0.2126 * m[0] + 0.7152 * m[1] + 0.0722 * m[2];
+                // the chains render all light but the direct light (the direct pass's)
+                let direct = run_method(&desc, Method::Pt, Norm::L2, 8192, nee, 0, 100, 0);
+                let (m, d) = (reference.mean(), direct.layer("Combined").unwrap().mean());
+                let lum = 0.2126 * (m[0] - d[0]) + 0.7152 * (m[1] - d[1]) + 0.0722 * (m[2] - d[2]);
                 let bs: Vec<f64> = runs.iter().map(|r| r.stats.normalization).collect();
                 let bm = bs.iter().sum::<f64>() / k as f64;
                 assert!((bm / lum - 1.0).abs() < 0.03, "normalisation {bm} vs image luminance {lum}");
@@ -485,9 +526,14 @@ fn all_methods_converge_on_specular_gap_and_veil_scenes() {
             let est: Vec<Vec<f64>> = runs.iter().map(|r| block_means(&estimate(r), 4)).collect();
             let ref_frac = spp as f64 / ref_spp as f64;
             assert_converges(&format!("{name} {method:?}"), &est, &reference, ref_frac, 2.5);
-            if method != Method::Pssmlt {
-                // through the glass and the mirror the shift copies half-vectors
-                check_gradients(&format!("{name} {method:?}"), &runs, &ref_out, ref_frac, 2.5);
+            // through the glass and the mirror the shift copies half-vectors
+            let what = format!("{name} {method:?}");
+            match method {
+                Method::Gdpt => check_gradients(&what, &runs, &ref_out, ref_frac, 2.5),
+                Method::Gdpssmlt => {
+                    check_gdpssmlt_gradients(&what, &desc, &runs, &ref_out, ref_spp, nee, ref_frac, 2.5)
+                }
+                _ => {}
             }
             for r in &runs {
                 assert!(r.layers.iter().all(|(_, img)| img.data.iter().all(|v| v.is_finite())));
@@ -518,8 +564,13 @@ fn all_methods_converge_through_glass_with_and_without_nee() {
             let est: Vec<Vec<f64>> = runs.iter().map(|r| block_means(&estimate(r), 4)).collect();
             let ref_frac = spp as f64 / ref_spp as f64;
             assert_converges(&format!("{name} nee={nee} {method:?}"), &est, &reference, ref_frac, 2.5);
-            if method != Method::Pssmlt {
-                check_gradients(&format!("{name} nee={nee} {method:?}"), &runs, &ref_out, ref_frac, 2.5);
+            let what = format!("{name} nee={nee} {method:?}");
+            match method {
+                Method::Gdpt => check_gradients(&what, &runs, &ref_out, ref_frac, 2.5),
+                Method::Gdpssmlt => {
+                    check_gdpssmlt_gradients(&what, &desc, &runs, &ref_out, ref_spp, nee, ref_frac, 2.5)
+                }
+                _ => {}
             }
         }
     }

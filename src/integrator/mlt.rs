@@ -6,7 +6,10 @@
 //! * `gdpssmlt`: state (u, d), d ∈ {+x, −x, +y, −y}; target
 //!   F = ℓ(|G_d|) + (α/4)·ℓ(|L|) (docs/algorithm.md §3, ℓ of per-channel absolute values);
 //!   splats: primal C_x (base pixel) and C_y (neighbour), gradient ±4·G_d; then screened
-//!   Poisson reconstruction and the very-direct image (plain Monte Carlo) on top.
+//!   Poisson reconstruction.
+//!
+//! Direct light (camera-visible emission and light after one scattering) is not the chains'
+//! work: a direct pass renders it by plain Monte Carlo and adds it on top (`FirstHits`).
 //!
 //! Bootstrap: independent states estimate b = E[F] and give chain starts ∝ F; every large
 //! step of every chain is one more independent state, so b is refined with them as the
@@ -25,11 +28,11 @@
 use super::{ChainStart, RenderControl, RenderOutput, RenderSettings, RenderStats};
 use crate::film::Image;
 use crate::math::{abs_luminance, is_finite_spectrum, Spectrum};
-use crate::path::{camera_transparency, first_hit, trace_path, Path};
+use crate::path::{camera_transparency, first_hit, trace_path, trace_path_from, Path, PathSettings, Primary};
 use crate::reconstruct::{gradient_domain_image, gradient_domain_layers, IrlsParams, Norm, Problem, RowPlanar};
 use crate::sampler::{mix64, IndependentSampler, PssSampler, Sampler};
 use crate::scene::{CameraRay, Scene};
-use crate::shift::shift;
+use crate::shift::shift_indirect;
 use glam::Vec2;
 use rayon::prelude::*;
 use std::sync::atomic::Ordering;
@@ -103,11 +106,17 @@ impl Bootstrap {
 pub const DIRECTION_MUTATION_PROBABILITY: f32 = 0.5;
 /// Bands a chain's splats are sorted into, for the parallel merge after each round.
 const MERGE_BANDS: usize = 64;
-/// Samples per pixel of the very-direct image of gdpssmlt (and of the denoising passes of
-/// both Metropolis methods): 16 before the chains run, then topped up between rounds to a
-/// quarter of the mutations per pixel done (whenever that doubles it), up to the maximum, so
-/// that it converges with the budget like the rest of the image.
-const VERY_DIRECT_SPP: (u32, u32) = (16, 4096);
+/// Samples per pixel of the direct pass (direct light and the denoising guides): 16 before
+/// the chains run, then topped up between rounds to `DIRECT_SPP_PER_MUTATION` of the
+/// mutations per pixel done (whenever that doubles it), up to the maximum, so that it
+/// converges with the budget like the rest of the image.
+const DIRECT_SPP: (u32, u32) = (16, 4096);
+/// Direct-pass samples per mutation (per pixel). A direct sample costs about a tenth of a
+/// gdpssmlt mutation. Measured (gdpssmlt, 4 s, 128², relMSE; ratio 0.25 / 1 / 4 / 8): area
+/// light 3.3e-4 / 1.5e-4 / 1.3e-4 / 1.7e-4, area + point + sun + world 3.8e-4 / 2.1e-4 /
+/// 1.5e-4 / 1.4e-4, door ajar 0.017 / 0.012 / 0.013 / 0.015, glass box 0.0068 / 0.0067 /
+/// 0.0083 / 0.0099: 2 between them.
+const DIRECT_SPP_PER_MUTATION: f64 = 2.0;
 
 const SHIFTS: [(i32, i32); 4] = [(1, 0), (-1, 0), (0, 1), (0, -1)];
 const PRIMAL: usize = 0;
@@ -148,36 +157,38 @@ struct Target<'a> {
 impl Target<'_> {
     /// Evaluates the state; for the gradient target only direction `only` (all four if None).
     fn evaluate<S: Sampler>(&self, sampler: &mut S, path: &mut Path, only: Option<usize>) -> Evaluated {
-        // The primary sample is the raster position itself (a box pixel filter). The
-        // Metropolis methods do not take the scene's pixel filter: mapping the fraction inside
-        // the pixel through it (as pt does) measured gdpssmlt's naive image 3% ± 1.5% darker
-        // on the smooth room (8 seeds), which is not understood yet (docs/limits.md).
+        // The primary sample picks the pixel (its integer part) and, as pt's samples do, the
+        // offset from the pixel's centre through the scene's pixel filter (its fraction): the
+        // splats go to that pixel, which so estimates the image convolved with the filter.
         let u = sampler.next_2d();
-        let raster = Vec2::new(u.x * self.w as f32, u.y * self.h as f32);
-        let (px, py) = ((raster.x as usize).min(self.w - 1), (raster.y as usize).min(self.h - 1));
+        let (fx, fy) = (u.x * self.w as f32, u.y * self.h as f32);
+        let (px, py) = ((fx as usize).min(self.w - 1), (fy as usize).min(self.h - 1));
+        let frac = Vec2::new(fx - px as f32, fy - py as f32);
+        let raster = self.scene.camera.pixel_raster(px as f32, py as f32, frac);
         let pixel = py * self.w + px;
         let c = trace_path(self.scene, &self.settings.path, raster, sampler, Some(path));
         let mut ev = Evaluated { splats: [Splats::default(); 4], f: [0.0; 4] };
         if !is_finite_spectrum(c.radiance) {
             return ev;
         }
+        // the chains render indirect light; direct light is the direct pass's (FirstHits)
+        let l = c.radiance - c.direct;
         if !self.gradient {
-            let f = abs_luminance(c.radiance);
+            let f = abs_luminance(l);
             for k in 0..4 {
                 ev.f[k] = f;
                 ev.splats[k].pixel = pixel;
-                ev.splats[k].push(PRIMAL, pixel, c.radiance);
+                ev.splats[k].push(PRIMAL, pixel, l);
             }
             return ev;
         }
-        let l = c.radiance - c.very_direct;
         for (k, (dx, dy)) in SHIFTS.iter().enumerate() {
             if only.is_some_and(|o| o != k) {
                 continue;
             }
             let (nx, ny) = (px as i32 + dx, py as i32 + dy);
             let inside = nx >= 0 && ny >= 0 && nx < self.w as i32 && ny < self.h as i32;
-            let pc = shift(self.scene, path, inside.then(|| raster + Vec2::new(*dx as f32, *dy as f32)));
+            let pc = shift_indirect(self.scene, path, inside.then(|| raster + Vec2::new(*dx as f32, *dy as f32)));
             if !is_finite_spectrum(pc.base) || !is_finite_spectrum(pc.offset) {
                 continue;
             }
@@ -466,8 +477,8 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl,
     // Very-direct light of gdpssmlt by plain Monte Carlo (first, so previews include it; then
     // topped up as the chains advance), and the denoising albedo and normal of every
     // Metropolis render.
-    let mut first = FirstHits::new(w, h, settings.path.transparent_bounces);
-    first.add(scene, settings.seed, VERY_DIRECT_SPP.0, control);
+    let mut first = FirstHits::new(w, h, &settings.path);
+    first.add(scene, settings.seed, DIRECT_SPP.0, control);
 
     // Every chain starts from a bootstrap state (replayed; direction ∝ F) ...
     let mut chains: Vec<Chain> = (0..n_chains)
@@ -523,7 +534,7 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl,
             });
             image.merge(&logs[..group.len()]);
         }
-        let target = very_direct_target(image.mutations, w * h);
+        let target = direct_target(image.mutations, w * h);
         if target >= 2 * first.spp {
             first.add(scene, settings.seed, target, control);
         }
@@ -542,11 +553,13 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl,
     let b = image.normalisation(boot_sum, n_boot);
     stats.normalization = b;
     stats.chains = n_chains;
-    if no_light {
-        stats.warnings.push("no light reaches the camera in the bootstrap: the image is black".into());
-    }
-    first.add(scene, settings.seed, very_direct_target(mutations, w * h), control);
+    // without indirect light (no chain ran) the budget is the direct pass's
+    let direct_spp = if no_light { settings.spp.min(DIRECT_SPP.1) } else { direct_target(mutations, w * h) };
+    first.add(scene, settings.seed, direct_spp, control);
     let ([direct, albedo, normal], alpha) = first.into_means();
+    if no_light && !direct.iter().any(|&v| v > 0.0) {
+        stats.warnings.push("no light reaches the camera: the image is black".into());
+    }
     let norm = control.final_norm(settings.reconstruction);
     let mut layers = resolve(image, b, direct, settings.alpha_rec, norm, &|| control.is_cancelled());
     let img = |data: Vec<f32>| Image { width: w, height: h, channels: 3, data };
@@ -565,16 +578,24 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl,
 }
 
 /// Samples per pixel of the first-hit images after `mutations` mutations over `pixels`.
-fn very_direct_target(mutations: u64, pixels: usize) -> u32 {
-    (mutations / (4 * pixels.max(1) as u64)).clamp(VERY_DIRECT_SPP.0 as u64, VERY_DIRECT_SPP.1 as u64) as u32
+fn direct_target(mutations: u64, pixels: usize) -> u32 {
+    let spp = DIRECT_SPP_PER_MUTATION * mutations as f64 / pixels.max(1) as f64;
+    (spp as u64).clamp(DIRECT_SPP.0 as u64, DIRECT_SPP.1 as u64) as u32
 }
 
-/// Camera-visible emission, first-surface albedo and normal by plain Monte Carlo, jittered
-/// samples per pixel accumulated progressively: sums of [very direct, albedo, normal], RGB;
-/// and, with a transparent film, of the camera rays' transparency (alpha = 1 − its mean).
+/// The direct pass: direct light (`PathContribution::direct`: the render's own paths cut at
+/// `max_bounces` 0, Cycles' direct lighting), first-surface albedo and normal, by plain
+/// Monte Carlo (Owen-scrambled Sobol samples through the pixel filter, as pt's), accumulated
+/// progressively: sums of [direct, albedo, normal], RGB; and, with a transparent film, of
+/// the camera rays' transparency (alpha = 1 − its mean). The chains render the rest of the
+/// light (Veach 1997 §11.3.2 and Mitsuba's "direct sampling" do the same): direct light is
+/// what plain Monte Carlo renders best, and a chain that need not find it spends its
+/// mutations on the indirect light.
 struct FirstHits {
     sums: [Vec<f32>; 3],
     transparent: Vec<f32>,
+    /// The render's path settings with `max_bounces` 0.
+    direct: PathSettings,
     /// Transparent surfaces a camera ray may cross (PathSettings::transparent_bounces).
     crossings: u32,
     spp: u32,
@@ -583,11 +604,12 @@ struct FirstHits {
 }
 
 impl FirstHits {
-    fn new(w: usize, h: usize, crossings: u32) -> FirstHits {
+    fn new(w: usize, h: usize, path: &PathSettings) -> FirstHits {
         FirstHits {
             sums: std::array::from_fn(|_| vec![0.0; w * h * 3]),
             transparent: Vec::new(),
-            crossings,
+            direct: PathSettings { max_bounces: 0, ..*path },
+            crossings: path.transparent_bounces,
             spp: 0,
             w,
             h,
@@ -599,11 +621,11 @@ impl FirstHits {
     fn add(&mut self, scene: &Scene, seed: u64, target: u32, control: &RenderControl) {
         let (w, h) = (self.w, self.h);
         while self.spp < target {
-            if self.spp >= VERY_DIRECT_SPP.0 && control.should_stop() {
+            if self.spp >= DIRECT_SPP.0 && control.should_stop() {
                 break;
             }
             let (from, n) = (self.spp, (target - self.spp).min(8));
-            let (film_transparent, crossings) = (scene.camera.film_transparent, self.crossings);
+            let (film_transparent, crossings, cfg) = (scene.camera.film_transparent, self.crossings, &self.direct);
             if film_transparent {
                 self.transparent.resize(w * h, 0.0);
             }
@@ -620,17 +642,25 @@ impl FirstHits {
                 .for_each(|(y, (((direct, albedo), normal), transparent))| {
                     for x in 0..w {
                         let mut rays = [CameraRay::default(); 8];
-                        for (k, ray) in rays.iter_mut().enumerate().take(n as usize) {
-                            let mut smp = super::pt::pixel_sampler(seed ^ 0xD1, y * w + x, from + k as u32);
-                            let raster = Vec2::new(x as f32, y as f32) + smp.next_2d(); // box, as the chains
-                            *ray = scene.camera.generate_ray(raster, smp.next_2d());
+                        let mut samplers: [_; 8] =
+                            std::array::from_fn(|k| super::pt::pixel_sampler(seed ^ 0xD1, y * w + x, from + k as u32));
+                        let mut lens = [Vec2::ZERO; 8];
+                        for k in 0..n as usize {
+                            let smp = &mut samplers[k];
+                            let raster = scene.camera.pixel_raster(x as f32, y as f32, smp.next_2d());
+                            lens[k] = smp.next_2d();
+                            rays[k] = scene.camera.generate_ray(raster, lens[k]);
                         }
                         let hits = scene.intersect_camera_rays(&rays[..n as usize]);
                         let mut acc = [Spectrum::ZERO; 3];
                         let mut t = 0.0f32;
-                        for (ray, hit) in rays.iter().zip(hits).take(n as usize) {
+                        for (k, (ray, hit)) in rays.iter().zip(hits).take(n as usize).enumerate() {
+                            let primary = Primary { lens: lens[k], ray: *ray, hit };
+                            let c = trace_path_from(scene, cfg, primary, &mut samplers[k], None);
+                            if is_finite_spectrum(c.radiance) {
+                                acc[0] += c.radiance;
+                            }
                             let f = first_hit(scene, ray, hit);
-                            acc[0] += f.very_direct;
                             acc[1] += f.albedo;
                             acc[2] += f.normal;
                             if film_transparent {
@@ -651,13 +681,13 @@ impl FirstHits {
         }
     }
 
-    /// The mean of image `k` (0 very direct, 1 albedo, 2 normal).
+    /// The mean of image `k` (0 direct, 1 albedo, 2 normal).
     fn mean(&self, k: usize) -> Vec<f32> {
         let n = self.spp.max(1) as f32;
         self.sums[k].par_iter().map(|v| v / n).collect()
     }
 
-    /// The means of [very direct, albedo, normal], made in place, and the alpha layer of a
+    /// The means of [direct, albedo, normal], made in place, and the alpha layer of a
     /// transparent film (one channel; None otherwise).
     fn into_means(self) -> ([Vec<f32>; 3], Option<Image>) {
         let n = self.spp.max(1) as f32;
@@ -682,13 +712,13 @@ fn splat_scale(image: &Accum, b: f64) -> f32 {
     }
 }
 
-/// The image so far (a preview): the splats × b/mpp; for gdpssmlt their L2 screened Poisson
-/// reconstruction plus the very-direct image.
+/// The image so far (a preview): the splats × b/mpp (for gdpssmlt their L2 screened Poisson
+/// reconstruction) plus the direct light.
 fn preview(image: &Accum, b: f64, first: &FirstHits, alpha_rec: f64) -> Image {
     let s = splat_scale(image, b);
     let (w, h) = (first.w, first.h);
     if image.layers.len() == 1 {
-        let data = image.layers[PRIMAL].scaled(s).to_interleaved(None, f32::NEG_INFINITY);
+        let data = image.layers[PRIMAL].scaled(s).to_interleaved(Some(&first.mean(0)), f32::NEG_INFINITY);
         return Image { width: w, height: h, channels: 3, data };
     }
     let [p, dx, dy] = [PRIMAL, DX, DY].map(|l| image.layers[l].scaled(s));
@@ -697,9 +727,8 @@ fn preview(image: &Accum, b: f64, first: &FirstHits, alpha_rec: f64) -> Image {
 }
 
 /// The output layers, from the image (consumed: its buffers become the problem and the
-/// layers) and the very-direct image: splats × b/mpp; for gdpssmlt the screened Poisson
-/// reconstruction plus the very-direct image (pssmlt's chains carry that light themselves);
-/// and the chains' density.
+/// layers) and the direct pass's image: splats × b/mpp (for gdpssmlt their screened Poisson
+/// reconstruction) plus the direct light; and the chains' density.
 fn resolve(
     image: Accum,
     b: f64,
@@ -720,7 +749,7 @@ fn resolve(
             let p = Problem::new(alpha_rec, primal, dx, dy);
             gradient_domain_layers(p, direct, norm, &IrlsParams::default(), stop)
         }
-        Err(primal) => vec![("Combined".into(), img(primal[PRIMAL].to_interleaved(None, f32::NEG_INFINITY)))],
+        Err(primal) => vec![("Combined".into(), img(primal[PRIMAL].to_interleaved(Some(&direct), f32::NEG_INFINITY)))],
     };
     let dmean = density.iter().map(|&d| d as f64).sum::<f64>() / (w * h) as f64;
     let density: Vec<f32> = density.iter().flat_map(|&v| [(v as f64 / dmean.max(1e-300)) as f32; 3]).collect();
@@ -756,14 +785,16 @@ mod tests {
         assert_eq!(Bootstrap::new(vec![0.0; 10]).sample(0.5), None);
     }
 
-    /// The first-hit pass, tracing each pixel's camera rays in packets of eight and topped up
-    /// in two passes, gives every pixel the mean of the samples that single rays give it.
+    /// The direct pass, tracing each pixel's camera rays in packets of eight and topped up in
+    /// two passes, gives every pixel the mean of the samples that single paths (cut at
+    /// `max_bounces` 0) and single first-hit rays give it.
     #[test]
     fn packet_first_hit_pass_matches_single_rays() {
         let scene = Scene::build(&crate::scene::builtin::cornell_spheres(9, 7)).unwrap();
         let settings = RenderSettings { seed: 3, ..Default::default() };
         let (w, h) = (9, 7);
-        let mut first = FirstHits::new(w, h, settings.path.transparent_bounces);
+        let mut first = FirstHits::new(w, h, &settings.path);
+        let cut = PathSettings { max_bounces: 0, ..settings.path };
         first.add(&scene, settings.seed, 5, &RenderControl::new(0.0)); // a first pass of 5,
         first.add(&scene, settings.seed, 21, &RenderControl::new(0.0)); // topped up to 21
         let spp = first.spp;
@@ -774,10 +805,13 @@ mod tests {
                 let mut acc = [Spectrum::ZERO; 3];
                 for s in 0..spp {
                     let mut smp = super::super::pt::pixel_sampler(settings.seed ^ 0xD1, y * w + x, s);
-                    let raster = Vec2::new(x as f32, y as f32) + smp.next_2d(); // box, as the chains
-                    let ray = scene.camera.generate_ray(raster, smp.next_2d());
+                    let raster = scene.camera.pixel_raster(x as f32, y as f32, smp.next_2d());
+                    let lens = smp.next_2d();
+                    let ray = scene.camera.generate_ray(raster, lens);
                     let f = first_hit(&scene, &ray, scene.intersect(ray.origin, ray.dir, ray.tmin, ray.tmax));
-                    acc[0] += f.very_direct;
+                    let mut smp2 = super::super::pt::pixel_sampler(settings.seed ^ 0xD1, y * w + x, s);
+                    smp2.next_2d(); // the raster sample
+                    acc[0] += trace_path(&scene, &cut, raster, &mut smp2, None).radiance;
                     acc[1] += f.albedo;
                     acc[2] += f.normal;
                 }
