@@ -295,6 +295,26 @@ fn check_gdpssmlt_gradients(
     check_gradients_of(what, runs, reference, direct.layer("Combined").unwrap(), ref_frac, factor);
 }
 
+/// A gradient-domain method's gradients against the reference's (tolerance 2.5× noise); no
+/// check for the other methods.
+#[allow(clippy::too_many_arguments)]
+fn check_method_gradients(
+    what: &str,
+    method: Method,
+    desc: &SceneDesc,
+    runs: &[RenderOutput],
+    reference: &RenderOutput,
+    ref_spp: u32,
+    nee: bool,
+    ref_frac: f64,
+) {
+    match method {
+        Method::Gdpt => check_gradients(what, runs, reference, ref_frac, 2.5),
+        Method::Gdpssmlt => check_gdpssmlt_gradients(what, desc, runs, reference, ref_spp, nee, ref_frac, 2.5),
+        _ => {}
+    }
+}
+
 /// The runs' gradient layers against the finite differences of the reference's Combined
 /// minus `undifferenced` (the light a method adds without gradients).
 fn check_gradients_of(
@@ -528,13 +548,7 @@ fn all_methods_converge_on_specular_gap_and_veil_scenes() {
             assert_converges(&format!("{name} {method:?}"), &est, &reference, ref_frac, 2.5);
             // through the glass and the mirror the shift copies half-vectors
             let what = format!("{name} {method:?}");
-            match method {
-                Method::Gdpt => check_gradients(&what, &runs, &ref_out, ref_frac, 2.5),
-                Method::Gdpssmlt => {
-                    check_gdpssmlt_gradients(&what, &desc, &runs, &ref_out, ref_spp, nee, ref_frac, 2.5)
-                }
-                _ => {}
-            }
+            check_method_gradients(&what, method, &desc, &runs, &ref_out, ref_spp, nee, ref_frac);
             for r in &runs {
                 assert!(r.layers.iter().all(|(_, img)| img.data.iter().all(|v| v.is_finite())));
             }
@@ -565,13 +579,7 @@ fn all_methods_converge_through_glass_with_and_without_nee() {
             let ref_frac = spp as f64 / ref_spp as f64;
             assert_converges(&format!("{name} nee={nee} {method:?}"), &est, &reference, ref_frac, 2.5);
             let what = format!("{name} nee={nee} {method:?}");
-            match method {
-                Method::Gdpt => check_gradients(&what, &runs, &ref_out, ref_frac, 2.5),
-                Method::Gdpssmlt => {
-                    check_gdpssmlt_gradients(&what, &desc, &runs, &ref_out, ref_spp, nee, ref_frac, 2.5)
-                }
-                _ => {}
-            }
+            check_method_gradients(&what, method, &desc, &runs, &ref_out, ref_spp, nee, ref_frac);
         }
     }
 }
