@@ -474,9 +474,8 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl,
     control.work_total.store(total, Ordering::Relaxed);
     let chain_seed = mix64(settings.seed ^ 0xC4A1);
 
-    // Very-direct light of gdpssmlt by plain Monte Carlo (first, so previews include it; then
-    // topped up as the chains advance), and the denoising albedo and normal of every
-    // Metropolis render.
+    // The direct pass: direct light by plain Monte Carlo (first, so previews include it; then
+    // topped up as the chains advance), and the denoising albedo and normal.
     let mut first = FirstHits::new(w, h, &settings.path);
     first.add(scene, settings.seed, DIRECT_SPP.0, control);
 
@@ -577,7 +576,7 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl,
     RenderOutput { layers, stats }
 }
 
-/// Samples per pixel of the first-hit images after `mutations` mutations over `pixels`.
+/// Samples per pixel of the direct pass after `mutations` mutations over `pixels`.
 fn direct_target(mutations: u64, pixels: usize) -> u32 {
     let spp = DIRECT_SPP_PER_MUTATION * mutations as f64 / pixels.max(1) as f64;
     (spp as u64).clamp(DIRECT_SPP.0 as u64, DIRECT_SPP.1 as u64) as u32
