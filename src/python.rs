@@ -697,6 +697,8 @@ fn render<'py>(
     stats.set_item("acceptance", st.acceptance)?;
     stats.set_item("normalization", st.normalization)?;
     stats.set_item("chains", st.chains)?;
+    stats.set_item("direct_pass", st.direct_pass)?;
+    stats.set_item("direct_relative_variance", st.direct_relative_variance)?;
     dict.set_item("stats", stats)?;
     Ok(dict)
 }

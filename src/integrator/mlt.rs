@@ -461,13 +461,16 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl,
     // The direct pass (first, so previews include it; then topped up as the chains advance),
     // and the denoising albedo and normal. Its first samples, in two halves, measure how
     // hard direct light is for plain Monte Carlo; where it is too hard, the chains take it.
+    // (The camera-seen emission is left out of that measure: the pass renders it either way.)
     let mut first = FirstHits::new(w, h, &settings.path, true);
+    first.emitted = Some(vec![0.0; w * h * 3]);
     first.add(scene, settings.seed, DIRECT_SPP.0 / 2, control);
-    let half = first.sums[0].clone();
+    let half = first.sums_apart();
     first.add(scene, settings.seed, DIRECT_SPP.0, control);
-    let q = relative_variance(&half, &first.sums[0], DIRECT_SPP.0 / 2);
+    let q = relative_variance(&half, &first.sums_apart(), DIRECT_SPP.0 / 2);
     let direct_apart = q.is_some_and(|q| q <= DIRECT_APART_MAX_RELATIVE_VARIANCE);
     drop(half);
+    first.emitted = None;
     if !direct_apart {
         first = FirstHits::new(w, h, &settings.path, false);
         first.add(scene, settings.seed, DIRECT_SPP.0, control);
@@ -579,6 +582,8 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl,
     let b = image.normalisation(boot_sum, n_boot);
     stats.normalization = b;
     stats.chains = n_chains;
+    stats.direct_pass = direct_apart;
+    stats.direct_relative_variance = q.unwrap_or(0.0);
     // without indirect light (no chain ran) the budget is the direct pass's
     let direct_spp = match (direct_apart, no_light) {
         (false, _) => DIRECT_SPP.0,
@@ -644,6 +649,10 @@ fn direct_target(mutations: u64, pixels: usize) -> u32 {
 struct FirstHits {
     sums: [Vec<f32>; 3],
     transparent: Vec<f32>,
+    /// While the pass probes how hard direct light is (light mode): the sums of the
+    /// camera-seen emission, which its direct light includes but the decision leaves out
+    /// (the pass renders it either way).
+    emitted: Option<Vec<f32>>,
     /// The render's path settings with `max_bounces` 0.
     direct: PathSettings,
     /// Transparent surfaces a camera ray may cross (PathSettings::transparent_bounces).
@@ -662,6 +671,7 @@ impl FirstHits {
             light,
             sums: std::array::from_fn(|_| vec![0.0; w * h * 3]),
             transparent: Vec::new(),
+            emitted: None,
             direct: PathSettings { max_bounces: 0, ..*path },
             crossings: path.transparent_bounces,
             spp: 0,
@@ -688,13 +698,16 @@ impl FirstHits {
             let [direct, albedo, normal] = &mut self.sums;
             let mut transparent: Vec<&mut [f32]> = self.transparent.chunks_mut(w).collect();
             transparent.resize_with(h, || &mut []);
+            let mut emitted: Vec<&mut [f32]> = self.emitted.iter_mut().flat_map(|e| e.chunks_mut(3 * w)).collect();
+            emitted.resize_with(h, || &mut []);
             direct
                 .par_chunks_mut(3 * w)
                 .zip(albedo.par_chunks_mut(3 * w))
                 .zip(normal.par_chunks_mut(3 * w))
                 .zip(transparent.into_par_iter())
+                .zip(emitted.into_par_iter())
                 .enumerate()
-                .for_each(|(y, (((direct, albedo), normal), transparent))| {
+                .for_each(|(y, ((((direct, albedo), normal), transparent), emitted))| {
                     for x in 0..w {
                         let mut rays = [CameraRay::default(); 8];
                         let mut samplers: [_; 8] =
@@ -708,7 +721,7 @@ impl FirstHits {
                         }
                         let hits = scene.intersect_camera_rays(&rays[..n as usize]);
                         let mut acc = [Spectrum::ZERO; 3];
-                        let mut t = 0.0f32;
+                        let (mut t, mut e) = (0.0f32, Spectrum::ZERO);
                         for (k, (ray, hit)) in rays.iter().zip(hits).take(n as usize).enumerate() {
                             let primary = Primary { lens: lens[k], ray: *ray, hit };
                             let f = first_hit(scene, ray, hit);
@@ -716,6 +729,7 @@ impl FirstHits {
                                 let c = trace_path_from(scene, cfg, primary, &mut samplers[k], None);
                                 if is_finite_spectrum(c.radiance) {
                                     acc[0] += c.radiance;
+                                    e += f.very_direct;
                                 }
                             } else {
                                 acc[0] += f.very_direct;
@@ -734,9 +748,23 @@ impl FirstHits {
                         if film_transparent {
                             transparent[x] += t;
                         }
+                        if !emitted.is_empty() {
+                            emitted[3 * x] += e.x;
+                            emitted[3 * x + 1] += e.y;
+                            emitted[3 * x + 2] += e.z;
+                        }
                     }
                 });
             self.spp += n;
+        }
+    }
+
+    /// The sums of the direct light the chains would otherwise render: direct light but the
+    /// camera-seen emission (while probing; else all of it).
+    fn sums_apart(&self) -> Vec<f32> {
+        match &self.emitted {
+            Some(e) => self.sums[0].iter().zip(e).map(|(d, e)| d - e).collect(),
+            None => self.sums[0].clone(),
         }
     }
 

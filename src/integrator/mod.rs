@@ -282,6 +282,13 @@ pub struct RenderStats {
     pub acceptance: f64,
     pub normalization: f64,
     pub chains: usize,
+    /// Metropolis methods: true where direct light came from the Monte Carlo direct pass and
+    /// the chains rendered the rest; false where the chains rendered all light but the
+    /// camera-seen emission (direct light too hard for plain Monte Carlo).
+    pub direct_pass: bool,
+    /// Metropolis methods: the relative variance of one direct-light sample (camera-seen
+    /// emission aside) by which `direct_pass` was decided; 0 where no direct light was seen.
+    pub direct_relative_variance: f64,
 }
 
 /// Named images: "Combined" first, then passes.
