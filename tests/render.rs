@@ -915,3 +915,19 @@ fn adaptive_sampling_stops_settled_pixels_and_keeps_the_image() {
     let one_thread = render_with(0.05, 100, 1);
     assert_eq!(one_thread.layer("Combined").unwrap().data, adaptive[0].layer("Combined").unwrap().data);
 }
+
+/// A frame that shows only emission (the world behind nothing, with either Metropolis
+/// method) is not reported as black, and its emission gets the samples asked for (the
+/// pixel filter's edges are where they show). With no direct light to measure, the chains
+/// take all light and find none; the warning once said the image was black.
+#[test]
+fn metropolis_frames_of_emission_alone_are_not_reported_black() {
+    let cam = cornell_box(8, 8).camera;
+    let desc = SceneDesc { camera: cam, world: [0.5, 0.25, 0.125], ..Default::default() };
+    for method in [Method::Pssmlt, Method::Gdpssmlt] {
+        let out = run_method(&desc, method, Norm::L2, 4, true, 4, 1, 0);
+        assert!(!out.stats.warnings.iter().any(|w| w.contains("black")), "{method:?}: {:?}", out.stats.warnings);
+        let m = out.layer("Combined").unwrap().mean();
+        assert!((m[0] - 0.5).abs() < 1e-3 && (m[2] - 0.125).abs() < 1e-3, "{method:?}: {m:?}");
+    }
+}

@@ -589,13 +589,14 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl,
     stats.direct_relative_variance = q.unwrap_or(0.0);
     // without indirect light (no chain ran) the budget is the direct pass's
     let direct_spp = match (direct_apart, no_light) {
-        (false, _) => DIRECT_SPP.0,
-        (true, true) => settings.spp.min(DIRECT_SPP.1),
+        (_, true) => settings.spp.min(DIRECT_SPP.1),
+        (false, false) => DIRECT_SPP.0,
         (true, false) => direct_target(mutations, w * h),
     };
     first.add(scene, settings.seed, direct_spp, control);
     let ([direct, albedo, normal], alpha) = first.into_means();
-    if no_light && !(direct_apart && direct.iter().any(|&v| v > 0.0)) {
+    // (the pass's image: direct light, or with the chains taking all, the camera-seen emission)
+    if no_light && !direct.iter().any(|&v| v > 0.0) {
         stats.warnings.push("no light reaches the camera: the image is black".into());
     }
     let norm = control.final_norm(settings.reconstruction);
