@@ -473,11 +473,7 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl,
     let q = relative_variance(&half, &first.sums_apart(), DIRECT_SPP.0 / 2);
     let direct_apart = q.is_some_and(|q| q <= DIRECT_APART_MAX_RELATIVE_VARIANCE);
     drop(half);
-    first.emitted = None;
-    if !direct_apart {
-        first = FirstHits::new(w, h, &settings.path, false);
-        first.add(scene, settings.seed, DIRECT_SPP.0, control);
-    }
+    first.settle(direct_apart);
     let target = Target { scene, settings, gradient, direct_apart, w, h };
     let p_large = settings.large_step_probability;
     let boot_seed = mix64(settings.seed ^ 0xB007);
@@ -760,6 +756,16 @@ impl FirstHits {
                     }
                 });
             self.spp += n;
+        }
+    }
+
+    /// Ends the probe: keeps the direct light (`apart`), or else only the camera-seen emission
+    /// summed while probing (the same samples' first hits), and renders that from then on.
+    fn settle(&mut self, apart: bool) {
+        let emitted = self.emitted.take();
+        if !apart {
+            self.sums[0] = emitted.expect("settle ends a probe");
+            self.light = false;
         }
     }
 
