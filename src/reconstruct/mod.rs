@@ -15,7 +15,7 @@ mod irls;
 
 pub use cg::{Problem, RowPlanar, Weights};
 pub use dct::solve_l2;
-pub use irls::{box_blur, solve_l1, IrlsParams};
+pub use irls::{add_box_blur, solve_l1, IrlsParams};
 
 use crate::film::Image;
 
