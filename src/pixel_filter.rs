@@ -18,10 +18,14 @@ const TABLE: usize = 1024;
 #[derive(Clone, Debug)]
 pub enum PixelFilter {
     Box,
-    /// The window's CDF at TABLE + 1 evenly spaced offsets across its width.
+    /// The window's CDF at TABLE + 1 evenly spaced offsets across its width, and its guide
+    /// table: `start[j]` is the cell that u = j/TABLE falls in (Chen & Asau 1974), from which
+    /// a sample's cell is a short forward scan instead of a binary search (that search, ten
+    /// dependent branches, was 4–5% of a path tracer's time).
     BlackmanHarris {
         width: f32,
         cdf: Vec<f32>,
+        start: Vec<u16>,
     },
 }
 
@@ -42,8 +46,9 @@ impl PixelFilter {
                 cdf[i / 16] = acc;
             }
         }
-        let cdf = cdf.iter().map(|c| (c / acc) as f32).collect();
-        PixelFilter::BlackmanHarris { width, cdf }
+        let cdf: Vec<f32> = cdf.iter().map(|c| (c / acc) as f32).collect();
+        let start = (0..TABLE).map(|j| cell_of(&cdf, j as f32 / TABLE as f32) as u16).collect();
+        PixelFilter::BlackmanHarris { width, cdf, start }
     }
 
     /// The filter named as the scene describes it (`None` for an unknown name).
@@ -60,9 +65,9 @@ impl PixelFilter {
     pub fn offset(&self, u: f32) -> f32 {
         match self {
             PixelFilter::Box => u - 0.5,
-            PixelFilter::BlackmanHarris { width, cdf } => {
+            PixelFilter::BlackmanHarris { width, cdf, start } => {
                 // the cell i with cdf[i] ≤ u < cdf[i + 1], then linear inside it
-                let i = cdf.partition_point(|&c| c <= u).clamp(1, TABLE) - 1;
+                let i = guided_cell(cdf, start, u);
                 let span = cdf[i + 1] - cdf[i];
                 let t = if span > 0.0 { ((u - cdf[i]) / span).clamp(0.0, 1.0) } else { 0.5 };
                 ((i as f32 + t) / TABLE as f32 - 0.5) * 2.0 * width
@@ -77,6 +82,21 @@ impl PixelFilter {
             PixelFilter::BlackmanHarris { width, .. } => *width,
         }
     }
+}
+
+/// `cell_of`, by a forward scan from u's guide-table entry.
+#[inline]
+fn guided_cell(cdf: &[f32], start: &[u16], u: f32) -> usize {
+    let mut i = start[((u * TABLE as f32) as usize).min(TABLE - 1)] as usize;
+    while i + 1 < TABLE && cdf[i + 1] <= u {
+        i += 1;
+    }
+    i
+}
+
+/// The cell i of a CDF table with cdf[i] ≤ u < cdf[i + 1] (clamped to the table's cells).
+fn cell_of(cdf: &[f32], u: f32) -> usize {
+    cdf.partition_point(|&c| c <= u).clamp(1, TABLE) - 1
 }
 
 /// The Blackman–Harris window of total support `width` at offset x (0 outside it); Cycles
@@ -137,6 +157,22 @@ mod tests {
                 }
             }
             assert!(chi2 < crit, "width {width}: chi2 {chi2} (critical {crit})");
+        }
+    }
+
+    /// The guide table's scan finds the cell the binary search finds, for every u on a fine
+    /// grid and at the CDF's own values (cell edges) and just below them.
+    #[test]
+    fn the_guide_table_finds_the_cells_of_the_binary_search() {
+        for width in [1.5f32, 0.5, 3.0] {
+            let PixelFilter::BlackmanHarris { cdf, start, .. } = PixelFilter::blackman_harris(width) else {
+                unreachable!()
+            };
+            let grid = (0..1 << 16).map(|k| k as f32 / 65_536.0);
+            let edges = cdf.iter().flat_map(|&c| [c, f32::from_bits(c.to_bits().saturating_sub(1))]);
+            for u in grid.chain(edges).filter(|u| (0.0..1.0).contains(u)) {
+                assert_eq!(guided_cell(&cdf, &start, u), cell_of(&cdf, u), "width {width}, u = {u}");
+            }
         }
     }
 
