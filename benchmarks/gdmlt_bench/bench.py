@@ -132,7 +132,7 @@ def run(scene="cornell", size=None, budgets=(1.0, 2.0, 4.0), methods=("pt", "gdp
     what = (f"Cycles for {reference_seconds:g} s (another seed)" if reference == "cycles"
             else f"pt with NEE at {reference_spp} spp")
     out(f"# {label} {cam['resolution_x']}x{cam['resolution_y']}, max bounces {max_bounces}, threads={threads or 'all'}, "
-        f"reference: {what}" + (f", settings {extra}" if extra else ""))
+        f"reference: {what}, core {gdmlt.BUILD_TARGET}" + (f", settings {extra}" if extra else ""))
     t0 = time.perf_counter()
     if reference == "cycles":
         # GDMLT's own error then includes any difference from Cycles' answer, not only noise
