@@ -142,15 +142,7 @@ fn dot(a: &[f32], b: &[f32]) -> f64 {
 /// Σ a²·m over a row (the preconditioned norm), as `dot`.
 #[inline]
 fn dot_weighted(a: &[f32], m: &[f32]) -> f64 {
-    let mut lanes = [0.0f32; 8];
-    let (ca, cm) = (a.chunks_exact(8), m.chunks_exact(8));
-    let tail: f32 = ca.remainder().iter().zip(cm.remainder()).map(|(x, y)| x * x * y).sum();
-    for (x, y) in ca.zip(cm) {
-        for k in 0..8 {
-            lanes[k] += x[k] * x[k] * y[k];
-        }
-    }
-    lanes.iter().map(|&v| v as f64).sum::<f64>() + tail as f64
+    dot3(a, a, m)
 }
 
 /// Σ a·b·m over a row, as `dot`.
