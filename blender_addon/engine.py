@@ -239,6 +239,7 @@ class GDMLTRenderEngine(bpy.types.RenderEngine):
         if st["invalid_samples"]:
             warn(f"{st['invalid_samples']} samples were NaN/Inf and were dropped")
         extra = f" | acceptance {st['acceptance'] * 100:.0f}%" if st.get("chains") else ""
+        extra += f" | α {st['alpha_rec']:.2g}" if st.get("alpha_rec") else ""
         from gdmlt.progress import samples_per_pixel
 
         self.update_stats("GDMLT", f"{label} | {samples_per_pixel(st)} per pixel | render {st['elapsed']:.2f} s, "

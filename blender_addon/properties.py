@@ -72,8 +72,9 @@ class GDMLTRenderSettings(bpy.types.PropertyGroup):
     seed: IntProperty(name="Seed", default=D["seed"], min=0, description="Random seed; the same seed and settings give the same image")
     reconstruction: EnumProperty(name="Reconstruction", items=RECON_ITEMS, default=D["reconstruction"].upper(),
                                  description="Norm of the screened Poisson reconstruction (gradient-domain methods)")
-    alpha_reconstruction: FloatProperty(name="Alpha", default=D["alpha_rec"], min=1e-4, soft_max=2.0,
-                                        description="Weight of the primal image against the gradients in the reconstruction")
+    alpha_reconstruction: FloatProperty(name="Alpha", default=D["alpha_rec"], min=0.0, soft_max=2.0,
+                                        description="Weight of the primal image against the gradients in the reconstruction; "
+                                                    "0 = automatic, measured from the render's own noise")
     alpha_target: FloatProperty(name="Target Alpha", default=D["alpha_target"], min=0.01, soft_max=4.0,
                                 description="Gradient-domain Metropolis: weight of the primal image in the target function")
     large_step_probability: FloatProperty(name="Large Step Probability", default=D["large_step_probability"], min=0.0, max=1.0,

@@ -699,6 +699,7 @@ fn render<'py>(
     stats.set_item("chains", st.chains)?;
     stats.set_item("direct_pass", st.direct_pass)?;
     stats.set_item("direct_relative_variance", st.direct_relative_variance)?;
+    stats.set_item("alpha_rec", st.alpha_rec)?;
     dict.set_item("stats", stats)?;
     Ok(dict)
 }

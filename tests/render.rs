@@ -49,7 +49,8 @@ fn estimate(out: &RenderOutput) -> Image {
     let layers = ["GD Primal", "GD Gradient X", "GD Gradient Y", "Very Direct"].map(|n| out.layer(n));
     let [Some(p), Some(dx), Some(dy), Some(vd)] = layers else { return out.layer("Combined").unwrap().clone() };
     let primal: Vec<f32> = p.data.iter().zip(&vd.data).map(|(a, b)| a - b).collect();
-    let alpha = RenderSettings::default().alpha_rec;
+    let alpha = out.stats.alpha_rec;
+    assert!(alpha > 0.0, "a gradient-domain render reports the α it reconstructed with");
     let rec = reconstruct_rgb(p.width, p.height, &primal, &dx.data, &dy.data, alpha, Norm::L2, &|| false);
     Image { data: rec.iter().zip(&vd.data).map(|(a, b)| a + b).collect(), ..p.clone() }
 }

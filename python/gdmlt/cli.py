@@ -104,8 +104,9 @@ def build_parser():
                    help="Metropolis methods: number of Markov chains (default 0 = one per 2000 mutations, up to 1024)")
     r.add_argument("--recon", choices=["l1", "l2"], type=str.lower, dest="reconstruction",
                    help=f"gradient-domain reconstruction norm, l1 (robust) or l2 (unbiased); default {D['reconstruction']}")
-    r.add_argument("--alpha-rec", type=_pos_float, dest="alpha_rec",
-                   help=f"screened-Poisson weight of the primal image in the reconstruction (default {D['alpha_rec']})")
+    r.add_argument("--alpha-rec", type=_nonneg_float, dest="alpha_rec",
+                   help="screened-Poisson weight of the primal image in the reconstruction; 0 (the default) "
+                        "measures it from the render's own noise")
     r.add_argument("--spp", type=_positive_int, help=f"samples (PT methods) or mutations (Metropolis methods) per pixel (default: the file's, else {D['spp']})")
     r.add_argument("--time", type=_nonneg_float, dest="time_limit", help="time limit in seconds, 0 = none; halts on whichever of --spp and --time comes first")
     r.add_argument("--noise-threshold", type=_unit_float, dest="adaptive_threshold",
@@ -220,7 +221,7 @@ SETTING_PARSERS = {"method": _choice(*RENDER_METHODS), "spp": _positive_int, "ti
                    "max_bounces": _bounces, "nee": _flag, "seed": _seed, "threads": _threads,
                    **{f"{k}_bounces": _bounces for k in BOUNCE_KINDS},
                    "clamp_direct": _nonneg_float, "clamp_indirect": _nonneg_float,
-                   "reconstruction": _choice("l1", "l2"), "alpha_rec": _pos_float, "alpha_target": _pos_float,
+                   "reconstruction": _choice("l1", "l2"), "alpha_rec": _nonneg_float, "alpha_target": _pos_float,
                    "large_step_probability": _nonneg_float, "chains": _chains, "denoise": _flag,
                    "adaptive_threshold": _unit_float, "adaptive_min_samples": _min_samples,
                    "width": _side, "height": _side}
@@ -473,8 +474,9 @@ def _report(args, out: Path, stats: dict, t0: float) -> int:
     unit = "mutations" if stats.get("chains") else "samples"
     from .progress import samples_per_pixel
 
+    alpha = f", reconstruction α {stats['alpha_rec']:.3g}" if stats.get("alpha_rec") else ""
     print(f"render {stats.get('elapsed', 0.0):.2f} s ({samples_per_pixel(stats)} {unit} per pixel"
-          f"{', method ' + stats['method'] if 'method' in stats else ''}), total {total:.2f} s")
+          f"{', method ' + stats['method'] if 'method' in stats else ''}{alpha}), total {total:.2f} s")
     return 0
 
 

@@ -82,7 +82,7 @@ def render_partial(desc: dict, k: int, n: int, settings: dict) -> dict:
     work = 0.5 * (float(st.get("spp_min", 0)) + float(st.get("spp_max", 0)))
     out = {f"layer:{name}": np.asarray(img, np.float32) for name, img in res["layers"].items()}
     out.update({"format": FORMAT, "method": opts.get("method", "pt"), "k": k, "n": n, "work": work * w * h,
-                "alpha_rec": float(opts.get("alpha_rec", 0.2)), "reconstruction": opts.get("reconstruction", "l1"),
+                "alpha_rec": float(st.get("alpha_rec") or opts.get("alpha_rec") or 0.2), "reconstruction": opts.get("reconstruction", "l1"),
                 "scene_hash": scene_hash(desc), "settings_hash": settings_hash(settings), "seed": opts["seed"]})
     return out
 
@@ -203,7 +203,9 @@ def merge(partials, alpha_rec=None, reconstruction=None) -> dict:
         direct = merged["Very Direct"]
         merged["Combined"] = gdmlt.reconstruct(
             np.ascontiguousarray(merged["GD Primal"] - direct), merged["GD Gradient X"], merged["GD Gradient Y"],
-            direct, alpha=alpha_rec or partials[0]["alpha_rec"], norm=reconstruction or partials[0]["reconstruction"],
+            # α: as asked, else the work-weighted mean of what each partial used (each measured
+            # its own from its sample halves where it was automatic: the same quantity)
+            direct, alpha=alpha_rec or float(np.dot(weights, [p["alpha_rec"] for p in partials])), norm=reconstruction or partials[0]["reconstruction"],
             method=method)
     if "Alpha" in merged:
         # as the core does for one render: where every camera sample saw the (transparent)

@@ -11,7 +11,9 @@ use super::{RenderControl, RenderOutput, RenderSettings, RenderStats};
 use crate::film::Image;
 use crate::math::{is_finite_spectrum, Spectrum};
 use crate::path::{trace_path_from, Path, Primary};
-use crate::reconstruct::{gradient_domain_image, gradient_domain_layers, IrlsParams, Norm, Problem, RowPlanar};
+use crate::reconstruct::{
+    gradient_domain_image, gradient_domain_layers, HalfDifference, IrlsParams, Norm, Problem, RowPlanar, FALLBACK_ALPHA,
+};
 use crate::sampler::Sampler;
 use crate::scene::{CameraRay, Scene};
 use crate::shift::shift_from;
@@ -21,11 +23,13 @@ use std::sync::atomic::Ordering;
 
 /// The accumulators of a render, whole images in f32: primal and gradients row-planar (the
 /// reconstruction's layout, so they become its problem without a copy), the first-hit sums
-/// interleaved RGB (the output's layout). About 76 bytes per pixel.
+/// interleaved RGB (the output's layout), and the even − odd sample halves that measure the
+/// reconstruction's α (reconstruct/alpha.rs). About 88 bytes per pixel.
 struct GdFilm {
     primal: RowPlanar,
     dx: RowPlanar,
     dy: RowPlanar,
+    halves: HalfDifference,
     direct: Vec<f32>,
     albedo: Vec<f32>,
     normal: Vec<f32>,
@@ -40,6 +44,8 @@ struct GdRow<'a> {
     primal: &'a mut [f32],
     dx: &'a mut [f32],
     dy: &'a mut [f32],
+    /// The row of the half differences of primal, dx, dy (channel means).
+    halves: [&'a mut [f32]; 3],
     direct: &'a mut [f32],
     albedo: &'a mut [f32],
     normal: &'a mut [f32],
@@ -53,6 +59,7 @@ impl GdFilm {
             primal: RowPlanar::zeros(w, h),
             dx: RowPlanar::zeros(w, h),
             dy: RowPlanar::zeros(w, h),
+            halves: HalfDifference::zeros(w, h),
             direct: vec![0.0; 3 * w * h],
             albedo: vec![0.0; 3 * w * h],
             normal: vec![0.0; 3 * w * h],
@@ -66,6 +73,9 @@ impl GdFilm {
         let mut primal = self.primal.data.chunks_mut(3 * w);
         let mut dx = self.dx.data.chunks_mut(3 * w);
         let mut dy = self.dy.data.chunks_mut(3 * w);
+        let mut half_p = self.halves.primal.chunks_mut(w);
+        let mut half_x = self.halves.dx.chunks_mut(w);
+        let mut half_y = self.halves.dy.chunks_mut(w);
         let mut direct = self.direct.chunks_mut(3 * w);
         let mut albedo = self.albedo.chunks_mut(3 * w);
         let mut normal = self.normal.chunks_mut(3 * w);
@@ -76,6 +86,7 @@ impl GdFilm {
                 primal: primal.next().expect("one row each"),
                 dx: dx.next().expect("one row each"),
                 dy: dy.next().expect("one row each"),
+                halves: [&mut half_p, &mut half_x, &mut half_y].map(|it| it.next().expect("one row each")),
                 direct: direct.next().expect("one row each"),
                 albedo: albedo.next().expect("one row each"),
                 normal: normal.next().expect("one row each"),
@@ -85,11 +96,21 @@ impl GdFilm {
             .collect()
     }
 
+    /// The reconstruction's α: the setting, or where it is 0 (automatic) the one the two
+    /// sample halves measure.
+    fn alpha(&self, setting: f64) -> f64 {
+        if setting > 0.0 {
+            setting
+        } else {
+            self.halves.alpha([&self.primal, &self.dx, &self.dy]).unwrap_or(FALLBACK_ALPHA)
+        }
+    }
+
     /// The gradient-domain problem of `spp` samples per pixel, and the very-direct image,
     /// copied (the render goes on).
     fn problem(&self, spp: u32, alpha: f64) -> (Problem, Vec<f32>) {
         let s = 1.0 / spp.max(1) as f32;
-        let p = Problem::new(alpha, self.primal.scaled(s), self.dx.scaled(s), self.dy.scaled(s));
+        let p = Problem::new(self.alpha(alpha), self.primal.scaled(s), self.dx.scaled(s), self.dy.scaled(s));
         (p, self.direct.par_iter().map(|v| v * s).collect())
     }
 }
@@ -101,6 +122,14 @@ fn acc_planar(row: &mut [f32], x: usize, v: Spectrum, s: f32) {
     row[x] += v.x * s;
     row[w + x] += v.y * s;
     row[2 * w + x] += v.z * s;
+}
+
+/// Adds v·s to pixel x of a row-planar row, and its channel mean times `sign` to pixel x of
+/// the row's half difference.
+#[inline]
+fn acc_split(row: &mut [f32], half: &mut [f32], x: usize, v: Spectrum, s: f32, sign: f32) {
+    acc_planar(row, x, v, s);
+    half[x] += sign * s * (v.x + v.y + v.z) * (1.0 / 3.0);
 }
 
 /// Adds v to pixel x of an interleaved RGB row.
@@ -130,6 +159,7 @@ fn render_row(
     for x in 0..w as usize {
         for s in from..to {
             let mut sampler = super::pt::pixel_sampler(settings.seed, y * w as usize + x, s);
+            let sign = HalfDifference::sign(s.into());
             let raster = scene.camera.pixel_raster(x as f32, y as f32, sampler.next_2d());
             // the base's camera ray and its four offsets' (neighbour pixels, same lens sample)
             // traced as one packet: ray 0 the base, ray 1 + i the offset of SHIFTS[i]
@@ -158,19 +188,23 @@ fn render_row(
                     *win[y - lo].invalid += 1;
                     continue;
                 }
-                acc_planar(win[y - lo].primal, x, pc.base, 0.25);
+                let me = &mut win[y - lo];
+                acc_split(me.primal, me.halves[0], x, pc.base, 0.25, sign);
                 if !inside {
                     continue;
                 }
                 let (nx, ny) = (nx as usize, ny as usize);
-                acc_planar(win[ny - lo].primal, nx, pc.offset, 0.25);
+                // the forward difference at the left or upper pixel of the pair
                 let g = pc.offset - pc.base;
-                match (dx, dy) {
-                    (1, 0) => acc_planar(win[y - lo].dx, x, g, 1.0),
-                    (-1, 0) => acc_planar(win[ny - lo].dx, nx, g, -1.0),
-                    (0, 1) => acc_planar(win[y - lo].dy, x, g, 1.0),
-                    _ => acc_planar(win[ny - lo].dy, nx, g, -1.0),
+                let (at, row, side) = if dx + dy > 0 { (x, y, 1.0) } else { (nx, ny, -1.0) };
+                let to = &mut win[row - lo];
+                if dx != 0 {
+                    acc_split(to.dx, to.halves[1], at, g, side, sign);
+                } else {
+                    acc_split(to.dy, to.halves[2], at, g, side, sign);
                 }
+                let n = &mut win[ny - lo];
+                acc_split(n.primal, n.halves[0], nx, pc.offset, 0.25, sign);
             }
         }
     }
@@ -208,6 +242,7 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl)
             run_phase(scene, settings, &mut rows, phase, done, to);
         }
         drop(rows);
+        film.halves.count(done.into(), to.into());
         control.work_done.fetch_add(w as u64 * h as u64 * (to - done) as u64, Ordering::Relaxed);
         let dt = t0.elapsed().as_secs_f64();
         let per_sample = dt / (to - done) as f64;
@@ -227,14 +262,16 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl)
     // the accumulators become the layers: scaled in place, the primal and gradients handed to
     // the reconstruction as its problem (nothing is held twice)
     let s = 1.0 / done.max(1) as f32;
-    let GdFilm { mut primal, mut dx, mut dy, mut direct, mut albedo, mut normal, transparent, invalid } = film;
+    let alpha = film.alpha(settings.alpha_rec);
+    let GdFilm { mut primal, mut dx, mut dy, halves, mut direct, mut albedo, mut normal, transparent, invalid } = film;
+    drop(halves);
     for v in [&mut primal, &mut dx, &mut dy] {
         v.scale(s);
     }
     for v in [&mut direct, &mut albedo, &mut normal] {
         v.par_iter_mut().for_each(|x| *x *= s);
     }
-    let problem = Problem::new(settings.alpha_rec, primal, dx, dy);
+    let problem = Problem::new(alpha, primal, dx, dy);
     let norm = control.final_norm(settings.reconstruction);
     let mut layers = gradient_domain_layers(problem, direct, norm, &IrlsParams::short(), &|| control.is_cancelled());
     let img = |data: Vec<f32>| Image { width: w, height: h, channels: 3, data };
@@ -254,7 +291,60 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl)
             spp_min: done,
             spp_max: done,
             invalid_samples: invalid.iter().sum(),
+            alpha_rec: alpha,
             ..Default::default()
         },
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::builtin::cornell_box;
+
+    fn film_of(scene: &Scene, settings: &RenderSettings, passes: &[(u32, u32)]) -> GdFilm {
+        let (w, h) = (scene.camera.width as usize, scene.camera.height as usize);
+        let mut film = GdFilm::new(w, h);
+        for &(from, to) in passes {
+            let mut rows = film.rows();
+            for phase in 0..3 {
+                run_phase(scene, settings, &mut rows, phase, from, to);
+            }
+            drop(rows);
+            film.halves.count(from.into(), to.into());
+        }
+        film
+    }
+
+    /// The half differences are the channel means of (even samples − odd samples) of the
+    /// primal and both gradients, every splat included (the offsets' to the neighbours too):
+    /// four samples taken in passes of 1, 2 and 1 against the four one-sample films.
+    #[test]
+    fn halves_are_the_even_minus_odd_samples() {
+        let scene = Scene::build(&cornell_box(12, 10)).unwrap();
+        let settings = RenderSettings { method: super::super::Method::Gdpt, seed: 3, ..Default::default() };
+        let film = film_of(&scene, &settings, &[(0, 1), (1, 3), (3, 4)]);
+        assert_eq!(film.halves.counts, [2, 2]);
+        let one: Vec<GdFilm> = (0..4).map(|s| film_of(&scene, &settings, &[(s, s + 1)])).collect();
+        let planes = |f: &GdFilm| [f.primal.data.clone(), f.dx.data.clone(), f.dy.data.clone()];
+        let (w, h) = (12, 10);
+        let mut nonzero = 0;
+        for (k, half) in [&film.halves.primal, &film.halves.dx, &film.halves.dy].into_iter().enumerate() {
+            for y in 0..h {
+                for x in 0..w {
+                    let mean = |f: &GdFilm| (0..3).map(|c| planes(f)[k][(3 * y + c) * w + x]).sum::<f32>() / 3.0;
+                    let expected = mean(&one[0]) - mean(&one[1]) + mean(&one[2]) - mean(&one[3]);
+                    let got = half[y * w + x];
+                    let scale = one.iter().map(|f| mean(f).abs()).sum::<f32>();
+                    assert!((got - expected).abs() <= 1e-5 * scale + 1e-7, "layer {k} ({x}, {y}): {got} vs {expected}");
+                    nonzero += usize::from(expected.abs() > 1e-4);
+                }
+            }
+        }
+        assert!(nonzero > w * h, "the test sees noise in the halves ({nonzero} pixels)");
+        // and the α they give is used where the setting is automatic, the setting otherwise
+        let measured = film.halves.alpha([&film.primal, &film.dx, &film.dy]).unwrap();
+        assert_eq!(film.alpha(0.0), measured);
+        assert_eq!(film.alpha(0.7), 0.7);
     }
 }

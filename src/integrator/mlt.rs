@@ -31,7 +31,9 @@ use super::{ChainStart, RenderControl, RenderOutput, RenderSettings, RenderStats
 use crate::film::Image;
 use crate::math::{abs_luminance, is_finite_spectrum, Spectrum};
 use crate::path::{camera_transparency, first_hit, trace_path, trace_path_from, Path, PathSettings, Primary};
-use crate::reconstruct::{gradient_domain_image, gradient_domain_layers, IrlsParams, Norm, Problem, RowPlanar};
+use crate::reconstruct::{
+    gradient_domain_image, gradient_domain_layers, HalfDifference, IrlsParams, Norm, Problem, RowPlanar, FALLBACK_ALPHA,
+};
 use crate::sampler::{mix64, IndependentSampler, PssSampler, Sampler};
 use crate::scene::{CameraRay, Scene};
 use crate::shift::{shift, shift_indirect};
@@ -385,15 +387,18 @@ fn mutate(target: &Target, c: &mut Chain, log: &mut Log, gradient: bool) {
     log.mutations += 1;
 }
 
-/// One merge band of the image (whole rows): its rows of every layer and of the density.
-type BandMut<'a> = (Vec<&'a mut [f32]>, &'a mut [u32]);
+/// One merge band of the image (whole rows): its rows of every layer, of the density and of
+/// the half differences (gdpssmlt).
+type BandMut<'a> = (Vec<&'a mut [f32]>, &'a mut [u32], Vec<&'a mut [f32]>);
 
 /// The image so far: the splat sums of each layer (primal; and dx, dy for gdpssmlt),
-/// row-planar f32 as the reconstruction takes them, the chains' visits per pixel, and the
-/// tallies.
+/// row-planar f32 as the reconstruction takes them, the chains' visits per pixel, for
+/// gdpssmlt the even − odd chain halves that measure the reconstruction's α
+/// (reconstruct/alpha.rs), and the tallies.
 struct Accum {
     layers: Vec<RowPlanar>,
     density: Vec<u32>,
+    halves: Option<HalfDifference>,
     mutations: u64,
     accepted: u64,
     large_f: f64,
@@ -406,6 +411,7 @@ impl Accum {
         Accum {
             layers: (0..n_layers).map(|_| RowPlanar::zeros(w, h)).collect(),
             density: vec![0; w * h],
+            halves: gradient.then(|| HalfDifference::zeros(w, h)),
             mutations: 0,
             accepted: 0,
             large_f: 0.0,
@@ -413,23 +419,31 @@ impl Accum {
         }
     }
 
-    /// Adds the chains' logs of a round (or of a batch of its chains): band by band in
-    /// parallel, chain by chain in order within a band (so every pixel sums its splats in the
-    /// same order on any thread count).
-    fn merge(&mut self, logs: &[Log]) {
+    /// Adds the chains' logs of a round (or of a batch of its chains, the first of them chain
+    /// `first_chain`): band by band in parallel, chain by chain in order within a band (so
+    /// every pixel sums its splats in the same order on any thread count).
+    fn merge(&mut self, logs: &[Log], first_chain: usize) {
         let Some(first) = logs.first() else { return };
         let bp = first.band_pixels as usize;
         let w = self.layers[0].width;
         let mut layer_bands: Vec<std::slice::ChunksMut<'_, f32>> =
             self.layers.iter_mut().map(|l| l.data.chunks_mut(3 * bp)).collect();
+        let mut half_bands: Vec<std::slice::ChunksMut<'_, f32>> = match &mut self.halves {
+            Some(d) => [&mut d.primal, &mut d.dx, &mut d.dy].map(|v| v.chunks_mut(bp)).into(),
+            None => Vec::new(),
+        };
         let bands: Vec<BandMut> = self
             .density
             .chunks_mut(bp)
-            .map(|d| (layer_bands.iter_mut().map(|it| it.next().expect("same band count")).collect(), d))
+            .map(|d| {
+                let layers = layer_bands.iter_mut().map(|it| it.next().expect("same band count")).collect();
+                (layers, d, half_bands.iter_mut().map(|it| it.next().expect("same band count")).collect())
+            })
             .collect();
-        bands.into_par_iter().enumerate().for_each(|(b, (mut layers, density))| {
+        bands.into_par_iter().enumerate().for_each(|(b, (mut layers, density, mut halves))| {
             let base = b * bp;
-            for log in logs {
+            for (i, log) in logs.iter().enumerate() {
+                let sign = HalfDifference::sign((first_chain + i) as u64);
                 for s in log.band_splats(b) {
                     let (pixel, layer) = ((s.at / 4) as usize - base, (s.at % 4) as usize);
                     if layer == DENSITY {
@@ -441,6 +455,9 @@ impl Accum {
                         for (k, v) in s.v.iter().enumerate() {
                             l[(3 * r + k) * w + x] += v;
                         }
+                        if let Some(half) = halves.get_mut(layer) {
+                            half[pixel] += sign * (s.v[0] + s.v[1] + s.v[2]) * (1.0 / 3.0);
+                        }
                     }
                 }
             }
@@ -450,6 +467,16 @@ impl Accum {
             self.accepted += log.accepted;
             self.large_f += log.large_f;
             self.large_steps += log.large_steps;
+        }
+    }
+
+    /// The reconstruction's α: the setting, or where it is 0 (automatic) the one the even and
+    /// odd chains measure.
+    fn alpha(&self, setting: f64) -> f64 {
+        match (&self.halves, self.layers.as_slice()) {
+            _ if setting > 0.0 => setting,
+            (Some(d), [p, dx, dy]) => d.alpha([p, dx, dy]).unwrap_or(FALLBACK_ALPHA),
+            _ => FALLBACK_ALPHA,
         }
     }
 
@@ -538,6 +565,9 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl,
     let no_light = starts.total <= 0.0;
     drop(starts); // the bootstrap is not needed once the chains have started
     let mut image = Accum::new(w, h, gradient);
+    if let Some(d) = &mut image.halves {
+        d.counts = [chains.len().div_ceil(2) as u64, (chains.len() / 2) as u64];
+    }
     // ... and all chains advance in rounds of ROUND mutations, so that a time limit or Esc
     // stops them at about the same length, and intermediate images can be taken in between.
     // A round runs the chains batch by batch (a batch in parallel, each chain into its own
@@ -546,7 +576,7 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl,
     let batch = (4 * rayon::current_num_threads()).max(CHAIN_BATCH).min(chains.len().max(1));
     let mut logs: Vec<Log> = (0..batch).map(|_| Log::new(w, h, gradient)).collect();
     while !control.should_stop() && chains.iter().any(|c| c.remaining > 0) {
-        for group in chains.chunks_mut(batch) {
+        for (g, group) in chains.chunks_mut(batch).enumerate() {
             group.par_iter_mut().zip(logs.par_iter_mut()).with_max_len(1).for_each(|(c, log)| {
                 log.clear();
                 if control.should_stop() {
@@ -560,13 +590,15 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl,
                 c.remaining -= n;
                 control.work_done.fetch_add(n, Ordering::Relaxed);
             });
-            image.merge(&logs[..group.len()]);
+            image.merge(&logs[..group.len()], g * batch);
         }
         let target = direct_target(image.mutations, w * h);
         if direct_apart && target >= 2 * first.spp {
             first.add(scene, settings.seed, target, control);
         }
-        control.offer_preview(|| preview(&image, image.normalisation(boot_sum, n_boot), &first, settings.alpha_rec));
+        control.offer_preview(|| {
+            preview(&image, image.normalisation(boot_sum, n_boot), &first, image.alpha(settings.alpha_rec))
+        });
     }
     drop(chains);
     let (mutations, accepted) = (image.mutations, image.accepted);
@@ -596,7 +628,10 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl,
         stats.warnings.push("no light reaches the camera: the image is black".into());
     }
     let norm = control.final_norm(settings.reconstruction);
-    let mut layers = resolve(image, b, direct, settings.alpha_rec, norm, &|| control.is_cancelled());
+    if gradient {
+        stats.alpha_rec = image.alpha(settings.alpha_rec);
+    }
+    let mut layers = resolve(image, b, direct, stats.alpha_rec, norm, &|| control.is_cancelled());
     let img = |data: Vec<f32>| Image { width: w, height: h, channels: 3, data };
     layers.push(("Denoising Albedo".into(), img(albedo)));
     layers.push(("Denoising Normal".into(), img(normal)));
@@ -865,6 +900,40 @@ mod tests {
     /// The pooled relative variance from two halves matches the one of the distribution the
     /// samples come from: per pixel, a light found with probability p carrying 1/p (mean 1,
     /// variance (1 − p)/p), p varying over the image; and it is None for a black image.
+    /// The chain halves: a chain's splats to the primal and gradients enter the half
+    /// differences with the sign of its index's parity (the index in the whole render, not in
+    /// its batch), channel-averaged; visits do not; merging in batches gives the same halves.
+    #[test]
+    fn chain_halves_are_even_minus_odd_chains() {
+        let (w, h) = (7, 20);
+        let logs: Vec<Log> = (0..5)
+            .map(|c| {
+                let mut log = Log::new(w, h, true);
+                for (layer, pixel) in [(PRIMAL, 3), (DX, 3), (DY, 130), (PRIMAL, 130), (DENSITY, 3)] {
+                    log.push(layer, pixel, [c as f32 + 1.0, 2.0 * layer as f32, 0.5]);
+                }
+                log.sort_by_band();
+                log
+            })
+            .collect();
+        let mut whole = Accum::new(w, h, true);
+        whole.merge(&logs, 0);
+        let mut batched = Accum::new(w, h, true);
+        batched.merge(&logs[..2], 0);
+        batched.merge(&logs[2..], 2);
+        let mean = |c: f32, layer: usize| (c + 1.0 + 2.0 * layer as f32 + 0.5) / 3.0;
+        let expect =
+            |layer: usize| (0..5).map(|c| if c % 2 == 0 { 1.0 } else { -1.0 } * mean(c as f32, layer)).sum::<f32>();
+        for a in [&whole, &batched] {
+            let d = a.halves.as_ref().unwrap();
+            for (got, layer) in [(d.primal[3], PRIMAL), (d.dx[3], DX), (d.dy[130], DY), (d.primal[130], PRIMAL)] {
+                assert!((got - expect(layer)).abs() < 1e-5, "layer {layer}: {got} vs {}", expect(layer));
+            }
+            assert_eq!(d.primal.iter().chain(&d.dx).chain(&d.dy).filter(|v| **v != 0.0).count(), 4);
+        }
+        assert!(Accum::new(w, h, false).halves.is_none(), "pssmlt keeps no halves");
+    }
+
     #[test]
     fn relative_variance_of_direct_samples_matches_their_distribution() {
         let n = 8u32;

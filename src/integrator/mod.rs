@@ -59,7 +59,8 @@ pub struct RenderSettings {
     pub seed: u64,
     /// Worker threads; 0 = all cores.
     pub threads: usize,
-    /// Gradient-domain methods: reconstruction norm and screened-Poisson weight α.
+    /// Gradient-domain methods: reconstruction norm and screened-Poisson weight α; α = 0
+    /// (the default) measures it from the render's own noise (reconstruct/alpha.rs).
     pub reconstruction: Norm,
     pub alpha_rec: f64,
     /// Metropolis methods: probability of a large step (Kelemen), default 0.5 (measured
@@ -100,7 +101,7 @@ impl Default for RenderSettings {
             seed: 0,
             threads: 0,
             reconstruction: Norm::L1,
-            alpha_rec: 0.2,
+            alpha_rec: 0.0,
             large_step_probability: 0.5,
             alpha_target: 1.0,
             chains: 0,
@@ -137,8 +138,10 @@ impl RenderSettings {
                 return Err(RenderError::Settings(format!("{what} must be a finite number ≥ 0 (0 = off)")));
             }
         }
-        if !(self.alpha_rec.is_finite() && self.alpha_rec > 0.0) {
-            return Err(RenderError::Settings("reconstruction alpha must be a finite number > 0".into()));
+        if !(self.alpha_rec.is_finite() && self.alpha_rec >= 0.0) {
+            return Err(RenderError::Settings(
+                "reconstruction alpha must be a finite number ≥ 0 (0 = automatic)".into(),
+            ));
         }
         if !(0.0..=1.0).contains(&self.large_step_probability) {
             return Err(RenderError::Settings("large step probability must be in [0, 1]".into()));
@@ -289,6 +292,8 @@ pub struct RenderStats {
     /// Metropolis methods: the relative variance of one direct-light sample (camera-seen
     /// emission aside) by which `direct_pass` was decided; 0 where no direct light was seen.
     pub direct_relative_variance: f64,
+    /// Gradient-domain methods: the reconstruction's α (the setting, or the measured one).
+    pub alpha_rec: f64,
 }
 
 /// Named images: "Combined" first, then passes.

@@ -9,10 +9,12 @@
 //! (`RowPlanar`), the integrators' own accumulation layout, so a render's buffers become the
 //! problem without a copy (memory per pixel: docs/limits.md).
 
+mod alpha;
 mod cg;
 mod dct;
 mod irls;
 
+pub use alpha::{HalfDifference, ALPHA_RANGE, FALLBACK_ALPHA};
 pub use cg::{Problem, RowPlanar, Weights};
 pub use dct::solve_l2;
 pub use irls::{add_box_blur, solve_l1, IrlsParams};
