@@ -5,7 +5,9 @@
 //!
 //! Splats reach the rows above and below, so rows are processed in three phases (y mod 3):
 //! within a phase the 3-row windows are disjoint, which makes the accumulation lock-free and
-//! the image identical for any thread count.
+//! the image identical for any thread count given the same passes. (Passes grow while they
+//! take under 0.1 s, so where a pass crosses that line on one machine and not on another the
+//! order of a pixel's additions differs: the images then differ by f32 rounding, ~1e-6.)
 
 use super::{RenderControl, RenderOutput, RenderSettings, RenderStats};
 use crate::film::Image;
