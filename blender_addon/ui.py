@@ -47,7 +47,7 @@ class GDMLT_PT_sampling(GDMLTRenderPanel, bpy.types.Panel):
         if s.method in {"AUTO", "GDPT", "GDPSSMLT"}:
             col = layout.column(align=True)
             col.prop(s, "reconstruction")
-            col.prop(s, "alpha_reconstruction")
+            col.prop(s, "alpha_reconstruction", text="Alpha (0 = Automatic)")
         if s.method in {"AUTO", "PSSMLT", "GDPSSMLT"}:
             col = layout.column(align=True)
             col.prop(s, "large_step_probability")
