@@ -14,7 +14,7 @@ use crate::film::Image;
 use crate::math::{is_finite_spectrum, Spectrum};
 use crate::path::{trace_path_from, Path, Primary};
 use crate::reconstruct::{
-    gradient_domain_image, gradient_domain_layers, HalfDifference, IrlsParams, Norm, Problem, RowPlanar, FALLBACK_ALPHA,
+    chosen_alpha, gradient_domain_image, gradient_domain_layers, HalfDifference, IrlsParams, Norm, Problem, RowPlanar,
 };
 use crate::sampler::Sampler;
 use crate::scene::{CameraRay, Scene};
@@ -101,11 +101,7 @@ impl GdFilm {
     /// The reconstruction's α: the setting, or where it is 0 (automatic) the one the two
     /// sample halves measure.
     fn alpha(&self, setting: f64) -> f64 {
-        if setting > 0.0 {
-            setting
-        } else {
-            self.halves.alpha([&self.primal, &self.dx, &self.dy]).unwrap_or(FALLBACK_ALPHA)
-        }
+        chosen_alpha(setting, || self.halves.alpha([&self.primal, &self.dx, &self.dy]))
     }
 
     /// The gradient-domain problem of `spp` samples per pixel, and the very-direct image,

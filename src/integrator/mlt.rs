@@ -32,7 +32,7 @@ use crate::film::Image;
 use crate::math::{abs_luminance, is_finite_spectrum, Spectrum};
 use crate::path::{camera_transparency, first_hit, trace_path, trace_path_from, Path, PathSettings, Primary};
 use crate::reconstruct::{
-    gradient_domain_image, gradient_domain_layers, HalfDifference, IrlsParams, Norm, Problem, RowPlanar, FALLBACK_ALPHA,
+    chosen_alpha, gradient_domain_image, gradient_domain_layers, HalfDifference, IrlsParams, Norm, Problem, RowPlanar,
 };
 use crate::sampler::{mix64, IndependentSampler, PssSampler, Sampler};
 use crate::scene::{CameraRay, Scene};
@@ -473,11 +473,10 @@ impl Accum {
     /// The reconstruction's α: the setting, or where it is 0 (automatic) the one the even and
     /// odd chains measure.
     fn alpha(&self, setting: f64) -> f64 {
-        match (&self.halves, self.layers.as_slice()) {
-            _ if setting > 0.0 => setting,
-            (Some(d), [p, dx, dy]) => d.alpha([p, dx, dy]).unwrap_or(FALLBACK_ALPHA),
-            _ => FALLBACK_ALPHA,
-        }
+        chosen_alpha(setting, || match (&self.halves, self.layers.as_slice()) {
+            (Some(d), [p, dx, dy]) => d.alpha([p, dx, dy]),
+            _ => None,
+        })
     }
 
     /// b = E[F] from the bootstrap's F sum and every large step so far.

@@ -35,6 +35,16 @@ pub const ALPHA_RANGE: (f64, f64) = (0.02, 5.0);
 /// 16 all 1.02 on average; uncapped 1.035, 1.14 on the door ajar (1.03 with 8).
 pub const OUTLIER_CAP: f64 = 8.0;
 
+/// The α a reconstruction uses for the setting `setting`: the setting where it is > 0; where
+/// it is 0 (automatic) the `measured` one, or [`FALLBACK_ALPHA`] where nothing was measured.
+pub fn chosen_alpha(setting: f64, measured: impl FnOnce() -> Option<f64>) -> f64 {
+    if setting > 0.0 {
+        setting
+    } else {
+        measured().unwrap_or(FALLBACK_ALPHA)
+    }
+}
+
 /// Per pixel, the channel mean of (sum of the even half's samples − sum of the odd half's),
 /// for the primal and the two gradients, in the scale of the render's accumulators; and how
 /// many samples (or chains) each half holds.

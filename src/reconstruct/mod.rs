@@ -14,7 +14,7 @@ mod cg;
 mod dct;
 mod irls;
 
-pub use alpha::{HalfDifference, ALPHA_RANGE, FALLBACK_ALPHA};
+pub use alpha::{chosen_alpha, HalfDifference, ALPHA_RANGE, FALLBACK_ALPHA};
 pub use cg::{Problem, RowPlanar, Weights};
 pub use dct::solve_l2;
 pub use irls::{add_box_blur, solve_l1, IrlsParams};
