@@ -61,11 +61,17 @@ fn write_albedo_tables() {
     let dielectric = tabulate(N_MU * N_ROUGH * N_ETA, dielectric_entry);
     let white = tabulate(N_MU * N_ROUGH_WHITE, white_entry);
     let average = white_averages(&white);
+    let glass = tabulate(N_SIDE * N_MU * N_ROUGH * N_ETA, glass_entry);
+    let glass_average = hemispherical_averages(&glass);
     let array = |name: &str, v: &[f32]| {
         // Debug formatting of an f32 reads back to the same bits
         format!("pub static {name}: [f32; {}] = {v:?};\n", v.len())
     };
-    let text = array("DIELECTRIC", &dielectric) + &array("WHITE", &white) + &array("WHITE_AVERAGE", &average);
+    let text = array("DIELECTRIC", &dielectric)
+        + &array("WHITE", &white)
+        + &array("WHITE_AVERAGE", &average)
+        + &array("GLASS", &glass)
+        + &array("GLASS_AVERAGE", &glass_average);
     let out = std::path::PathBuf::from(std::env::var("OUT_DIR").expect("OUT_DIR")).join("albedo_tables.rs");
     std::fs::write(out, text).expect("writing the albedo tables");
 }

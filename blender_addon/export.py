@@ -298,8 +298,9 @@ def _node_params(node, textures, warnings, what):
     else:
         warnings.append(f"{what}: shader node '{node.name}' ({t}) is not supported; rendered as grey diffuse")
     _normal_map(node, out, textures, warnings, what)
-    if t in ("BSDF_PRINCIPLED", "BSDF_GLOSSY", "BSDF_ANISOTROPIC"):
-        # Multiscatter GGX (Blender's default) compensates the metal lobe's lost energy
+    if t in ("BSDF_PRINCIPLED", "BSDF_GLOSSY", "BSDF_ANISOTROPIC", "BSDF_GLASS", "BSDF_REFRACTION"):
+        # Multiscatter GGX (Blender's default) compensates the energy the metal and glass lobes
+        # lose to single scattering (the Refraction BSDF has no such option)
         out["multiscatter"] = getattr(node, "distribution", "GGX") == "MULTI_GGX"
     return out
 
@@ -412,7 +413,7 @@ class _Mixture:
     textures: list = field(default_factory=list)  # (base colour texture, on a diffuse-only leaf)
     rough_textures: list = field(default_factory=list)
     normals: list = field(default_factory=list)  # the leaves' normal maps (texture, strength)
-    multiscatter: list = field(default_factory=list)  # the metal leaves' distributions
+    multiscatter: list = field(default_factory=list)  # the metal and glass leaves' distributions
     bsdf_leaves: int = 0
 
     @property
@@ -455,7 +456,7 @@ def _gather(leaves, warnings, what) -> _Mixture:
                             f"rendered opaque")
         if "normal_texture" in p:
             mix.normals.append((p["normal_texture"], p["normal_strength"]))
-        if w * m > 0:
+        if w * m > 0 or w * (1 - m) * t > 0:
             mix.multiscatter.append(p.get("multiscatter", False))
     return mix
 
@@ -549,7 +550,7 @@ def _combined_textures(mix, out, colour, warnings, what):
     if mix.multiscatter:
         out["multiscatter"] = mix.multiscatter[0]
         if len(set(mix.multiscatter)) > 1:
-            warnings.append(f"{what}: the mixed glossy/metal lobes use different distributions; "
+            warnings.append(f"{what}: the mixed glossy/metal/glass lobes use different distributions; "
                             f"{'Multiscatter GGX' if mix.multiscatter[0] else 'GGX'} is used for all")
     if mix.normals:
         # one shading normal per point in the core: a normal map shared by every BSDF leaf

@@ -261,6 +261,7 @@ class _Reader:
             elif bkind == "ND_dielectric_bsdf" and p(sh, "scatter_mode", "R") in ("RT", "T"):
                 out["base_color"] = tuple(c * weight for c in p(sh, "tint", (1.0, 1.0, 1.0)))
                 out["transmission"], out["ior"], out["roughness"] = 1.0, p(sh, "ior", 1.5), rough()
+                out["multiscatter"] = True  # Blender's Glass BSDF default (Multiscatter GGX)
             else:
                 self.warn(f"{what}: MaterialX BSDF {bkind} is not supported; the UsdPreviewSurface is used")
                 return False

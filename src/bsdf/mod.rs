@@ -393,7 +393,7 @@ mod tests {
         Bsdf::Principled {
             diffuse: Layered::plain(Lambert { albedo: Spectrum::ONE }),
             metal: Conductor { f0: Spectrum::ONE, roughness, multiscatter: false },
-            glass: Dielectric { eta: 1.5, tint: Spectrum::ONE, roughness: 0.0 },
+            glass: Dielectric { eta: 1.5, tint: Spectrum::ONE, roughness: 0.0, multiscatter: false },
             w,
             pass: 0.0,
             pass_tint: Spectrum::ONE,
@@ -417,7 +417,7 @@ mod tests {
         let b = Bsdf::Principled {
             diffuse: Layered::plain(Lambert { albedo: Spectrum::ONE }),
             metal: Conductor { f0: Spectrum::ONE, roughness: 0.5, multiscatter: false },
-            glass: Dielectric { eta: 1.5, tint: Spectrum::ONE, roughness: 0.0 },
+            glass: Dielectric { eta: 1.5, tint: Spectrum::ONE, roughness: 0.0, multiscatter: false },
             w: [0.4, 0.0, 0.0],
             pass: 0.6,
             pass_tint: tint,

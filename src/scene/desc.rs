@@ -89,8 +89,8 @@ pub struct MaterialDesc {
     /// the specular layer's): a Mix Shader of a rough Glossy and a smooth Glass, say.
     pub metal_roughness: Option<f32>,
     pub glass_roughness: Option<f32>,
-    /// The metal lobe compensates the energy single scattering loses (Blender's Multiscatter
-    /// GGX, its default distribution).
+    /// The metal and glass lobes compensate the energy single scattering loses (Blender's
+    /// Multiscatter GGX, its default distribution).
     pub multiscatter: bool,
     /// Probability τ of passing straight through the surface (Blender's Transparent BSDF, or
     /// Principled alpha = 1 − τ as coverage); the other lobes share 1 − τ.

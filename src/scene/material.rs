@@ -162,7 +162,12 @@ impl Material {
         let metal =
             Conductor { f0: self.metal_color.unwrap_or(base_color), roughness: rm, multiscatter: self.multiscatter };
         let eta = if front { self.ior } else { 1.0 / self.ior };
-        let glass = Dielectric { eta, tint: self.glass_color.unwrap_or(base_color), roughness: rg };
+        let glass = Dielectric {
+            eta,
+            tint: self.glass_color.unwrap_or(base_color),
+            roughness: rg,
+            multiscatter: self.multiscatter,
+        };
         if tau > 0.0 || self.general {
             Bsdf::Principled { diffuse, metal, glass, w, pass: tau, pass_tint: self.transparent_color }
         } else if w[1] <= 0.0 && w[2] <= 0.0 && !diffuse.has_layer() {
