@@ -59,6 +59,11 @@ pub struct PathSettings {
     /// `pssmlt` apply it (the gradient-domain methods do not: see integrator::render).
     pub clamp_direct: f32,
     pub clamp_indirect: f32,
+    /// Light samples through rough glass evaluated by the BSDF itself (`Bsdf::eval`), where
+    /// next-event estimation and BSDF sampling alone then agree exactly; off (the default),
+    /// as Cycles evaluates them (`Bsdf::eval_light`: a little more light through rough glass
+    /// with NEE than without, as Cycles renders it). For tests of NEE against naive sampling.
+    pub strict_glass_nee: bool,
 }
 
 /// A per-kind limit that never binds before the total does.
@@ -101,6 +106,7 @@ impl Default for PathSettings {
             transparent_bounces: MAX_TRANSPARENT_BOUNCES,
             clamp_direct: 0.0,
             clamp_indirect: 0.0,
+            strict_glass_nee: false,
         }
     }
 }
@@ -205,6 +211,25 @@ pub struct Event {
     /// vertex reached before any scattering (crossings of transparent surfaces are not
     /// scatterings).
     pub direct: bool,
+    /// The path's light events count what Cycles' light sampling adds through rough glass
+    /// (`Bsdf::eval_light_sample`; NEE on and `PathSettings::strict_glass_nee` off): an
+    /// offset re-evaluates a light sample *and* a BSDF hit with it, since either may shift
+    /// to a pair of directions there that only light sampling reaches.
+    pub as_cycles_light: bool,
+}
+
+impl Event {
+    /// (f·|cos θi|, BSDF pdf) of `bsdf` from wo towards wi for this event, whose light pdf
+    /// there is `pdf_l`: the integrand every strategy of the path shares (a base's own BSDF
+    /// hits are pairs the interface connects, where it is the BSDF).
+    #[inline]
+    pub fn bsdf_eval(&self, bsdf: &crate::bsdf::Bsdf, wo: Vec3, wi: Vec3, pdf_l: f32) -> (Spectrum, f32) {
+        if self.as_cycles_light {
+            bsdf.eval_light_sample(wo, wi, true, (!self.delta).then_some(pdf_l))
+        } else {
+            (bsdf.eval(wo, wi), bsdf.pdf(wo, wi))
+        }
+    }
 }
 
 /// A recorded path (reused between samples: no allocation once warm).
@@ -280,7 +305,7 @@ pub fn trace_path_from<S: Sampler>(
         p.lens = primary.lens;
     }
     let mut out = PathContribution::default();
-    let mut st = PathState::new(primary.ray, cfg.nee && scene.has_lights());
+    let mut st = PathState::new(primary.ray, cfg.nee && scene.has_lights(), !cfg.strict_glass_nee);
     let mut pending_hit = Some(primary.hit); // the camera ray's, traced by the caller
     let mut guide = Some(Spectrum::ONE); // the denoising guides' throughput, until they are written
     loop {
@@ -368,7 +393,7 @@ pub fn trace_path_from<S: Sampler>(
 
         // 7. next-event estimation
         if st.use_nee && !bsdf.is_delta() {
-            let nee = next_event(scene, &si, &bsdf, wo, u_light_select, u_light);
+            let nee = next_event(scene, &si, &bsdf, wo, u_light_select, u_light, st.as_cycles_light);
             if let Some(e) = nee {
                 add(&mut out, cfg.clamp(st.beta * e.f * e.le * (e.weight / e.pdf_l), st.depth), false, st.depth == 0);
                 let numerator = st.beta * e.f * e.le;
@@ -420,10 +445,13 @@ struct PathState {
     /// Index of the last vertex that scattered (CAMERA_VERTEX before the first).
     last_vertex: u32,
     use_nee: bool,
+    /// Light events are evaluated with what Cycles' light sampling adds through rough glass
+    /// (NEE on, `strict_glass_nee` off).
+    as_cycles_light: bool,
 }
 
 impl PathState {
-    fn new(cam: CameraRay, use_nee: bool) -> PathState {
+    fn new(cam: CameraRay, use_nee: bool, as_cycles_light: bool) -> PathState {
         PathState {
             o: cam.origin,
             d: cam.dir,
@@ -442,6 +470,7 @@ impl PathState {
             pass_tint: Spectrum::ONE,
             last_vertex: CAMERA_VERTEX,
             use_nee,
+            as_cycles_light: use_nee && as_cycles_light,
         }
     }
 
@@ -505,6 +534,7 @@ impl PathState {
                 numerator,
                 through_transparent: self.passed,
                 direct: self.direct_emission(),
+                as_cycles_light: self.as_cycles_light,
             });
         }
     }
@@ -593,7 +623,8 @@ struct NextEvent {
 }
 
 /// Next-event estimation at `si`: one light sample (`u_select`, `u_light`), unoccluded and on
-/// a side BSDF sampling may continue to, or None.
+/// a side BSDF sampling may continue to, or None. `as_cycles`: with what Cycles' evaluation
+/// adds through rough glass (`Bsdf::eval_light_sample`).
 #[inline]
 fn next_event(
     scene: &Scene,
@@ -602,10 +633,11 @@ fn next_event(
     wo: Vec3,
     u_select: f32,
     u_light: Vec2,
+    as_cycles: bool,
 ) -> Option<NextEvent> {
     let (li, ls) = scene.sample_light(si.p, u_select, u_light)?;
     let wi = si.frame.to_local(ls.wi);
-    let f = bsdf.eval(wo, wi);
+    let (f, pdf_b) = bsdf.eval_light_sample(wo, wi, as_cycles, (!ls.is_delta).then_some(ls.pdf));
     // the same directions BSDF sampling may continue in (below): on one side of both the
     // geometric and the shading normal — the reflection side, or through a transmitting
     // surface (rough glass) on the other (skipping that side while BSDF-sampled hits there
@@ -615,7 +647,7 @@ fn next_event(
     }
     let (tr, crossed_transparent) = scene.transmittance(si, &ls)?;
     let radiance = ls.radiance * tr;
-    let pdf_b = if ls.is_delta { 0.0 } else { bsdf.pdf(wo, wi) };
+    let pdf_b = if ls.is_delta { 0.0 } else { pdf_b };
     let weight = if ls.is_delta { 1.0 } else { power_heuristic(ls.pdf, pdf_b) };
     let at_infinity = !ls.dist.is_finite();
     let event = Event {
@@ -632,6 +664,7 @@ fn next_event(
         numerator: Spectrum::ZERO,
         through_transparent: crossed_transparent,
         direct: false, // set by the caller
+        as_cycles_light: as_cycles,
     };
     Some(NextEvent { le: radiance, f, pdf_l: ls.pdf, weight, event })
 }

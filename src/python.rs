@@ -598,6 +598,7 @@ fn render<'py>(
             transparent_bounces: transparent_bounces.unwrap_or(d.path.transparent_bounces),
             clamp_direct: clamp_direct.unwrap_or(d.path.clamp_direct),
             clamp_indirect: clamp_indirect.unwrap_or(d.path.clamp_indirect),
+            strict_glass_nee: d.path.strict_glass_nee,
         },
         seed: seed.unwrap_or(d.seed),
         threads: threads.unwrap_or(d.threads),

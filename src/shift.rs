@@ -137,11 +137,15 @@ struct Free {
 }
 
 impl Free {
-    /// f·|cos θ| and solid-angle pdf of the offset's BSDF at y towards world direction `dir`.
-    fn scatter(&self, scene: &Scene, dir: Vec3) -> (Spectrum, f32) {
+    /// f·|cos θ| and solid-angle pdf of the offset's BSDF at y towards world direction `dir`
+    /// (for light event `e` of light pdf p_l at y, if any: as the base evaluated it).
+    fn scatter(&self, scene: &Scene, dir: Vec3, e: Option<(&Event, f32)>) -> (Spectrum, f32) {
         let bsdf = bsdf_at(scene, self.y.material, self.y.front, self.y.uv);
         let (wo, wi) = (self.y.frame.to_local(self.wo), self.y.frame.to_local(dir));
-        (bsdf.eval(wo, wi), bsdf.pdf(wo, wi))
+        match e {
+            Some((e, pdf_l)) => e.bsdf_eval(&bsdf, wo, wi, pdf_l),
+            None => (bsdf.eval(wo, wi), bsdf.pdf(wo, wi)),
+        }
     }
 }
 
@@ -310,10 +314,11 @@ impl<'a> Offset<'a> {
                 let bsdf = bsdf_at(scene, x.material, x.front, x.uv);
                 let dir = if e.at_infinity { e.z } else { (e.z - x.p).normalize() };
                 let wi = x.frame.to_local(dir);
-                let pdf_b = if e.delta { 0.0 } else { bsdf.pdf(wo, wi) };
+                let (fy, pdf) = e.bsdf_eval(&bsdf, wo, wi, e.pdf_l);
+                let pdf_b = if e.delta { 0.0 } else { pdf };
                 // base numerator = β_x·f_x·Le (NEE) or β_x(k+1)·Le·p_b = β_x·f_x·Le/q_k (hit);
                 // `event` divides by q_k
-                Some((beta * bsdf.eval(wo, wi) * e.le, r * (pdf_b + e.pdf_l)))
+                Some((beta * fy * e.le, r * (pdf_b + e.pdf_l)))
             }
             // a segment through transparent surfaces is not re-created from a free offset
             // vertex (neither is the offset's, in reconnect_event: shadow tests stop at them)
@@ -416,7 +421,7 @@ fn reconnect(scene: &Scene, xk: &Vertex, xn: &Vertex, f: &Free) -> Option<State>
     if !(j > 0.0 && j.is_finite() && xk.pdf_out > 0.0) {
         return None;
     }
-    let (fy, pdf) = f.scatter(scene, dir);
+    let (fy, pdf) = f.scatter(scene, dir, None);
     Some(State::Joined {
         wo: xn.frame.to_local(-dir),
         beta: f.beta * fy * (j / (xk.pdf_out * xk.rr)),
@@ -432,9 +437,9 @@ fn reconnect_event(scene: &Scene, e: &Event, xk: Vec3, f: &Free) -> Option<(Spec
     }
     let dir = if e.at_infinity { e.z } else { (e.z - f.y.p).normalize() };
     let (le, pdf_l) = scene.light_eval(e.light, f.y.p, e.z)?;
-    let (fy, pdf) = f.scatter(scene, dir);
-    let pdf_b = if e.delta { 0.0 } else { pdf };
     let pdf_l = if e.pdf_l > 0.0 { pdf_l } else { 0.0 }; // same strategies as the base
+    let (fy, pdf) = f.scatter(scene, dir, Some((e, pdf_l)));
+    let pdf_b = if e.delta { 0.0 } else { pdf };
     let j = if e.at_infinity || e.delta {
         1.0
     } else {
@@ -538,7 +543,7 @@ pub fn offset_path(scene: &Scene, base: &Path, offset_raster: Vec2) -> Path {
                     }
                 } else if let Some(n) = base.vertices.get(offset.k + 1) {
                     let dir = (n.p - f.y.p).normalize();
-                    let (fv, pdf) = f.scatter(scene, dir);
+                    let (fv, pdf) = f.scatter(scene, dir, None);
                     v.wi = dir;
                     v.f_out = fv;
                     v.pdf_out = pdf;

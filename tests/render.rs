@@ -166,9 +166,22 @@ fn a_textured_emitter_agrees_between_nee_and_naive() {
     check_gradients("gdpt textured emitter", &runs, &ref_out, 64.0 / 4096.0, 2.0);
 }
 
+/// A pt render whose light samples through rough glass are evaluated by the BSDF itself
+/// (`PathSettings::strict_glass_nee`), or as Cycles evaluates them.
+fn run_glass_nee(desc: &SceneDesc, spp: u32, nee: bool, seed: u64, strict: bool) -> Image {
+    let mut desc = desc.clone();
+    desc.camera.pixel_filter = "BOX".into();
+    let scene = Scene::build(&desc).expect("scene builds");
+    let path = PathSettings { strict_glass_nee: strict, ..PathSettings::new(6, nee) };
+    let settings = RenderSettings { method: Method::Pt, spp, path, seed, ..Default::default() };
+    render(&scene, &settings, &RenderControl::new(0.0)).expect("render").layer("Combined").unwrap().clone()
+}
+
+/// (The light samples are evaluated by the BSDF itself: as Cycles evaluates them through rough
+/// glass, NEE finds more light there than BSDF sampling can — `nee_through_rough_glass_is_cycles_estimate`.)
 fn nee_and_naive_agree(desc: &SceneDesc) {
     let desc = desc.clone();
-    let nee = block_means(&run(&desc, 256, true, 6, 1, 0), 4);
+    let nee = block_means(&run_glass_nee(&desc, 256, true, 1, true), 4);
     let naive_a = block_means(&run(&desc, 512, false, 6, 2, 0), 4);
     let naive_b = block_means(&run(&desc, 512, false, 6, 3, 0), 4);
     let rms = |v: &Vec<f64>| (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt();
@@ -181,6 +194,34 @@ fn nee_and_naive_agree(desc: &SceneDesc) {
     assert!(mean_d.abs() < 4.0 * re / (d.len() as f64).sqrt(), "mean difference {mean_d} (noise rms {re})");
     // the image is not black
     assert!(naive_a.iter().sum::<f64>() / naive_a.len() as f64 > 0.01);
+}
+
+/// Light samples through rough glass are evaluated as Cycles evaluates them
+/// (`Dielectric::eval_light`): where no glass is seen the image is the strict evaluation's
+/// bit for bit; the bulb in rough glass, lit only through it, is brighter — by what
+/// Cycles' evaluation adds, beyond the seeds' spread (measured: +0.42% at 32², roughness 0.35).
+#[test]
+fn nee_through_rough_glass_is_cycles_estimate() {
+    use gdmlt::scene::builtin::cornell_bulb;
+    let plain = cornell_box(16, 16);
+    assert_eq!(run_glass_nee(&plain, 16, true, 3, false).data, run_glass_nee(&plain, 16, true, 3, true).data);
+    let bulb = cornell_bulb(32, 32);
+    let mean = |img: &Image| img.data.iter().map(|&v| v as f64).sum::<f64>() / img.data.len() as f64;
+    let (mut cycles, mut strict) = (Vec::new(), Vec::new());
+    for seed in 1..=4 {
+        cycles.push(mean(&run_glass_nee(&bulb, 256, true, seed, false)));
+        strict.push(mean(&run_glass_nee(&bulb, 256, true, seed, true)));
+    }
+    let d: Vec<f64> = cycles.iter().zip(&strict).map(|(a, b)| a - b).collect();
+    let m = d.iter().sum::<f64>() / 4.0;
+    let sd = (d.iter().map(|x| (x - m).powi(2)).sum::<f64>() / 3.0).sqrt();
+    let base = strict.iter().sum::<f64>() / 4.0;
+    println!(
+        "bulb: Cycles' light evaluation {:+.3}% ± {:.3}% of the strict one",
+        100.0 * m / base,
+        100.0 * sd / 2.0 / base
+    );
+    assert!(m > 0.0 && m > 4.0 * sd / 2.0, "Cycles' evaluation adds {m} ± {} to {base}", sd / 2.0);
 }
 
 #[test]
@@ -589,7 +630,10 @@ fn all_methods_converge_on_specular_gap_and_veil_scenes() {
 #[test]
 fn all_methods_converge_through_glass_with_and_without_nee() {
     use gdmlt::scene::builtin::{cornell_bulb, cornell_spheres};
-    let k = 4usize;
+    // eight runs: light through rough glass is heavy-tailed, and with four the spread that
+    // sets the tolerance was itself too noisy (ratio of error to expected noise 0.7–2.8 over
+    // six sets of four seeds, with light samples evaluated either way; 1.3–1.8 with eight)
+    let k = 8usize;
     for (name, desc, nee) in [
         ("spheres", cornell_spheres(16, 16), false),
         ("bulb", cornell_bulb(16, 16), true),

@@ -60,9 +60,12 @@ impl Dielectric {
     }
 
     /// Microfacet normal of the pair (wo, wi) and whether it is a reflection; None where no
-    /// microfacet of the upper hemisphere connects them.
+    /// microfacet of the upper hemisphere connects them — or, `as_cycles_light`, only where
+    /// the pair has no half-vector at all: a refraction pair then takes its generalized
+    /// half-vector up to sign, whether or not that microfacet faces both directions, as
+    /// Cycles evaluates light samples (see `eval_light`).
     #[inline]
-    fn half_vector(&self, wo: Vec3, wi: Vec3) -> Option<(Vec3, bool)> {
+    fn half_vector(&self, wo: Vec3, wi: Vec3, as_cycles_light: bool) -> Option<(Vec3, bool)> {
         if wo.z <= 0.0 || wi.z == 0.0 {
             return None;
         }
@@ -73,8 +76,10 @@ impl Dielectric {
             return None;
         }
         let h = if hu.z < 0.0 { -hu / len } else { hu / len };
-        // wo must see the microfacet; wi must lie on its other side for refraction
-        if wo.dot(h) <= 0.0 || (wi.dot(h) > 0.0) != reflection {
+        // wo must see the microfacet; wi must lie on its other side for refraction (Cycles'
+        // light samples skip this for refraction pairs)
+        let strict = reflection || !as_cycles_light;
+        if strict && (wo.dot(h) <= 0.0 || (wi.dot(h) > 0.0) != reflection) {
             return None;
         }
         Some((h, reflection))
@@ -82,10 +87,38 @@ impl Dielectric {
 
     /// f(wo, wi)·|cos θi| (rough interface; zero when smooth).
     pub fn eval(&self, wo: Vec3, wi: Vec3) -> Spectrum {
+        self.eval_as(wo, wi, false)
+    }
+
+    /// Solid-angle pdf with which `sample` returns wi (rough interface).
+    pub fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
+        self.pdf_as(wo, wi, false)
+    }
+
+    /// f·|cos θi| of a light sample as Cycles evaluates it: its BSDF evaluation takes a
+    /// refraction pair's half-vector up to sign and absolute values of its cosines, without
+    /// asking that the microfacet face both directions (no χ⁺ terms), so next-event
+    /// estimation through rough glass also counts pairs that no microfacet refracts into each
+    /// other and that BSDF sampling never produces. On the pairs the interface can refract,
+    /// it is `eval`. Cycles renders rough glass lit through it by light sampling that much
+    /// brighter than by BSDF sampling alone (measured, 40×30 slab of glass at roughness 1 in
+    /// front of a large emitter: +16%; at 0.7 +7%); GDMLT's light samples follow it, so that
+    /// its image is Cycles' image (docs/conventions.md).
+    pub fn eval_light(&self, wo: Vec3, wi: Vec3) -> Spectrum {
+        self.eval_as(wo, wi, true)
+    }
+
+    /// The pdf that goes with `eval_light` in the MIS weight of a light sample: Walter's
+    /// transmission pdf with |wo·h|.
+    pub fn pdf_light(&self, wo: Vec3, wi: Vec3) -> f32 {
+        self.pdf_as(wo, wi, true)
+    }
+
+    fn eval_as(&self, wo: Vec3, wi: Vec3, as_cycles_light: bool) -> Spectrum {
         if self.is_delta() {
             return Spectrum::ZERO;
         }
-        let Some((h, reflection)) = self.half_vector(wo, wi) else { return Spectrum::ZERO };
+        let Some((h, reflection)) = self.half_vector(wo, wi, as_cycles_light) else { return Spectrum::ZERO };
         let g = Ggx::from_roughness(self.roughness);
         let f = fresnel_dielectric(wo.dot(h), self.eta);
         let dg = g.d(h) * g.g2(wo, wi);
@@ -101,14 +134,16 @@ impl Dielectric {
         }
     }
 
-    /// Solid-angle pdf with which `sample` returns wi (rough interface).
-    pub fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
+    fn pdf_as(&self, wo: Vec3, wi: Vec3, as_cycles_light: bool) -> f32 {
         if self.is_delta() {
             return 0.0;
         }
-        let Some((h, reflection)) = self.half_vector(wo, wi) else { return 0.0 };
+        let Some((h, reflection)) = self.half_vector(wo, wi, as_cycles_light) else { return 0.0 };
         let f = fresnel_dielectric(wo.dot(h), self.eta);
-        let pdf_h = Ggx::from_roughness(self.roughness).pdf_visible(wo, h);
+        let g = Ggx::from_roughness(self.roughness);
+        // the density of visible normals, G1(wo)·|wo·h|·D(h)/cos θo (h faces wo unless
+        // `as_cycles_light`)
+        let pdf_h = g.g1(wo) * wo.dot(h).abs() * g.d(h) / wo.z;
         if reflection {
             pdf_h * f / (4.0 * wo.dot(h))
         } else {
@@ -272,6 +307,37 @@ mod tests {
                 multiscatter: true,
             });
             chi2_test(&b, Vec3::new(0.6, 0.0, 0.8), 23);
+        }
+    }
+
+    /// A light sample is evaluated as Cycles evaluates it: wherever the interface connects
+    /// the pair (every direction sampling produces) `eval_light`/`pdf_light` are
+    /// `eval`/`pdf` exactly; reflection pairs always are; some refraction pairs that no
+    /// microfacet connects have a value only there.
+    #[test]
+    fn light_samples_are_evaluated_as_cycles_does() {
+        use crate::sampler::{IndependentSampler, Sampler};
+        let mut s = IndependentSampler::new(8, 8);
+        for eta in [1.5f32, 1.0 / 1.5] {
+            let d = Dielectric { eta, tint: Spectrum::ONE, roughness: 0.7, multiscatter: true };
+            let mut only_cycles = 0;
+            for _ in 0..20_000 {
+                let wo = crate::math::square_to_uniform_sphere(s.next_2d());
+                let wo = Vec3::new(wo.x, wo.y, wo.z.abs().max(0.02)).normalize();
+                let wi = crate::math::square_to_uniform_sphere(s.next_2d());
+                let (f, p, fl, pl) = (d.eval(wo, wi), d.pdf(wo, wi), d.eval_light(wo, wi), d.pdf_light(wo, wi));
+                if f.x > 0.0 || wi.z > 0.0 {
+                    assert!(f == fl && p == pl, "η={eta} {wo} {wi}: {f}/{p} vs {fl}/{pl}");
+                } else if fl.x > 0.0 {
+                    assert!(pl > 0.0);
+                    only_cycles += 1;
+                }
+                // what sampling produces is where both agree
+                if let Some(bs) = d.sample(wo, s.next_1d(), s.next_2d()) {
+                    assert!(d.eval(wo, bs.wi).x > 0.0 && d.eval_light(wo, bs.wi) == d.eval(wo, bs.wi));
+                }
+            }
+            assert!(only_cycles > 100, "η={eta}: {only_cycles} pairs evaluated by Cycles only");
         }
     }
 

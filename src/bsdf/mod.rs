@@ -19,7 +19,7 @@ pub use dielectric::{refraction_half_vector, Dielectric};
 pub use lambert::Lambert;
 pub use layered::Layered;
 
-use crate::math::Spectrum;
+use crate::math::{power_heuristic, Spectrum};
 use glam::{Vec2, Vec3};
 
 /// Roughness at or below which a lobe is treated as specular by the shift mapping
@@ -161,6 +161,38 @@ impl Bsdf {
                 p
             }
         }
+    }
+
+    /// (f·|cos θi|, BSDF pdf) of a light sample's direction, whose light pdf is `pdf_l` (None:
+    /// a delta light). With `as_cycles`, f gains what Cycles' evaluation of rough glass adds
+    /// beyond the BSDF — its value on pairs no microfacet connects (`Dielectric::eval_light`),
+    /// which only light sampling reaches there — times the MIS weight Cycles gives it,
+    /// p_l²/(p_l² + p_b²) with its pdf p_b of such pairs (1 for delta lights); the pdf returned
+    /// stays the BSDF's, which is 0 there. A light sample then adds exactly what Cycles' adds
+    /// (pt's MIS weight of it is 1), and the gradient-domain methods, whose MIS runs over
+    /// base and offset paths alike, see one integrand (Cycles' total) that BSDF sampling
+    /// cannot reach where it differs. (In a Principled mixture the other lobes keep their
+    /// own weight, where Cycles weighs them with the glass lobe's extended pdf too.)
+    #[inline]
+    pub fn eval_light_sample(&self, wo: Vec3, wi: Vec3, as_cycles: bool, pdf_l: Option<f32>) -> (Spectrum, f32) {
+        let (f, p) = (self.eval(wo, wi), self.pdf(wo, wi));
+        if !as_cycles || wi.z >= 0.0 {
+            return (f, p); // (reflection pairs are evaluated alike)
+        }
+        let (glass, weight) = match self {
+            Bsdf::Dielectric(g) => (g, 1.0),
+            Bsdf::Principled { glass, w, .. } if w[2] > 0.0 => (glass, w[2]),
+            _ => return (f, p),
+        };
+        if glass.eval(wo, wi).max_element() > 0.0 {
+            return (f, p); // the interface connects the pair: Cycles' value is the BSDF's
+        }
+        let extra = glass.eval_light(wo, wi) * weight;
+        if !(extra.max_element() > 0.0) {
+            return (f, p);
+        }
+        let mis = pdf_l.map_or(1.0, |pl| power_heuristic(pl, p + weight * glass.pdf_light(wo, wi)));
+        (f + extra * mis, p)
     }
 
     /// Samples an incident direction from two primary samples plus one for lobe selection.
