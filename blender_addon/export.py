@@ -265,6 +265,12 @@ def _node_params(node, textures, warnings, what):
         out["specular_ior"] = _specular_layer_ior(out["ior"], _input_value(node, "Specular IOR Level", warnings,
                                                                            what, 0.5))
         out["transmission"] = _input_value(node, "Transmission Weight", warnings, what, 0.0)
+        if out["transmission"] > 0:
+            # as Cycles: its glass reflects with the Specular Tint (white; warned when set) and
+            # transmits √(base colour) at each interface, so that light entering and leaving
+            # takes the base colour once — a Glass BSDF tints both by its colour
+            out["glass_reflection_tint"] = (1.0, 1.0, 1.0)
+            out["glass_sqrt_tint"] = True
         _warn_unsupported_layers(node, warnings, what)
         _emission(node, "Emission Color", "Emission Strength", out, textures, warnings, what, (0, 0, 0, 1), 0.0)
         alpha_tex = _linked_texture(node, "Alpha", textures, warnings, what, output="Alpha")
@@ -403,6 +409,7 @@ class _Mixture:
     """What the weighted leaves of a Mix/Add Shader tree add up to (`_gather`), before it is
     turned into one material (`_combine`)."""
     lobes: dict = field(default_factory=lambda: {"d": _LobeSum(), "m": _LobeSum(), "g": _LobeSum()})
+    glass_reflection: _LobeSum = field(default_factory=_LobeSum)  # the glass lobes' reflection colours
     passing: _LobeSum = field(default_factory=_LobeSum)  # Transparent BSDF leaves (and 1 − alpha)
     emission: np.ndarray = field(default_factory=lambda: np.zeros(3))
     glowing: list = field(default_factory=list)  # the leaves that emit
@@ -437,7 +444,10 @@ def _gather(leaves, warnings, what) -> _Mixture:
         colour = np.array(p["base_color"][:3], dtype=np.float64)
         for k, wk in (("d", (1 - m) * (1 - t)), ("m", m), ("g", (1 - m) * t)):
             if w * wk > 0:
-                mix.lobes[k].add(w * wk, colour)
+                # (a Principled leaf's glass transmits √colour per interface)
+                mix.lobes[k].add(w * wk, np.sqrt(colour) if k == "g" and p.get("glass_sqrt_tint") else colour)
+        if w * (1 - m) * t > 0:
+            mix.glass_reflection.add(w * (1 - m) * t, np.array(p.get("glass_reflection_tint", colour), dtype=np.float64))
         has_layer = p.get("specular_ior", 1.0) > 1.0 and w * (1 - m) * (1 - t) > 0
         if has_layer:
             mix.layer_weight += w * (1 - m) * (1 - t)
@@ -491,6 +501,9 @@ def _combine(leaves, warnings, what):
     dg = mix.lobes["d"].weight + mix.lobes["g"].weight
     out["transmission"] = mix.lobes["g"].weight / dg if dg > 0 else 0.0
     out["base_color"], out["metal_color"], out["glass_color"] = colour["d"], colour["m"], colour["g"]
+    reflection = mix.glass_reflection.mean(scale)
+    if mix.glass_reflection.weight > 0 and max(abs(a - b) for a, b in zip(reflection, colour["g"])) > 1e-6:
+        out["glass_reflection_tint"] = reflection
     if mix.layer_weight > 0:
         out["specular_ior"] = mix.layer_iors[0]
         out["specular"] = mix.layer_weight / mix.lobes["d"].weight

@@ -140,6 +140,8 @@ fn parse_material(d: &Bound<'_, PyDict>) -> PyResult<MaterialDesc> {
         multiscatter: get_or(d, "multiscatter", false, &ctx)?,
         metal_color: get_or(d, "metal_color", None, &ctx)?,
         glass_color: get_or(d, "glass_color", None, &ctx)?,
+        glass_reflection_tint: get_or(d, "glass_reflection_tint", None, &ctx)?,
+        glass_sqrt_tint: get_or(d, "glass_sqrt_tint", false, &ctx)?,
         specular_ior: get_or(d, "specular_ior", def.specular_ior, &ctx)?,
         specular: get_or(d, "specular", def.specular, &ctx)?,
         transparency: get_or(d, "transparency", def.transparency, &ctx)?,
@@ -794,6 +796,7 @@ fn builtin_scene<'py>(py: Python<'py>, name: &str, width: u32, height: u32) -> P
         ] {
             md.set_item(key, v)?;
         }
+        md.set_item("glass_sqrt_tint", m.glass_sqrt_tint)?;
         md.set_item("multiscatter", m.multiscatter)?;
         md.set_item("pass_index", m.pass_index)?;
         for (key, value) in [
@@ -807,7 +810,11 @@ fn builtin_scene<'py>(py: Python<'py>, name: &str, width: u32, height: u32) -> P
                 md.set_item(key, t)?;
             }
         }
-        for (key, value) in [("metal_color", m.metal_color), ("glass_color", m.glass_color)] {
+        for (key, value) in [
+            ("metal_color", m.metal_color),
+            ("glass_color", m.glass_color),
+            ("glass_reflection_tint", m.glass_reflection_tint),
+        ] {
             if let Some(c) = value {
                 md.set_item(key, c)?;
             }

@@ -218,6 +218,9 @@ class _Reader:
             # OpenPBR's specular_weight is twice Principled's Specular IOR Level
             out["specular_ior"] = specular_layer_ior(out["ior"], 0.5 * p(surface, "specular_weight", 1.0))
             out["transmission"] = p(surface, "transmission_weight", 0.0)
+            if out["transmission"] > 0:
+                # as the Principled BSDF it comes from: untinted reflection, √colour transmitted
+                out["glass_reflection_tint"], out["glass_sqrt_tint"] = (1.0, 1.0, 1.0), True
             lum = p(surface, "emission_luminance", 0.0)  # Blender writes its Emission Strength here
             out["emission"] = tuple(c * lum for c in p(surface, "emission_color", (1.0, 1.0, 1.0)))
             opacity = min(max(p(surface, "geometry_opacity", 1.0, "alpha_texture"), 0.0), 1.0)

@@ -25,7 +25,11 @@ use glam::{Vec2, Vec3};
 #[derive(Clone, Copy, Debug)]
 pub struct Dielectric {
     pub eta: f32,
+    /// Colour of the transmitted light (and of the multiply scattered light, as Cycles).
     pub tint: Spectrum,
+    /// Colour of the reflected light: the tint for Blender's Glass BSDF, white for the
+    /// Principled BSDF (its Specular Tint).
+    pub reflection_tint: Spectrum,
     /// Blender roughness (α = roughness²); at or below the threshold the interface is smooth.
     pub roughness: f32,
     /// Energy compensation for multiple scattering (Blender's Multiscatter GGX).
@@ -122,11 +126,12 @@ impl Dielectric {
         let g = Ggx::from_roughness(self.roughness);
         let f = fresnel_dielectric(wo.dot(h), self.eta);
         let dg = g.d(h) * g.g2(wo, wi);
-        let tint = self.tint * self.energy_scale(wo.z);
+        let scale = self.energy_scale(wo.z);
         if reflection {
             // F·D·G2 / (4 cos θo)
-            tint * (f * dg / (4.0 * wo.z))
+            self.reflection_tint * scale * (f * dg / (4.0 * wo.z))
         } else {
+            let tint = self.tint * scale;
             // Walter eq. 21 without radiance scaling (Cycles):
             // η²·(1−F)·D·G2·|wi·h||wo·h| / (cos θo·(wo·h + η wi·h)²)
             let denom = (wo.dot(h) + self.eta * wi.dot(h)).powi(2);
@@ -163,7 +168,7 @@ impl Dielectric {
                 let wi = Vec3::new(-wo.x, -wo.y, wo.z);
                 return Some(BsdfSample {
                     wi,
-                    weight: self.tint,
+                    weight: self.reflection_tint,
                     pdf: f,
                     lobe: LobeKind::Specular,
                     eta: 1.0,
@@ -205,7 +210,7 @@ impl Dielectric {
             let wi = refract(wo, Vec3::Z, self.eta)?;
             Some((self.tint * (1.0 - f), 1.0 - f, wi))
         } else {
-            Some((self.tint * f, f, Vec3::new(-wo.x, -wo.y, wo.z)))
+            Some((self.reflection_tint * f, f, Vec3::new(-wo.x, -wo.y, wo.z)))
         }
     }
 }
@@ -220,7 +225,13 @@ mod tests {
     /// both weights are 1 (no 1/η² radiance scaling, as Cycles: it was 1/η² before).
     #[test]
     fn fresnel_split_and_snell() {
-        let d = Dielectric { eta: 1.5, tint: Spectrum::ONE, roughness: 0.0, multiscatter: false };
+        let d = Dielectric {
+            eta: 1.5,
+            tint: Spectrum::ONE,
+            reflection_tint: Spectrum::ONE,
+            roughness: 0.0,
+            multiscatter: false,
+        };
         let u = Vec2::splat(0.5);
         for &cos in &[1.0f32, 0.8, 0.3, 0.05] {
             let wo = Vec3::new((1.0 - cos * cos).sqrt(), 0.0, cos);
@@ -235,7 +246,13 @@ mod tests {
         // normal incidence reflectance ((η−1)/(η+1))² = 0.04
         assert!((fresnel_dielectric(1.0, 1.5) - 0.04).abs() < 1e-4);
         // total internal reflection from inside
-        let inside = Dielectric { eta: 1.0 / 1.5, tint: Spectrum::ONE, roughness: 0.0, multiscatter: false };
+        let inside = Dielectric {
+            eta: 1.0 / 1.5,
+            tint: Spectrum::ONE,
+            reflection_tint: Spectrum::ONE,
+            roughness: 0.0,
+            multiscatter: false,
+        };
         let wo = Vec3::new(0.9, 0.0, (1.0f32 - 0.81).sqrt());
         assert_eq!(inside.sample(wo, 0.999, u).unwrap().lobe, LobeKind::Specular);
         assert!(inside.sample(wo, 0.999, u).unwrap().wi.z > 0.0);
@@ -247,7 +264,13 @@ mod tests {
     #[test]
     fn rough_dielectric_chi2() {
         for (eta, r) in [(1.5f32, 0.45f32), (1.5, 0.8), (1.0 / 1.5, 0.3), (1.33, 1.0)] {
-            let b = Bsdf::Dielectric(Dielectric { eta, tint: Spectrum::ONE, roughness: r, multiscatter: false });
+            let b = Bsdf::Dielectric(Dielectric {
+                eta,
+                tint: Spectrum::ONE,
+                reflection_tint: Spectrum::ONE,
+                roughness: r,
+                multiscatter: false,
+            });
             for wo in [Vec3::Z, Vec3::new(0.6, 0.0, 0.8), Vec3::new(-0.9, 0.2, 0.3).normalize()] {
                 chi2_test(&b, wo, 11);
             }
@@ -260,7 +283,13 @@ mod tests {
     #[test]
     fn rough_dielectric_white_furnace() {
         for (eta, r) in [(1.5f32, 0.6f32), (1.0 / 1.5, 0.7), (1.5, 1.0)] {
-            let b = Bsdf::Dielectric(Dielectric { eta, tint: Spectrum::ONE, roughness: r, multiscatter: false });
+            let b = Bsdf::Dielectric(Dielectric {
+                eta,
+                tint: Spectrum::ONE,
+                reflection_tint: Spectrum::ONE,
+                roughness: r,
+                multiscatter: false,
+            });
             let wo = Vec3::new(0.5, 0.1, 0.86).normalize();
             let (s, q) = white_furnace(&b, wo, 400_000, 5);
             assert!(s > 0.6 && s <= 1.0 + 1e-3, "eta {eta} r {r}: albedo {s}");
@@ -268,7 +297,13 @@ mod tests {
         }
         for eta in [1.5f32, 1.0 / 1.5] {
             let wo = Vec3::new(0.3, 0.0, 0.954).normalize();
-            let rough = Bsdf::Dielectric(Dielectric { eta, tint: Spectrum::ONE, roughness: 0.03, multiscatter: false });
+            let rough = Bsdf::Dielectric(Dielectric {
+                eta,
+                tint: Spectrum::ONE,
+                reflection_tint: Spectrum::ONE,
+                roughness: 0.03,
+                multiscatter: false,
+            });
             let (s, _) = white_furnace(&rough, wo, 200_000, 6);
             let f = fresnel_dielectric(wo.z, eta);
             let smooth = (f + (1.0 - f)) as f64;
@@ -287,8 +322,9 @@ mod tests {
         for eta in [1.5f32, 1.0 / 1.5, 1.33] {
             for r in [0.3f32, 0.6, 1.0] {
                 for wo in [Vec3::Z, Vec3::new(0.6, 0.0, 0.8), Vec3::new(0.9, 0.0, 0.25).normalize()] {
-                    let glass =
-                        |tint, multiscatter| Bsdf::Dielectric(Dielectric { eta, tint, roughness: r, multiscatter });
+                    let glass = |tint, multiscatter| {
+                        Bsdf::Dielectric(Dielectric { eta, tint, reflection_tint: tint, roughness: r, multiscatter })
+                    };
                     let (a, q) = white_furnace(&glass(Spectrum::ONE, true), wo, 200_000, 21);
                     assert!((a - 1.0).abs() < 0.015, "η={eta} r={r} wo={wo}: albedo {a}");
                     // (the harness's quadrature resolves the wider lobes only)
@@ -300,13 +336,38 @@ mod tests {
                     assert!(a_ss <= a_ms && a_ms <= y + 0.01, "η={eta} r={r}: single {a_ss}, multi {a_ms}, tint {y}");
                 }
             }
-            let b = Bsdf::Dielectric(Dielectric {
-                eta,
-                tint: Spectrum::new(0.9, 0.6, 0.3),
-                roughness: 0.6,
-                multiscatter: true,
-            });
+            let tint = Spectrum::new(0.9, 0.6, 0.3);
+            let b =
+                Bsdf::Dielectric(Dielectric { eta, tint, reflection_tint: tint, roughness: 0.6, multiscatter: true });
             chi2_test(&b, Vec3::new(0.6, 0.0, 0.8), 23);
+        }
+    }
+
+    /// Reflection and transmission take their own colours (the Principled BSDF tints only
+    /// what it transmits): smooth and rough, a reflected sample carries the reflection tint,
+    /// a transmitted one the tint, in proportion to the untinted interface's.
+    #[test]
+    fn reflection_and_transmission_take_their_own_tints() {
+        let (t, r) = (Spectrum::new(0.9, 0.5, 0.2), Spectrum::new(1.0, 1.0, 1.0));
+        for roughness in [0.0f32, 0.5] {
+            let tinted = Dielectric { eta: 1.5, tint: t, reflection_tint: r, roughness, multiscatter: false };
+            let white = Dielectric { tint: Spectrum::ONE, reflection_tint: Spectrum::ONE, ..tinted };
+            let wo = Vec3::new(0.6, 0.0, 0.8);
+            let mut s = crate::sampler::IndependentSampler::new(9, 9);
+            use crate::sampler::Sampler;
+            let (mut reflected, mut transmitted) = (0, 0);
+            for _ in 0..2000 {
+                let (ul, u) = (s.next_1d(), s.next_2d());
+                let (Some(a), Some(b)) = (tinted.sample(wo, ul, u), white.sample(wo, ul, u)) else { continue };
+                let want = if a.wi.z > 0.0 { r } else { t } * b.weight;
+                assert!((a.weight - want).abs().max_element() < 1e-5, "{roughness}: {} vs {want}", a.weight);
+                if a.wi.z > 0.0 {
+                    reflected += 1;
+                } else {
+                    transmitted += 1;
+                }
+            }
+            assert!(reflected > 20 && transmitted > 1000, "{reflected} reflected, {transmitted} transmitted");
         }
     }
 
@@ -319,7 +380,13 @@ mod tests {
         use crate::sampler::{IndependentSampler, Sampler};
         let mut s = IndependentSampler::new(8, 8);
         for eta in [1.5f32, 1.0 / 1.5] {
-            let d = Dielectric { eta, tint: Spectrum::ONE, roughness: 0.7, multiscatter: true };
+            let d = Dielectric {
+                eta,
+                tint: Spectrum::ONE,
+                reflection_tint: Spectrum::ONE,
+                roughness: 0.7,
+                multiscatter: true,
+            };
             let mut only_cycles = 0;
             for _ in 0..20_000 {
                 let wo = crate::math::square_to_uniform_sphere(s.next_2d());
@@ -347,8 +414,20 @@ mod tests {
     fn rough_dielectric_reciprocity() {
         let mut s = crate::sampler::IndependentSampler::new(2, 2);
         use crate::sampler::Sampler;
-        let outside = Dielectric { eta: 1.5, tint: Spectrum::ONE, roughness: 0.5, multiscatter: false };
-        let inside = Dielectric { eta: 1.0 / 1.5, tint: Spectrum::ONE, roughness: 0.5, multiscatter: false };
+        let outside = Dielectric {
+            eta: 1.5,
+            tint: Spectrum::ONE,
+            reflection_tint: Spectrum::ONE,
+            roughness: 0.5,
+            multiscatter: false,
+        };
+        let inside = Dielectric {
+            eta: 1.0 / 1.5,
+            tint: Spectrum::ONE,
+            reflection_tint: Spectrum::ONE,
+            roughness: 0.5,
+            multiscatter: false,
+        };
         for _ in 0..200 {
             let wo = crate::math::square_to_uniform_sphere(s.next_2d());
             let wi = crate::math::square_to_uniform_sphere(s.next_2d());

@@ -400,7 +400,11 @@ mod tests {
             Bsdf::Principled { diffuse, metal, glass, w, pass, pass_tint } => Bsdf::Principled {
                 diffuse,
                 metal: Conductor { f0: Spectrum::new(0.9, 0.6, 0.3), ..metal },
-                glass: Dielectric { tint: Spectrum::new(0.2, 0.4, 0.8), ..glass },
+                glass: Dielectric {
+                    tint: Spectrum::new(0.2, 0.4, 0.8),
+                    reflection_tint: Spectrum::new(0.2, 0.4, 0.8),
+                    ..glass
+                },
                 w,
                 pass,
                 pass_tint,
@@ -425,7 +429,13 @@ mod tests {
         Bsdf::Principled {
             diffuse: Layered::plain(Lambert { albedo: Spectrum::ONE }),
             metal: Conductor { f0: Spectrum::ONE, roughness, multiscatter: false },
-            glass: Dielectric { eta: 1.5, tint: Spectrum::ONE, roughness: 0.0, multiscatter: false },
+            glass: Dielectric {
+                eta: 1.5,
+                tint: Spectrum::ONE,
+                reflection_tint: Spectrum::ONE,
+                roughness: 0.0,
+                multiscatter: false,
+            },
             w,
             pass: 0.0,
             pass_tint: Spectrum::ONE,
@@ -449,7 +459,13 @@ mod tests {
         let b = Bsdf::Principled {
             diffuse: Layered::plain(Lambert { albedo: Spectrum::ONE }),
             metal: Conductor { f0: Spectrum::ONE, roughness: 0.5, multiscatter: false },
-            glass: Dielectric { eta: 1.5, tint: Spectrum::ONE, roughness: 0.0, multiscatter: false },
+            glass: Dielectric {
+                eta: 1.5,
+                tint: Spectrum::ONE,
+                reflection_tint: Spectrum::ONE,
+                roughness: 0.0,
+                multiscatter: false,
+            },
             w: [0.4, 0.0, 0.0],
             pass: 0.6,
             pass_tint: tint,

@@ -85,6 +85,15 @@ pub struct MaterialDesc {
     /// Shader of Diffuse and Glossy, say); None = the base colour (Principled).
     pub metal_color: Option<[f32; 3]>,
     pub glass_color: Option<[f32; 3]>,
+    /// Colour of the glass lobe's reflection when it differs from the glass colour: Blender's
+    /// Glass BSDF tints both, the Principled BSDF only its transmission (its reflection takes
+    /// the Specular Tint, white by default: the exporter writes (1, 1, 1)). None = the glass
+    /// colour.
+    pub glass_reflection_tint: Option<[f32; 3]>,
+    /// The glass lobe transmits the square root of its colour at each interface, so that
+    /// light entering and leaving takes the colour once (the Principled BSDF); false: the
+    /// colour itself (the Glass BSDF).
+    pub glass_sqrt_tint: bool,
     /// Roughness of the metal and glass lobes when it differs from `roughness` (which then is
     /// the specular layer's): a Mix Shader of a rough Glossy and a smooth Glass, say.
     pub metal_roughness: Option<f32>,
@@ -121,6 +130,8 @@ impl Default for MaterialDesc {
             emission_texture: None,
             metal_color: None,
             glass_color: None,
+            glass_reflection_tint: None,
+            glass_sqrt_tint: false,
             metal_roughness: None,
             glass_roughness: None,
             multiscatter: false,

@@ -29,6 +29,10 @@ pub struct Material {
     pub emission_texture: Option<u32>,
     pub metal_color: Option<Spectrum>,
     pub glass_color: Option<Spectrum>,
+    /// The glass lobe's reflection colour, when not the glass colour (Principled: white).
+    pub glass_reflection_tint: Option<Spectrum>,
+    /// The glass lobe transmits √colour per interface (Principled).
+    pub glass_sqrt_tint: bool,
     pub metal_roughness: Option<f32>,
     pub glass_roughness: Option<f32>,
     pub multiscatter: bool,
@@ -67,6 +71,7 @@ impl Material {
             .metal_color
             .iter()
             .chain(d.glass_color.iter())
+            .chain(d.glass_reflection_tint.iter())
             .flatten()
             .chain(d.transparent_color.iter())
             .chain(d.metal_roughness.iter())
@@ -113,6 +118,8 @@ impl Material {
             emission_texture: d.emission_texture,
             metal_color: d.metal_color.map(|c| Vec3::from_array(c).clamp(Vec3::ZERO, Vec3::ONE)),
             glass_color: d.glass_color.map(|c| Vec3::from_array(c).clamp(Vec3::ZERO, Vec3::ONE)),
+            glass_reflection_tint: d.glass_reflection_tint.map(|c| Vec3::from_array(c).clamp(Vec3::ZERO, Vec3::ONE)),
+            glass_sqrt_tint: d.glass_sqrt_tint,
             metal_roughness: d.metal_roughness.map(|r| r.clamp(0.0, 1.0)),
             glass_roughness: d.glass_roughness.map(|r| r.clamp(0.0, 1.0)),
             multiscatter: d.multiscatter,
@@ -162,9 +169,12 @@ impl Material {
         let metal =
             Conductor { f0: self.metal_color.unwrap_or(base_color), roughness: rm, multiscatter: self.multiscatter };
         let eta = if front { self.ior } else { 1.0 / self.ior };
+        let colour = self.glass_color.unwrap_or(base_color);
+        let tint = if self.glass_sqrt_tint { colour.max(Vec3::ZERO).powf(0.5) } else { colour };
         let glass = Dielectric {
             eta,
-            tint: self.glass_color.unwrap_or(base_color),
+            tint,
+            reflection_tint: self.glass_reflection_tint.unwrap_or(tint),
             roughness: rg,
             multiscatter: self.multiscatter,
         };
@@ -180,6 +190,37 @@ impl Material {
             Bsdf::Dielectric(glass)
         } else {
             Bsdf::Principled { diffuse, metal, glass, w, pass: 0.0, pass_tint: Spectrum::ZERO }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn glass_of(d: &MaterialDesc, front: bool) -> Dielectric {
+        match Material::from_desc(d, 0).unwrap().bsdf(front) {
+            Bsdf::Dielectric(g) => g,
+            other => panic!("not glass: {other:?}"),
+        }
+    }
+
+    /// Blender's Glass BSDF tints reflection and transmission by its colour; the Principled
+    /// BSDF reflects untinted and transmits √(base colour) at each interface, so that light
+    /// entering and leaving takes the base colour once (as Cycles sets its closures up) —
+    /// from either side.
+    #[test]
+    fn principled_and_glass_bsdf_tint_their_glass_as_cycles() {
+        let c = [0.81f32, 0.49, 0.25];
+        let glass_node = MaterialDesc { base_color: c, transmission: 1.0, ior: 1.5, ..Default::default() };
+        let principled =
+            MaterialDesc { glass_reflection_tint: Some([1.0; 3]), glass_sqrt_tint: true, ..glass_node.clone() };
+        for front in [true, false] {
+            let g = glass_of(&glass_node, front);
+            assert_eq!((g.tint, g.reflection_tint), (Vec3::from_array(c), Vec3::from_array(c)));
+            let p = glass_of(&principled, front);
+            assert!((p.tint - Vec3::new(0.9, 0.7, 0.5)).abs().max_element() < 1e-6, "{}", p.tint);
+            assert_eq!(p.reflection_tint, Vec3::ONE);
         }
     }
 }
