@@ -164,7 +164,7 @@ impl Bsdf {
     }
 
     /// (f·|cos θi|, BSDF pdf) of a light sample's direction, whose light pdf is `pdf_l` (None:
-    /// a delta light). With `as_cycles`, f gains what Cycles' evaluation of rough glass adds
+    /// a delta light, for which the pdf is not needed and is 0, as where f is 0). With `as_cycles`, f gains what Cycles' evaluation of rough glass adds
     /// beyond the BSDF — its value on pairs no microfacet connects (`Dielectric::eval_light`),
     /// which only light sampling reaches there — times the MIS weight Cycles gives it,
     /// p_l²/(p_l² + p_b²) with its pdf p_b of such pairs (1 for delta lights); the pdf returned
@@ -175,22 +175,25 @@ impl Bsdf {
     /// own weight, where Cycles weighs them with the glass lobe's extended pdf too.)
     #[inline]
     pub fn eval_light_sample(&self, wo: Vec3, wi: Vec3, as_cycles: bool, pdf_l: Option<f32>) -> (Spectrum, f32) {
-        let (f, p) = (self.eval(wo, wi), self.pdf(wo, wi));
+        let f = self.eval(wo, wi);
+        // (the pdf is only asked for where a light sample of a non-delta light carries light)
+        let pdf = |f: Spectrum| if pdf_l.is_some() && f.max_element() > 0.0 { self.pdf(wo, wi) } else { 0.0 };
         if !as_cycles || wi.z >= 0.0 {
-            return (f, p); // (reflection pairs are evaluated alike)
+            return (f, pdf(f)); // (reflection pairs are evaluated alike)
         }
         let (glass, weight) = match self {
             Bsdf::Dielectric(g) => (g, 1.0),
             Bsdf::Principled { glass, w, .. } if w[2] > 0.0 => (glass, w[2]),
-            _ => return (f, p),
+            _ => return (f, pdf(f)),
         };
         if glass.eval(wo, wi).max_element() > 0.0 {
-            return (f, p); // the interface connects the pair: Cycles' value is the BSDF's
+            return (f, pdf(f)); // the interface connects the pair: Cycles' value is the BSDF's
         }
         let extra = glass.eval_light(wo, wi) * weight;
         if !(extra.max_element() > 0.0) {
-            return (f, p);
+            return (f, pdf(f));
         }
+        let p = pdf(f);
         let mis = pdf_l.map_or(1.0, |pl| power_heuristic(pl, p + weight * glass.pdf_light(wo, wi)));
         (f + extra * mis, p)
     }
