@@ -44,6 +44,11 @@ pub fn refraction_half_vector(wo: Vec3, wi: Vec3, eta: f32) -> Vec3 {
 }
 
 impl Dielectric {
+    /// Clear (white) single-scattering glass of relative IOR `eta` and Blender roughness.
+    pub fn clear(eta: f32, roughness: f32) -> Dielectric {
+        Dielectric { eta, tint: Spectrum::ONE, reflection_tint: Spectrum::ONE, roughness, multiscatter: false }
+    }
+
     #[inline]
     pub fn is_delta(&self) -> bool {
         self.roughness <= SPECULAR_ROUGHNESS_THRESHOLD
@@ -225,13 +230,7 @@ mod tests {
     /// both weights are 1 (no 1/η² radiance scaling, as Cycles: it was 1/η² before).
     #[test]
     fn fresnel_split_and_snell() {
-        let d = Dielectric {
-            eta: 1.5,
-            tint: Spectrum::ONE,
-            reflection_tint: Spectrum::ONE,
-            roughness: 0.0,
-            multiscatter: false,
-        };
+        let d = Dielectric::clear(1.5, 0.0);
         let u = Vec2::splat(0.5);
         for &cos in &[1.0f32, 0.8, 0.3, 0.05] {
             let wo = Vec3::new((1.0 - cos * cos).sqrt(), 0.0, cos);
@@ -246,13 +245,7 @@ mod tests {
         // normal incidence reflectance ((η−1)/(η+1))² = 0.04
         assert!((fresnel_dielectric(1.0, 1.5) - 0.04).abs() < 1e-4);
         // total internal reflection from inside
-        let inside = Dielectric {
-            eta: 1.0 / 1.5,
-            tint: Spectrum::ONE,
-            reflection_tint: Spectrum::ONE,
-            roughness: 0.0,
-            multiscatter: false,
-        };
+        let inside = Dielectric::clear(1.0 / 1.5, 0.0);
         let wo = Vec3::new(0.9, 0.0, (1.0f32 - 0.81).sqrt());
         assert_eq!(inside.sample(wo, 0.999, u).unwrap().lobe, LobeKind::Specular);
         assert!(inside.sample(wo, 0.999, u).unwrap().wi.z > 0.0);
@@ -264,13 +257,7 @@ mod tests {
     #[test]
     fn rough_dielectric_chi2() {
         for (eta, r) in [(1.5f32, 0.45f32), (1.5, 0.8), (1.0 / 1.5, 0.3), (1.33, 1.0)] {
-            let b = Bsdf::Dielectric(Dielectric {
-                eta,
-                tint: Spectrum::ONE,
-                reflection_tint: Spectrum::ONE,
-                roughness: r,
-                multiscatter: false,
-            });
+            let b = Bsdf::Dielectric(Dielectric::clear(eta, r));
             for wo in [Vec3::Z, Vec3::new(0.6, 0.0, 0.8), Vec3::new(-0.9, 0.2, 0.3).normalize()] {
                 chi2_test(&b, wo, 11);
             }
@@ -283,13 +270,7 @@ mod tests {
     #[test]
     fn rough_dielectric_white_furnace() {
         for (eta, r) in [(1.5f32, 0.6f32), (1.0 / 1.5, 0.7), (1.5, 1.0)] {
-            let b = Bsdf::Dielectric(Dielectric {
-                eta,
-                tint: Spectrum::ONE,
-                reflection_tint: Spectrum::ONE,
-                roughness: r,
-                multiscatter: false,
-            });
+            let b = Bsdf::Dielectric(Dielectric::clear(eta, r));
             let wo = Vec3::new(0.5, 0.1, 0.86).normalize();
             let (s, q) = white_furnace(&b, wo, 400_000, 5);
             assert!(s > 0.6 && s <= 1.0 + 1e-3, "eta {eta} r {r}: albedo {s}");
@@ -297,13 +278,7 @@ mod tests {
         }
         for eta in [1.5f32, 1.0 / 1.5] {
             let wo = Vec3::new(0.3, 0.0, 0.954).normalize();
-            let rough = Bsdf::Dielectric(Dielectric {
-                eta,
-                tint: Spectrum::ONE,
-                reflection_tint: Spectrum::ONE,
-                roughness: 0.03,
-                multiscatter: false,
-            });
+            let rough = Bsdf::Dielectric(Dielectric::clear(eta, 0.03));
             let (s, _) = white_furnace(&rough, wo, 200_000, 6);
             let f = fresnel_dielectric(wo.z, eta);
             let smooth = (f + (1.0 - f)) as f64;
@@ -414,20 +389,8 @@ mod tests {
     fn rough_dielectric_reciprocity() {
         let mut s = crate::sampler::IndependentSampler::new(2, 2);
         use crate::sampler::Sampler;
-        let outside = Dielectric {
-            eta: 1.5,
-            tint: Spectrum::ONE,
-            reflection_tint: Spectrum::ONE,
-            roughness: 0.5,
-            multiscatter: false,
-        };
-        let inside = Dielectric {
-            eta: 1.0 / 1.5,
-            tint: Spectrum::ONE,
-            reflection_tint: Spectrum::ONE,
-            roughness: 0.5,
-            multiscatter: false,
-        };
+        let outside = Dielectric::clear(1.5, 0.5);
+        let inside = Dielectric::clear(1.0 / 1.5, 0.5);
         for _ in 0..200 {
             let wo = crate::math::square_to_uniform_sphere(s.next_2d());
             let wi = crate::math::square_to_uniform_sphere(s.next_2d());

@@ -432,13 +432,7 @@ mod tests {
         Bsdf::Principled {
             diffuse: Layered::plain(Lambert { albedo: Spectrum::ONE }),
             metal: Conductor { f0: Spectrum::ONE, roughness, multiscatter: false },
-            glass: Dielectric {
-                eta: 1.5,
-                tint: Spectrum::ONE,
-                reflection_tint: Spectrum::ONE,
-                roughness: 0.0,
-                multiscatter: false,
-            },
+            glass: Dielectric::clear(1.5, 0.0),
             w,
             pass: 0.0,
             pass_tint: Spectrum::ONE,
@@ -462,13 +456,7 @@ mod tests {
         let b = Bsdf::Principled {
             diffuse: Layered::plain(Lambert { albedo: Spectrum::ONE }),
             metal: Conductor { f0: Spectrum::ONE, roughness: 0.5, multiscatter: false },
-            glass: Dielectric {
-                eta: 1.5,
-                tint: Spectrum::ONE,
-                reflection_tint: Spectrum::ONE,
-                roughness: 0.0,
-                multiscatter: false,
-            },
+            glass: Dielectric::clear(1.5, 0.0),
             w: [0.4, 0.0, 0.0],
             pass: 0.6,
             pass_tint: tint,
