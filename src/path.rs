@@ -647,7 +647,6 @@ fn next_event(
     }
     let (tr, crossed_transparent) = scene.transmittance(si, &ls)?;
     let radiance = ls.radiance * tr;
-    let pdf_b = if ls.is_delta { 0.0 } else { pdf_b };
     let weight = if ls.is_delta { 1.0 } else { power_heuristic(ls.pdf, pdf_b) };
     let at_infinity = !ls.dist.is_finite();
     let event = Event {

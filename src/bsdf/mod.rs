@@ -164,8 +164,8 @@ impl Bsdf {
     }
 
     /// (f·|cos θi|, BSDF pdf) of a light sample's direction, whose light pdf is `pdf_l` (None:
-    /// a delta light, for which the pdf is not needed and is 0, as where f is 0). With `as_cycles`, f gains what Cycles' evaluation of rough glass adds
-    /// beyond the BSDF — its value on pairs no microfacet connects (`Dielectric::eval_light`),
+    /// a delta light, for which the pdf is not needed and is 0, as where f is 0). With
+    /// `as_cycles`, f gains what Cycles' evaluation of rough glass adds beyond the BSDF — its value on pairs no microfacet connects (`Dielectric::eval_light`),
     /// which only light sampling reaches there — times the MIS weight Cycles gives it,
     /// p_l²/(p_l² + p_b²) with its pdf p_b of such pairs (1 for delta lights); the pdf returned
     /// stays the BSDF's, which is 0 there. A light sample then adds exactly what Cycles' adds
@@ -186,7 +186,9 @@ impl Bsdf {
             Bsdf::Principled { glass, w, .. } if w[2] > 0.0 => (glass, w[2]),
             _ => return (f, pdf(f)),
         };
-        if glass.eval(wo, wi).max_element() > 0.0 {
+        // (a glass BSDF's own value is f: only a mixture evaluates its glass lobe again)
+        let glass_f = if matches!(self, Bsdf::Dielectric(_)) { f } else { glass.eval(wo, wi) };
+        if glass_f.max_element() > 0.0 {
             return (f, pdf(f)); // the interface connects the pair: Cycles' value is the BSDF's
         }
         let extra = glass.eval_light(wo, wi) * weight;
