@@ -261,6 +261,7 @@ def _node_params(node, textures, warnings, what):
         _color_or_texture(node, "Base Color", out, "base_color", textures, warnings, what, (0.8, 0.8, 0.8, 1))
         out["metallic"] = _input_value(node, "Metallic", warnings, what, 0.0)
         _color_or_texture(node, "Roughness", out, "roughness", textures, warnings, what, 0.5)
+        out["diffuse_roughness"] = _unit(_input_value(node, "Diffuse Roughness", warnings, what, 0.0))
         out["ior"] = _input_value(node, "IOR", warnings, what, 1.5)
         out["specular_ior"] = _specular_layer_ior(out["ior"], _input_value(node, "Specular IOR Level", warnings,
                                                                            what, 0.5))
@@ -284,6 +285,8 @@ def _node_params(node, textures, warnings, what):
     elif t == "BSDF_DIFFUSE":
         _color_or_texture(node, "Color", out, "base_color", textures, warnings, what, (0.8, 0.8, 0.8, 1))
         out["roughness"] = 1.0
+        # (Cycles: Oren–Nayar above 0, its Lambertian at 0)
+        out["diffuse_roughness"] = _unit(_input_value(node, "Roughness", warnings, what, 0.0))
     elif t == "BSDF_GLOSSY" or t == "BSDF_ANISOTROPIC":
         _color_or_texture(node, "Color", out, "base_color", textures, warnings, what, (0.8, 0.8, 0.8, 1))
         _color_or_texture(node, "Roughness", out, "roughness", textures, warnings, what, 0.5)
@@ -355,6 +358,11 @@ _UNSUPPORTED_LAYERS = (("Coat Weight", 0.0), ("Sheen Weight", 0.0), ("Subsurface
                        ("Anisotropic", 0.0), ("Thin Film Thickness", 0.0))
 
 
+def _unit(x):
+    """x clamped to [0, 1] (as Cycles clamps a roughness)."""
+    return min(max(float(x), 0.0), 1.0)
+
+
 def _warn_unsupported_layers(node, warnings, what):
     for name, off in _UNSUPPORTED_LAYERS:
         sock = node.inputs.get(name)
@@ -413,7 +421,7 @@ class _Mixture:
     passing: _LobeSum = field(default_factory=_LobeSum)  # Transparent BSDF leaves (and 1 − alpha)
     emission: np.ndarray = field(default_factory=lambda: np.zeros(3))
     glowing: list = field(default_factory=list)  # the leaves that emit
-    rough: list = field(default_factory=list)  # (lobe kind: layer, m or g; weight; roughness)
+    rough: list = field(default_factory=list)  # (lobe kind: layer, d, m or g; weight; roughness)
     iors: list = field(default_factory=list)  # the glass lobes' IOR
     layer_weight: float = 0.0  # diffuse-lobe weight under a specular layer
     layer_iors: list = field(default_factory=list)
@@ -455,6 +463,8 @@ def _gather(leaves, warnings, what) -> _Mixture:
         for kind, wk in (("layer", w * (1 - m) * (1 - t) if has_layer else 0.0), ("m", w * m), ("g", w * (1 - m) * t)):
             if wk > 0:
                 mix.rough.append((kind, wk, p["roughness"]))
+        if w * (1 - m) * (1 - t) > 0:
+            mix.rough.append(("d", w * (1 - m) * (1 - t), p.get("diffuse_roughness", 0.0)))
         if w * (1 - m) * t > 0:
             mix.iors.append(p["ior"])
         if "base_color_texture" in p:
@@ -529,17 +539,22 @@ def _combined_emission_texture(mix, out, warnings, what):
 
 
 def _combined_roughness(mix, out, warnings, what):
-    """Each lobe kind keeps its own roughness (the specular layer's is `roughness`); lobes of
-    one kind with different roughness share their weighted mean."""
+    """Each lobe kind keeps its own roughness (the specular layer's is `roughness`, the diffuse
+    base's `diffuse_roughness`); lobes of one kind with different roughness share their
+    weighted mean."""
     means = {}
-    for kind in ("layer", "m", "g"):
+    for kind in ("layer", "d", "m", "g"):
         rs = [(w, r) for k, w, r in mix.rough if k == kind]
         if rs:
             means[kind] = sum(w * r for w, r in rs) / sum(w for w, _ in rs)
             if max(r for _, r in rs) - min(r for _, r in rs) > 1e-3:
-                name = {"layer": "specular layers", "m": "glossy/metal lobes", "g": "glass lobes"}[kind]
+                name = {"layer": "specular layers", "d": "diffuse lobes", "m": "glossy/metal lobes",
+                        "g": "glass lobes"}[kind]
                 warnings.append(f"{what}: the mixed {name} have different roughness; their weighted mean "
                                 f"{means[kind]:.3f} is used")
+    if means.get("d", 0.0) > 0.0:
+        out["diffuse_roughness"] = means["d"]
+    means.pop("d", None)
     if means:
         out["roughness"] = means.get("layer", means.get("m", means.get("g")))
         for kind, key in (("m", "metal_roughness"), ("g", "glass_roughness")):

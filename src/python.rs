@@ -126,6 +126,7 @@ fn parse_material(d: &Bound<'_, PyDict>) -> PyResult<MaterialDesc> {
         base_color: rgb(d, "base_color", def.base_color, &ctx)?,
         emission: rgb(d, "emission", def.emission, &ctx)?,
         roughness: get_or(d, "roughness", def.roughness, &ctx)?,
+        diffuse_roughness: get_or(d, "diffuse_roughness", def.diffuse_roughness, &ctx)?,
         metallic: get_or(d, "metallic", def.metallic, &ctx)?,
         transmission: get_or(d, "transmission", def.transmission, &ctx)?,
         ior: get_or(d, "ior", def.ior, &ctx)?,
@@ -786,6 +787,7 @@ fn builtin_scene<'py>(py: Python<'py>, name: &str, width: u32, height: u32) -> P
         }
         for (key, v) in [
             ("roughness", m.roughness),
+            ("diffuse_roughness", m.diffuse_roughness),
             ("metallic", m.metallic),
             ("transmission", m.transmission),
             ("ior", m.ior),

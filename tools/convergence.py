@@ -169,6 +169,31 @@ def bulb(bpy, roughness, glass=None):
     return scene
 
 
+def rough_diffuse(bpy):
+    """Rough diffuse surfaces, which Cycles renders with Oren–Nayar: a clay-coloured room of
+    Diffuse BSDF Roughness 1 and a ball of Principled Diffuse Roughness 0.8 (specular
+    roughness 0.4), lit by a point lamp beside the camera — where rough diffuse differs most
+    from a Lambertian, scattering back towards the light — and an area light above."""
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    scene = bpy.context.scene
+    clay = _material(bpy, "Clay", "ShaderNodeBsdfDiffuse", Color=(0.8, 0.55, 0.4, 1.0), Roughness=1.0)
+    _room(bpy, scene, clay, smooth=False)
+    ball = _material(bpy, "Chalk", "ShaderNodeBsdfPrincipled", **{"Base Color": (0.5, 0.7, 0.9, 1.0),
+                                                                  "Roughness": 0.4, "Diffuse Roughness": 0.8})
+    _uv_sphere(bpy, scene, "Ball", (0.2, 0.3, 0.35), 0.35, 24, 12, ball, smooth=True)
+    for name, kind, energy, location in (("Lamp", "POINT", 60.0, (0.35, -2.3, 1.1)),
+                                         ("Area", "AREA", 40.0, (-0.4, 0.4, 1.45))):
+        light = bpy.data.lights.new(name, kind)
+        light.energy = energy
+        if kind == "AREA":
+            light.size = 0.5
+        else:
+            light.shadow_soft_size = 0.05
+        ob = bpy.data.objects.new(name, light)
+        ob.location = location
+        scene.collection.objects.link(ob)
+    _camera_and_world(bpy, scene)
+    return scene
 
 
 def checked_in(name, keep=None):
@@ -229,6 +254,7 @@ SCENES = {
         bpy, "Orange glass", "ShaderNodeBsdfPrincipled", **{"Base Color": (0.9, 0.7, 0.5, 1.0),
                                                             "Transmission Weight": 1.0, "Roughness": 0.2,
                                                             "IOR": 1.45})), 1024, 32),
+    "rough_diffuse": (rough_diffuse, 512, 16),
     "all_lights": (checked_in("lights", {"Area", "Point", "Spot", "Sun", "World"}), 512, 16),
     "specular": (checked_in("specular"), 1024, 32),
     "textures": (checked_in("textures"), 512, 16),

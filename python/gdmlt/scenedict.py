@@ -15,7 +15,8 @@ DEFAULT_MATERIAL = {"name": "(default)", "base_color": (0.8, 0.8, 0.8), "emissio
 
 def material(name: str, **params) -> dict:
     """A material: DEFAULT_MATERIAL with `params` (base_color, emission, roughness, metallic,
-    transmission, ior, specular, specular_ior, *_texture indices, …) over it."""
+    transmission, ior, specular, specular_ior, diffuse_roughness (0 = Lambertian, up to 1:
+    Oren–Nayar), *_texture indices, …) over it."""
     return dict(DEFAULT_MATERIAL, name=name, **params)
 
 

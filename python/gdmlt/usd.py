@@ -212,6 +212,7 @@ class _Reader:
             color = p(surface, "base_color", (0.8, 0.8, 0.8), "base_color_texture")
             out["base_color"] = tuple(c * weight for c in color)
             out["metallic"] = p(surface, "base_metalness", 0.0)
+            out["diffuse_roughness"] = min(max(float(p(surface, "base_diffuse_roughness", 0.0)), 0.0), 1.0)
             out["multiscatter"] = True  # OpenPBR's metal conserves energy (Blender's default, too)
             out["roughness"] = p(surface, "specular_roughness", 0.3, "roughness_texture")
             out["ior"] = p(surface, "specular_ior", 1.5)
@@ -254,6 +255,8 @@ class _Reader:
             if bkind == "ND_oren_nayar_diffuse_bsdf":
                 out["base_color"] = tuple(c * weight for c in p(sh, "color", (0.8, 0.8, 0.8), "base_color_texture"))
                 out["roughness"] = 1.0
+                # (Oren–Nayar above 0, compensated for multiple scattering as Cycles renders it)
+                out["diffuse_roughness"] = min(max(float(p(sh, "roughness", 0.0)), 0.0), 1.0)
             elif bkind == "ND_conductor_bsdf":
                 ior = self._source(sh.GetInput("ior"))
                 if ior is None or ior[0].GetIdAttr().Get() != "ND_artistic_ior":

@@ -160,7 +160,7 @@ mod tests {
     use super::*;
 
     fn layered(albedo: f32, eta: f32, roughness: f32) -> Bsdf {
-        Bsdf::Layered(Layered { base: Lambert { albedo: Spectrum::splat(albedo) }, eta, roughness, coverage: 1.0 })
+        Bsdf::Layered(Layered { base: Lambert::new(Spectrum::splat(albedo)), eta, roughness, coverage: 1.0 })
     }
 
     /// The layering keeps a white base exactly energy-conserving: albedo 1 at every angle,
@@ -192,7 +192,7 @@ mod tests {
     /// weight = F/probability, and the sum of both lobes is still the white furnace's 1.
     #[test]
     fn smooth_layer_mirror_lobe() {
-        let b = Layered { base: Lambert { albedo: Spectrum::splat(0.5) }, eta: 1.5, roughness: 0.0, coverage: 1.0 };
+        let b = Layered { base: Lambert::new(Spectrum::splat(0.5)), eta: 1.5, roughness: 0.0, coverage: 1.0 };
         let wo = Vec3::new(0.5, 0.1, 0.86).normalize();
         let (f, p, wi) = b.delta_eval(wo).unwrap();
         assert!((f.x - fresnel_dielectric(wo.z, 1.5)).abs() < 1e-6 && p > 0.0 && p < 1.0);
@@ -207,7 +207,7 @@ mod tests {
     #[test]
     fn below_the_shading_hemisphere_only_the_base_scatters() {
         let b = layered(0.5, 1.5, 0.3);
-        let plain = Bsdf::Lambert(Lambert { albedo: Spectrum::splat(0.5) });
+        let plain = Bsdf::Lambert(Lambert::new(Spectrum::splat(0.5)));
         let wo = Vec3::new(0.7, 0.1, -0.2).normalize();
         for wi in [Vec3::Z, Vec3::new(-0.6, 0.0, 0.8), Vec3::new(0.3, 0.5, 0.81).normalize()] {
             assert!((b.eval(wo, wi) - plain.eval(wo, wi)).abs().max_element() < 1e-7);

@@ -11,6 +11,7 @@ mod dielectric;
 mod lambert;
 mod layered;
 pub mod microfacet;
+mod oren_nayar;
 #[cfg(test)]
 pub(crate) mod testing;
 
@@ -427,12 +428,12 @@ mod tests {
         let g = tinted([0.0, 0.5, 0.5], 0.0).guide();
         let Guide::Through(t) = g else { panic!("{g:?}") };
         assert!((t - Spectrum::new(0.55, 0.5, 0.55)).abs().max_element() < 1e-6);
-        assert!(matches!(Bsdf::Lambert(Lambert { albedo: Spectrum::ONE }).guide(), Guide::Surface(_)));
+        assert!(matches!(Bsdf::Lambert(Lambert::new(Spectrum::ONE)).guide(), Guide::Surface(_)));
     }
 
     fn principled(w: [f32; 3], roughness: f32) -> Bsdf {
         Bsdf::Principled {
-            diffuse: Layered::plain(Lambert { albedo: Spectrum::ONE }),
+            diffuse: Layered::plain(Lambert::new(Spectrum::ONE)),
             metal: Conductor { f0: Spectrum::ONE, roughness, multiscatter: false },
             glass: Dielectric::clear(1.5, 0.0),
             w,
@@ -456,7 +457,7 @@ mod tests {
     fn pass_through_lobe_probability_and_furnace() {
         let tint = Spectrum::new(0.5, 0.5, 0.5);
         let b = Bsdf::Principled {
-            diffuse: Layered::plain(Lambert { albedo: Spectrum::ONE }),
+            diffuse: Layered::plain(Lambert::new(Spectrum::ONE)),
             metal: Conductor { f0: Spectrum::ONE, roughness: 0.5, multiscatter: false },
             glass: Dielectric::clear(1.5, 0.0),
             w: [0.4, 0.0, 0.0],

@@ -58,6 +58,9 @@ pub struct MaterialDesc {
     /// Emitted radiance: Emission Color × Emission Strength (two-sided, as in Cycles).
     pub emission: [f32; 3],
     pub roughness: f32,
+    /// Roughness σ of the diffuse base (Blender's Diffuse BSDF Roughness, Principled Diffuse
+    /// Roughness): 0 = Lambertian, above it Oren–Nayar as Cycles renders it.
+    pub diffuse_roughness: f32,
     pub metallic: f32,
     pub transmission: f32,
     pub ior: f32,
@@ -117,6 +120,7 @@ impl Default for MaterialDesc {
             base_color: [0.8, 0.8, 0.8],
             emission: [0.0; 3],
             roughness: 0.5,
+            diffuse_roughness: 0.0,
             metallic: 0.0,
             transmission: 0.0,
             ior: 1.5,

@@ -1,5 +1,5 @@
 //! Materials: the parameters of the Principled-like uber-material, turned into a BSDF at a
-//! surface point: Lambertian base (under a dielectric specular layer), GGX or mirror metal (metallic), smooth glass
+//! surface point: Lambertian or Oren–Nayar base (under a dielectric specular layer), GGX or mirror metal (metallic), smooth glass
 //! or rough GGX glass (transmission), mixed by their Principled weights, and a pass-through
 //! lobe (Transparent BSDF, alpha as coverage) that takes probability τ from all of them.
 
@@ -15,6 +15,8 @@ pub struct Material {
     pub base_color: Spectrum,
     pub emission: Spectrum,
     pub roughness: f32,
+    /// The diffuse base's roughness σ (0 = Lambertian, above it Oren–Nayar).
+    pub diffuse_roughness: f32,
     pub metallic: f32,
     pub transmission: f32,
     pub ior: f32,
@@ -59,6 +61,7 @@ impl Material {
         }
         let scalars = [
             d.roughness,
+            d.diffuse_roughness,
             d.metallic,
             d.transmission,
             d.ior,
@@ -97,6 +100,7 @@ impl Material {
             base_color: Vec3::from_array(d.base_color).clamp(Vec3::ZERO, Vec3::ONE),
             emission: Vec3::from_array(d.emission),
             roughness: d.roughness.clamp(0.0, 1.0),
+            diffuse_roughness: d.diffuse_roughness.clamp(0.0, 1.0),
             metallic: d.metallic.clamp(0.0, 1.0),
             transmission: d.transmission.clamp(0.0, 1.0),
             // η = 1 exactly would make refraction a pass-through; keep it just off 1.
@@ -155,7 +159,7 @@ impl Material {
         // the specular layer has the same IOR seen from either side (Cycles inverts it on
         // back faces; opaque surfaces are rarely seen from behind)
         let diffuse = Layered {
-            base: Lambert { albedo: base_color },
+            base: Lambert { albedo: base_color, roughness: self.diffuse_roughness },
             eta: self.specular_ior,
             roughness,
             coverage: self.specular,

@@ -812,7 +812,7 @@ def test_usd_materialx_materials_match_the_addons_translation(bpy_mod, tmp_out, 
             continue
         want, got = export.material_params(mat, [], textures), read[mat.name]
         metal, glass = want.get("metallic", 0.0), want.get("transmission", 0.0)
-        keys = ["metallic", "transmission", "emission"]
+        keys = ["metallic", "transmission", "emission", "diffuse_roughness"]
         keys += ["roughness"] if metal > 0 or glass > 0 or want.get("specular_ior", 1.0) > 1.0 else []
         keys += ["ior"] if glass > 0 else []
         keys += ["base_color"] if "base_color_texture" not in want else []
@@ -836,6 +836,31 @@ def test_usd_materialx_materials_match_the_addons_translation(bpy_mod, tmp_out, 
                                atol=1.0 / 255 + 1e-6), (mat.name, key)
         compared += 1
     assert compared >= (6 if name == "specular" else 3), compared
+
+
+def test_rough_diffuse_reaches_the_core_from_blender_and_usd(bpy_mod, tmp_out):
+    """A Diffuse BSDF's Roughness and a Principled's Diffuse Roughness (Oren–Nayar in Cycles)
+    are exported, and read back from Blender's USD export with MaterialX (OpenPBR
+    base_diffuse_roughness, oren_nayar_diffuse_bsdf roughness). Ignored before: the rough
+    clay room of tools/convergence.py rendered 27% brighter than Cycles (test_convergence)."""
+    from gdmlt import usd
+    from gdmlt_blender import export
+
+    bpy = bpy_mod
+    sys.path.insert(0, str(ROOT / "tools"))
+    import convergence
+
+    convergence.rough_diffuse(bpy)
+    desc, warnings = export.export_scene(bpy.context.evaluated_depsgraph_get())
+    assert warnings == []
+    exported = {m["name"]: m.get("diffuse_roughness", 0.0) for m in desc["materials"]}
+    assert exported["Clay"] == pytest.approx(1.0) and exported["Chalk"] == pytest.approx(0.8)
+    path = tmp_out / "rough" / "scene.usdc"
+    bpy.ops.wm.usd_export(filepath=str(path), generate_materialx_network=True)
+    read, warnings = usd.load(path, width=8, height=8)
+    assert warnings == [], warnings
+    got = {m["name"]: m.get("diffuse_roughness", 0.0) for m in read["materials"]}
+    assert (got["Clay"], got["Chalk"]) == pytest.approx((exported["Clay"], exported["Chalk"]))
 
 
 def test_gdmlt_export_carries_the_scene_and_its_settings_to_usd(bpy_mod, tmp_out):
