@@ -647,7 +647,7 @@ def _light(ob, matrix, warnings):
         return scenedict.point_light(name, pos, power, light.shadow_soft_size, soft, visible)
     if light.type == "SPOT":
         return scenedict.spot_light(name, pos, minus_z, power, light.shadow_soft_size, light.spot_size,
-                                    light.spot_blend, soft, visible)
+                                    light.spot_blend, soft, visible, matrix=m.astype(np.float32))
     if light.type == "AREA":
         return scenedict.area_light(name, m.astype(np.float32), light.shape, light.size, light.size_y, power,
                                     getattr(light, "normalize", True), visible,
@@ -840,8 +840,15 @@ def export_scene(depsgraph, test_break=lambda: False, need_camera=True):
         mat_ids = table[np.clip(mat_local, 0, len(table) - 1)]
         m = _matrix(inst.matrix_world)
         pos = (co.astype(np.float64) @ m[:3, :3].T + m[:3, 3]).astype(np.float32)
-        nmat = np.linalg.inv(m[:3, :3]).T if abs(np.linalg.det(m[:3, :3])) > 1e-30 else m[:3, :3]
+        det = np.linalg.det(m[:3, :3])
+        nmat = np.linalg.inv(m[:3, :3]).T if abs(det) > 1e-30 else m[:3, :3]
         nrm = (normals.astype(np.float64) @ nmat.T).astype(np.float32)
+        if det < 0:
+            # a mirroring transform winds the faces inside out; the core takes the outside
+            # (how glass refracts) from the winding, so wind them back, as Cycles negates
+            # the geometric normal of negatively scaled objects
+            tris, nrm = tris[:, ::-1], nrm.reshape(-1, 3, 3)[:, ::-1].reshape(-1, 3)
+            uvs = None if uvs is None else uvs.reshape(-1, 3, 2)[:, ::-1].reshape(-1, 2)
         name = ob.name if not inst.is_instance else f"{inst.parent.name if inst.parent else ''}/{ob.name}"
         meshes.append(scenedict.mesh(name, np.ascontiguousarray(pos), np.ascontiguousarray(tris, dtype=np.uint32),
                                      np.ascontiguousarray(nrm), mat_ids, uvs, ob.pass_index))

@@ -210,6 +210,10 @@ fn parse_light(d: &Bound<'_, PyDict>) -> PyResult<LightDesc> {
             spot_size: get_or(d, "spot_size", std::f32::consts::FRAC_PI_4, &ctx)?,
             spot_blend: get_or(d, "spot_blend", 0.15, &ctx)?,
             soft_falloff: get_or(d, "soft_falloff", true, &ctx)?,
+            matrix: match item(d, "matrix")? {
+                Some(m) if !m.is_none() => Some(matrix(d, "matrix", &ctx)?),
+                _ => None,
+            },
             power,
             visible_camera,
             name,

@@ -196,6 +196,26 @@ def rough_diffuse(bpy):
     return scene
 
 
+def spots(bpy):
+    """Two spot lights as artists set them: one whose object is scaled (2, 0.5, 1) — Cycles
+    makes its cone elliptical, wide along the object's x — and one of radius 0.15 with a
+    sharp cone, whose edge Cycles blurs by the angle the sphere subtends (each ray is
+    attenuated by its own direction); both pools of light cross the floor, a wall and a ball."""
+    scene, grey = _grey_room(bpy, smooth=False)
+    _uv_sphere(bpy, scene, "Ball", (0.2, 0.3, 0.3), 0.3, 24, 12, grey, smooth=True)
+    for name, energy, location, rotation, scale, size, blend, radius in (
+            ("Oval", 150.0, (-0.4, 0.2, 1.4), (0.35, 0.0, 0.5), (2.0, 0.5, 1.0), 50.0, 0.2, 0.1),
+            ("Wide", 80.0, (0.5, -0.2, 1.3), (-0.3, 0.4, 0.0), (1.0, 1.0, 1.0), 40.0, 0.05, 0.15)):
+        light = bpy.data.lights.new(name, "SPOT")
+        light.energy, light.spot_size, light.spot_blend = energy, math.radians(size), blend
+        light.shadow_soft_size = radius
+        ob = bpy.data.objects.new(name, light)
+        ob.location, ob.rotation_euler, ob.scale = location, rotation, scale
+        scene.collection.objects.link(ob)
+    _camera_and_world(bpy, scene)
+    return scene
+
+
 def checked_in(name, keep=None):
     """One of tests/scenes/*.blend (tools/make_test_scenes.py) at this module's size and
     bounce limit; `keep` names the lights left on."""
@@ -255,6 +275,7 @@ SCENES = {
                                                             "Transmission Weight": 1.0, "Roughness": 0.2,
                                                             "IOR": 1.45})), 1024, 32),
     "rough_diffuse": (rough_diffuse, 512, 16),
+    "spots": (spots, 512, 16),
     "all_lights": (checked_in("lights", {"Area", "Point", "Spot", "Sun", "World"}), 512, 16),
     "specular": (checked_in("specular"), 1024, 32),
     "textures": (checked_in("textures"), 512, 16),

@@ -27,11 +27,16 @@ def point_light(name, position, power, radius, soft_falloff=True, visible_camera
 
 
 def spot_light(name, position, direction, power, radius, spot_size, spot_blend, soft_falloff=True,
-               visible_camera=False) -> dict:
+               visible_camera=False, matrix=None) -> dict:
     """A spot light: a point light limited to a cone of full angle `spot_size` (radians)
-    around `direction`, softened by `spot_blend`."""
-    return dict(point_light(name, position, power, radius, soft_falloff, visible_camera), type="SPOT",
-                direction=tuple(direction), spot_size=float(spot_size), spot_blend=float(spot_blend))
+    around `direction`, softened by `spot_blend`. `matrix`: the light object's 4×4 matrix (float32),
+    whose uneven scale makes the cone elliptical as in Cycles (round in the object's scaled
+    frame); None: a round cone."""
+    d = dict(point_light(name, position, power, radius, soft_falloff, visible_camera), type="SPOT",
+             direction=tuple(direction), spot_size=float(spot_size), spot_blend=float(spot_blend))
+    if matrix is not None:
+        d["matrix"] = matrix
+    return d
 
 
 def area_light(name, matrix, shape, size, size_y, power, normalize=True, visible_camera=False,

@@ -450,15 +450,17 @@ class _Reader:
         k = np.arange(len(face_of_tri)) - np.repeat(np.cumsum(ntri_face) - ntri_face, ntri_face)
         c0 = starts[face_of_tri]
         corners = np.stack([c0, c0 + k + 1, c0 + k + 2], axis=1)
-        if mesh.GetOrientationAttr().Get() == "leftHanded":
+        m = _mat(self.xcache.GetLocalToWorldTransform(prim)) if to_world is None else to_world
+        det = np.linalg.det(m[:3, :3])
+        # the outside (how glass refracts) is taken from the world-space winding: a left-handed
+        # mesh, or a mirroring transform (negative determinant), winds it the other way
+        if (mesh.GetOrientationAttr().Get() == "leftHanded") != (det < 0):
             corners = corners[:, [0, 2, 1]]
         tris = idx[corners]
         if len(tris) == 0:
             self.warn(f"mesh '{name}': no face with three or more corners; skipped")
             return None
-        m = _mat(self.xcache.GetLocalToWorldTransform(prim)) if to_world is None else to_world
         pos = pts @ m[:3, :3].T + m[:3, 3]
-        det = np.linalg.det(m[:3, :3])
         nmat = np.linalg.inv(m[:3, :3]).T if abs(det) > 1e-30 else m[:3, :3]
 
         def corner_values(values, interp, what):
@@ -559,7 +561,7 @@ class _Reader:
                 minus_z = -m[:3, 2] / np.linalg.norm(m[:3, 2])
                 return scenedict.spot_light(name, pos, minus_z.tolist(), power.tolist(), r, 2 * math.radians(angle),
                                             float(shaping.GetShapingConeSoftnessAttr().Get(t) or 0.0),
-                                            visible_camera=visible)
+                                            visible_camera=visible, matrix=m.astype(np.float32))
             return scenedict.point_light(name, pos, power.tolist(), r, visible_camera=visible)
         if prim.IsA(UsdLux.RectLight) or prim.IsA(UsdLux.DiskLight):
             rect = prim.IsA(UsdLux.RectLight)

@@ -240,6 +240,7 @@ pub fn cornell_mixed_lights(width: u32, height: u32) -> SceneDesc {
             spot_blend: 0.2,
             soft_falloff: true,
             visible_camera: false,
+            matrix: None,
         },
         LightDesc::Sun {
             name: "Sun".into(),

@@ -172,6 +172,11 @@ pub enum LightDesc {
         spot_blend: f32,
         soft_falloff: bool,
         visible_camera: bool,
+        /// The light object's matrix (row-major 4×4), when its scale is to shape the cone:
+        /// as in Cycles, the cone is evaluated in the object's scaled frame, so a scale of
+        /// (2, 1, 1) widens it along the object's x (an elliptical spot). None: a round cone
+        /// around `direction`.
+        matrix: Option<[[f32; 4]; 4]>,
     },
     /// Area light: `to_world` (row-major 4×4, may carry scale) maps the local light whose
     /// extent is size_x × size_y in the xy plane and which emits towards local −Z.

@@ -7,7 +7,7 @@
 use super::desc::{AreaShape, LightDesc};
 use crate::error::SceneError;
 use crate::math::{luminance, square_to_disk_concentric, square_to_uniform_cone, Frame, Spectrum};
-use glam::{Vec2, Vec3};
+use glam::{Mat3, Vec2, Vec3};
 use std::f32::consts::PI;
 
 #[derive(Clone, Debug)]
@@ -67,13 +67,94 @@ pub struct Spot {
     pub dir: Vec3,
     pub cos_half: f32,
     pub smooth: f32,
+    /// For a light object of uneven scale: world direction → the object's scaled frame with
+    /// z along the spot (the cone is round there, as in Cycles, so elliptical in the world).
+    /// None: round around `dir`.
+    pub to_local: Option<Mat3>,
+    /// The widest angle between `dir` and a direction inside the cone (the light tree's θ_o).
+    pub theta_o: f32,
 }
 
 impl Spot {
+    /// A spot of full angle `size` and blend around `dir` (unit), shaped by the object's
+    /// 3×3 matrix `m` (its axes as columns, scale included) when that scales unevenly.
+    pub fn new(dir: Vec3, size: f32, blend: f32, m: Option<Mat3>) -> Spot {
+        let cos_half = (size.clamp(0.0, PI) * 0.5).cos();
+        let smooth = (1.0 - cos_half) * blend.clamp(0.0, 1.0);
+        let round = Spot { dir, cos_half, smooth, to_local: None, theta_o: cos_half.clamp(-1.0, 1.0).acos() };
+        let Some(m) = m else { return round };
+        let (x, y, z) = (m.x_axis.length(), m.y_axis.length(), m.z_axis.length());
+        let even = (x - z).abs() <= 1e-5 * z && (y - z).abs() <= 1e-5 * z;
+        let orthogonal = [m.x_axis.dot(m.y_axis), m.y_axis.dot(m.z_axis), m.z_axis.dot(m.x_axis)]
+            .iter()
+            .all(|d| d.abs() <= 1e-5 * (x * y).max(y * z).max(z * x));
+        if (even && orthogonal) || m.determinant().abs() < 1e-30 {
+            return round;
+        }
+        // local = diag(1, 1, −1)·M⁻¹·d: the object frame, its −z (where the spot points) as +z
+        let to_local = Mat3::from_diagonal(Vec3::new(1.0, 1.0, -1.0)) * m.inverse();
+        // θ_o: the cone's edge (round in the local frame) taken to the world, widest angle
+        let (sin_h, cos_h) = ((1.0 - cos_half * cos_half).max(0.0).sqrt(), cos_half);
+        let theta_o = (0..256)
+            .map(|k| {
+                let phi = 2.0 * PI * k as f32 / 256.0;
+                let w = (m * Vec3::new(sin_h * phi.cos(), sin_h * phi.sin(), -cos_h)).normalize_or(dir);
+                w.dot(dir).clamp(-1.0, 1.0).acos()
+            })
+            .fold(0.0f32, f32::max);
+        // (the 256 edge directions miss the widest by at most a part in 10⁴; margin of 1%)
+        Spot { to_local: Some(to_local), theta_o: (theta_o * 1.01 + 1e-3).min(PI), ..round }
+    }
+
+    /// The falloff of light leaving a spot of centre `center` and squared radius `r2`
+    /// along the unit direction `d` towards `p`: as Cycles, by the direction of the ray itself
+    /// (so a spot of some radius blurs its cone's edge by the sphere's angular size), and
+    /// none at points inside the sphere — well inside (by 1% of the radius): a ray leaving a
+    /// surface that touches the sphere starts a hair off it, where Cycles' starts on it.
+    #[inline]
+    pub fn along(&self, center: Vec3, r2: f32, p: Vec3, d: Vec3) -> f32 {
+        if r2 > 0.0 && (p - center).length_squared() < 0.98 * r2 {
+            return 1.0;
+        }
+        self.attenuation(d)
+    }
+
+    /// A falloff for choosing the light at `p`: positive wherever `along` can be for a ray
+    /// from some point of the sphere (centre, squared radius r2) to p — the direction from the
+    /// centre turned towards the axis by the sphere's angular radius, and a floor of 10⁻³
+    /// inside the widest cone that angle can reach (an elliptical cone need not be entered
+    /// along that turn) — so that light selection never leaves out a light that reaches p.
+    pub fn bound(&self, center: Vec3, r2: f32, p: Vec3) -> f32 {
+        let to = p - center;
+        let d2 = to.length_squared();
+        if r2 <= 0.0 {
+            return self.attenuation(to.normalize_or_zero());
+        }
+        if d2 < 0.98 * r2 {
+            return 1.0;
+        }
+        let t = to / d2.sqrt();
+        let alpha = (r2 / d2).sqrt().min(1.0).asin();
+        let theta = t.dot(self.dir).clamp(-1.0, 1.0).acos();
+        let beta = alpha.min(theta);
+        let turned = if theta > 1e-6 { (t * (theta - beta).sin() + self.dir * beta.sin()) / theta.sin() } else { t };
+        let a = self.attenuation(turned.normalize_or(t));
+        if a > 0.0 {
+            a
+        } else if theta <= self.theta_o + alpha {
+            1e-3
+        } else {
+            0.0
+        }
+    }
+
     /// Cycles' spot falloff: smoothstep over the blend region of the cone.
     #[inline]
     pub fn attenuation(&self, to_point: Vec3) -> f32 {
-        let c = to_point.dot(self.dir);
+        let c = match &self.to_local {
+            None => to_point.dot(self.dir),
+            Some(m) => (*m * to_point).normalize_or_zero().z,
+        };
         if c <= self.cos_half {
             return 0.0;
         }
@@ -155,6 +236,7 @@ impl Light {
                 spot_blend,
                 soft_falloff,
                 visible_camera,
+                matrix,
             } => {
                 check(
                     name,
@@ -163,12 +245,14 @@ impl Light {
                 )?;
                 check(name, v(*direction).length() > 0.0, "zero direction")?;
                 check(name, spot_size.is_finite() && spot_blend.is_finite(), "NaN or Inf spot size or blend")?;
-                let cos_half = (spot_size.clamp(0.0, PI) * 0.5).cos();
-                let spot = Spot {
-                    dir: v(*direction).normalize(),
-                    cos_half,
-                    smooth: (1.0 - cos_half) * spot_blend.clamp(0.0, 1.0),
+                let m = match matrix {
+                    Some(m) => {
+                        check(name, m.iter().flatten().all(|x| x.is_finite()), "NaN or Inf in its matrix")?;
+                        Some(Mat3::from_cols_array_2d(&[0, 1, 2].map(|c| [m[0][c], m[1][c], m[2][c]])))
+                    }
+                    None => None,
                 };
+                let spot = Spot::new(v(*direction).normalize(), *spot_size, *spot_blend, m);
                 Ok(Self::sphere(name, v(*position), *radius, v(*power), Some(spot), *soft_falloff, *visible_camera))
             }
             LightDesc::Area { name, to_world, shape, size_x, size_y, power, normalize, spread, visible_camera } => {
@@ -364,7 +448,7 @@ impl Light {
                     let dist = d2.sqrt();
                     (*center, -to / dist, to / dist, dist, 1.0, self.emission / d2)
                 };
-                let att = spot.map_or(1.0, |s| s.attenuation((p - *center).normalize_or_zero()));
+                let att = spot.map_or(1.0, |s| s.along(*center, radius * radius, p, -wi));
                 if att <= 0.0 {
                     return None;
                 }
@@ -439,7 +523,7 @@ impl Light {
                 if t >= tmax {
                     return None;
                 }
-                let att = spot.map_or(1.0, |s| s.attenuation((o - *center).normalize_or_zero()));
+                let att = spot.map_or(1.0, |s| s.along(*center, radius * radius, o, -d));
                 if att <= 0.0 {
                     return None;
                 }
@@ -530,6 +614,7 @@ mod tests {
             spot_blend: 0.1,
             soft_falloff: true,
             visible_camera: false,
+            matrix: None,
         };
         assert!(Light::from_desc(&spot).err().unwrap().to_string().contains("spot size"));
     }
@@ -621,5 +706,77 @@ mod tests {
             }
         }
         assert!(inside > 50 && outside > 50, "{inside} inside the cone, {outside} outside");
+    }
+
+    /// A spot whose object is scaled unevenly has the cone Cycles gives it: round in the
+    /// object's scaled frame, so an x scale of 2 widens it along x and a y scale of ½ narrows
+    /// it along y (each checked against tan θ' = tan θ · s/s_z at the edge); an even scale
+    /// keeps the round cone; every lit direction lies within θ_o (the light tree's bound).
+    #[test]
+    fn an_unevenly_scaled_spot_has_an_elliptical_cone() {
+        let rot = Mat3::from_rotation_y(0.4) * Mat3::from_rotation_x(-0.3);
+        let m = rot * Mat3::from_diagonal(Vec3::new(2.0, 0.5, 1.0));
+        let dir = -(rot * Vec3::Z);
+        let size = 60f32.to_radians();
+        let spot = Spot::new(dir, size, 0.0, Some(m));
+        assert!(spot.to_local.is_some());
+        let half = 0.5 * size;
+        let edge = |s: f32| (half.tan() * s).atan(); // the world half-angle along an axis scaled by s
+        let tilt = |axis: Vec3, a: f32| (dir * a.cos() + rot * axis * a.sin()).normalize();
+        for (axis, s) in [(Vec3::X, 2.0f32), (Vec3::Y, 0.5)] {
+            assert_eq!(spot.attenuation(tilt(axis, edge(s) * 0.98)), 1.0, "inside along {axis}");
+            assert_eq!(spot.attenuation(tilt(axis, edge(s) * 1.02)), 0.0, "outside along {axis}");
+        }
+        // wider than the round cone along x, narrower along y
+        let round = Spot::new(dir, size, 0.0, None);
+        assert_eq!(round.attenuation(tilt(Vec3::X, half * 1.2)), 0.0);
+        assert_eq!(round.attenuation(tilt(Vec3::Y, half * 0.8)), 1.0);
+        assert!((spot.theta_o - edge(2.0)).abs() < 0.02 && spot.theta_o >= edge(2.0), "{}", spot.theta_o);
+        let mut s = crate::sampler::IndependentSampler::new(5, 0);
+        use crate::sampler::Sampler;
+        for _ in 0..20_000 {
+            let d = crate::math::square_to_uniform_sphere(s.next_2d());
+            if spot.attenuation(d) > 0.0 {
+                assert!(d.dot(dir).clamp(-1.0, 1.0).acos() <= spot.theta_o, "{d}");
+            }
+        }
+        // an even scale (and rotation) is the round cone, exactly
+        let even = Spot::new(dir, size, 0.2, Some(rot * 3.0));
+        assert!(even.to_local.is_none() && even.theta_o == Spot::new(dir, size, 0.2, None).theta_o);
+    }
+
+    /// A spot with a radius attenuates each ray by its own direction (Cycles), so light
+    /// reaches a little beyond the cone through the centre; the light choice's `bound` is
+    /// positive wherever any ray from the sphere carries light (round and elliptical cones).
+    #[test]
+    fn a_spot_with_a_radius_lights_by_each_rays_direction_and_is_never_left_out() {
+        use crate::sampler::{IndependentSampler, Sampler};
+        let dir = Vec3::new(0.2, 0.1, -1.0).normalize();
+        let rot = Mat3::from_rotation_z(0.7) * Mat3::from_rotation_x(0.2);
+        let (center, r) = (Vec3::new(0.3, -0.2, 1.0), 0.25f32);
+        let mut s = IndependentSampler::new(7, 0);
+        for m in [None, Some(rot * Mat3::from_diagonal(Vec3::new(2.5, 0.6, 1.0)))] {
+            let axis = m.map_or(dir, |m| -(m * Vec3::Z).normalize());
+            let spot = Spot::new(axis, 50f32.to_radians(), 0.2, m);
+            let (mut beyond, mut lit) = (0, 0);
+            for _ in 0..200_000 {
+                let p = center + crate::math::square_to_uniform_sphere(s.next_2d()) * (0.3 + 2.0 * s.next_1d());
+                let q = center + crate::math::square_to_uniform_sphere(s.next_2d()) * r; // a point of the sphere
+                let a = spot.along(center, r * r, p, (p - q).normalize());
+                if a > 0.0 {
+                    lit += 1;
+                    assert!(spot.bound(center, r * r, p) > 0.0, "{p}: lit ({a}) but never chosen");
+                    if spot.attenuation((p - center).normalize()) == 0.0 {
+                        beyond += 1;
+                    }
+                }
+            }
+            assert!(lit > 1000 && beyond > 100, "{lit} lit, {beyond} beyond the centre's cone");
+        }
+        // without a radius the ray's direction is the centre's
+        let spot = Spot::new(dir, 0.8, 0.3, None);
+        let p = Vec3::new(0.4, 0.0, -1.0);
+        assert_eq!(spot.along(Vec3::ZERO, 0.0, p, p.normalize()), spot.attenuation(p.normalize()));
+        assert_eq!(spot.bound(Vec3::ZERO, 0.0, p), spot.attenuation(p.normalize()));
     }
 }

@@ -83,7 +83,7 @@ impl Entry {
             Kind::Sphere { center, r2, spot } => {
                 let to = p - *center;
                 let d2 = to.length_squared();
-                let att = if oriented { spot.map_or(1.0, |s| s.attenuation(to.normalize_or_zero())) } else { 1.0 };
+                let att = if oriented { spot.map_or(1.0, |s| s.bound(*center, *r2, p)) } else { 1.0 };
                 self.power * att / (4.0 * PI * d2.max(*r2).max(1e-12))
             }
             Kind::Planar { center, normal, half_diagonal, area } => {
@@ -116,7 +116,7 @@ impl Entry {
             Kind::Sphere { center, r2, spot } => {
                 let r = r2.sqrt();
                 let cone = match spot {
-                    Some(s) => Cone { axis: s.dir, theta_o: s.cos_half.clamp(-1.0, 1.0).acos(), theta_e: 1e-3 },
+                    Some(s) => Cone { axis: s.dir, theta_o: s.theta_o, theta_e: 1e-3 },
                     None => Cone::SPHERE,
                 };
                 Bounds { lo: *center - r, hi: *center + r, power: self.power / (4.0 * PI), cone }
@@ -452,6 +452,7 @@ mod tests {
                     spot_blend: 0.2,
                     soft_falloff: true,
                     visible_camera: false,
+                    matrix: None,
                 }
             } else {
                 crate::scene::desc::LightDesc::Point {

@@ -589,7 +589,7 @@ impl Scene {
                 (cos > 1e-7 && att > 0.0).then(|| (light.emission * att, pmf * d2 / (cos * area)))
             }
             LightShape::Sphere { center, radius, spot, soft_falloff } => {
-                let att = spot.map_or(1.0, |s| s.attenuation((from - *center).normalize_or_zero()));
+                let att = spot.map_or(1.0, |s| s.along(*center, radius * radius, from, (from - z).normalize_or_zero()));
                 if att <= 0.0 {
                     return None;
                 }

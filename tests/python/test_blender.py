@@ -376,6 +376,36 @@ def test_smooth_flat_and_custom_split_normals_are_exported(bpy_mod):
             assert np.abs(nrm - face[:, None, :]).max() > 0.1
 
 
+def test_a_mirrored_object_keeps_its_outside(bpy_mod):
+    """An object scaled by −1 along one axis (how artists mirror objects) has its winding
+    turned inside out; the core orients glass by the winding, so the export flips it back,
+    as Cycles negates the geometric normal of such objects. Every exported triangle of a
+    mirrored (and of an unmirrored) ball is wound outwards, along its corner normals. Failed
+    before: all of the mirrored ball's were wound inwards — a mirrored glass ball refracted
+    as an air bubble in glass (block difference to Cycles 26%, 15× the noise)."""
+    from gdmlt_blender import export
+
+    bpy = bpy_mod
+    sys.path.insert(0, str(ROOT / "tools"))
+    import convergence
+
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    scene = bpy.context.scene
+    glass = convergence._glass(bpy, "Glass", 0.0)
+    for name, scale in (("Plain", (1, 1, 1)), ("Mirrored", (-1, 1, 1)), ("Twice", (-1, -1, 1)),
+                        ("Thrice", (-1, -0.5, -2))):
+        ob = convergence._uv_sphere(bpy, scene, name, (0, 0, 0), 0.5, 12, 6, glass, smooth=True)
+        ob.scale = scale
+    desc, _ = export.export_scene(bpy.context.evaluated_depsgraph_get(), need_camera=False)
+    for mesh in desc["meshes"]:
+        p = np.asarray(mesh["positions"], dtype=np.float64)[np.asarray(mesh["indices"]).reshape(-1, 3)]
+        ng = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+        ns = np.asarray(mesh["normals"], dtype=np.float64).reshape(-1, 3, 3).mean(axis=1)
+        outward = p.mean(axis=1)  # (the balls are centred on the origin)
+        assert (np.einsum("ij,ij->i", ns, outward) > 0).all(), mesh["name"]
+        assert (np.einsum("ij,ij->i", ng, ns) > 0).all(), mesh["name"]
+
+
 def test_area_and_point_light_agree_with_cycles(bpy_mod, tmp_out):
     def _lights_scene(bpy, engine, spp, seed):
         return open_scene(bpy, "lights", engine, spp, seed, keep={"Area", "Point"})

@@ -120,6 +120,41 @@ def test_cli_renders_a_usd_file(tmp_path):
     assert img.shape == (8, 8, 3) and np.isfinite(img).all() and img.mean() > 0
 
 
+def _winding_normals(mesh):
+    """Per triangle: the geometric normal its winding gives, and the mean of its corner normals."""
+    p = np.asarray(mesh["positions"], dtype=np.float64)[np.asarray(mesh["indices"]).reshape(-1, 3)]
+    ng = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+    ns = np.asarray(mesh["normals"], dtype=np.float64).reshape(-1, 3, 3).mean(axis=1)
+    return ng, ns
+
+
+@pytest.mark.parametrize("orientation", ["rightHanded", "leftHanded"])
+def test_a_mirrored_mesh_keeps_its_outside(tmp_path, orientation):
+    """A transform of negative determinant (a scale of −1, how artists mirror objects) turns
+    a mesh's winding inside out; the core orients glass by the winding, so the loader flips
+    it back, as Cycles does (its geometric normal is negated for such objects). Each
+    triangle's winding normal then points to the side its normals do. Failed before:
+    every triangle of the mirrored quad was wound against its normal."""
+    path = _stage(tmp_path / "m.usda")
+    stage = Usd.Stage.Open(str(path))
+    quad = UsdGeom.Mesh.Define(stage, "/World/Mirrored")
+    pts = [(-0.5, -0.5, 0), (0.5, -0.5, 0), (0.5, 0.5, 0), (-0.5, 0.5, 0)]
+    quad.CreatePointsAttr(pts)
+    quad.CreateFaceVertexCountsAttr([4])
+    quad.CreateFaceVertexIndicesAttr([0, 1, 2, 3] if orientation == "rightHanded" else [3, 2, 1, 0])
+    quad.CreateOrientationAttr(orientation)
+    quad.CreateNormalsAttr([(0, 0, 1)] * 4)
+    quad.SetNormalsInterpolation("vertex")
+    quad.CreateSubdivisionSchemeAttr("none")
+    UsdGeom.Xformable(quad).AddScaleOp().Set(Gf.Vec3f(-1, 1, 1))
+    stage.GetRootLayer().Save()
+    desc, _ = usd.load(path, width=8, height=8)
+    mesh = next(m for m in desc["meshes"] if m["name"] == "/World/Mirrored")
+    ng, ns = _winding_normals(mesh)
+    assert np.allclose(ns / np.linalg.norm(ns, axis=1, keepdims=True), (0, 0, 1))  # the normals stay up
+    assert (np.einsum("ij,ij->i", ng, ns) > 0).all(), ng
+
+
 def test_point_instancer_places_every_instance(tmp_path):
     """A PointInstancer of a unit quad at three positions (one scaled by 2, one rotated) is
     flattened into three world-space copies with the instancer's own transform applied."""
