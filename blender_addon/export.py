@@ -310,7 +310,12 @@ def _node_params(node, textures, warnings, what):
     if t in ("BSDF_PRINCIPLED", "BSDF_GLOSSY", "BSDF_ANISOTROPIC", "BSDF_GLASS", "BSDF_REFRACTION"):
         # Multiscatter GGX (Blender's default) compensates the energy the metal and glass lobes
         # lose to single scattering (the Refraction BSDF has no such option)
-        out["multiscatter"] = getattr(node, "distribution", "GGX") == "MULTI_GGX"
+        distribution = getattr(node, "distribution", "GGX")
+        out["multiscatter"] = distribution == "MULTI_GGX"
+        if distribution not in ("GGX", "MULTI_GGX"):
+            # (measured: a Beckmann glossy ball of roughness 0.5 renders about 2% dark as GGX)
+            warnings.append(f"{what}: the {distribution.replace('_', '-').title()} distribution of "
+                            f"'{node.name}' is rendered as GGX")
     return out
 
 

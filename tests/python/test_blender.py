@@ -84,6 +84,31 @@ def test_unsupported_node_warns_and_falls_back(bpy_mod, tmp_out, capfd):
     assert "not supported" in err.out + err.err
 
 
+def test_glossy_distributions_rendered_as_ggx_are_named(bpy_mod):
+    """Beckmann and Ashikhmin-Shirley are rendered as GGX (a Beckmann glossy ball of
+    roughness 0.5: about 2% dark against Cycles), with a warning naming node and material;
+    GGX and Multiscatter GGX are rendered as they are, silently."""
+    from gdmlt_blender import export
+
+    bpy = bpy_mod
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    for distribution, warned in (("BECKMANN", "Beckmann"), ("ASHIKHMIN_SHIRLEY", "Ashikhmin-Shirley"),
+                                 ("GGX", None), ("MULTI_GGX", None)):
+        mat = bpy.data.materials.new(distribution)
+        mat.use_nodes = True
+        glossy = mat.node_tree.nodes.new("ShaderNodeBsdfGlossy")
+        glossy.distribution = distribution
+        mat.node_tree.links.new(glossy.outputs[0], mat.node_tree.get_output_node("ALL").inputs["Surface"])
+        warnings = []
+        params = export.material_params(mat, warnings)
+        assert params["metallic"] == 1.0 and params["multiscatter"] == (distribution == "MULTI_GGX")
+        if warned:
+            assert any(f"the {warned} distribution of 'Glossy BSDF' is rendered as GGX" in w
+                       and distribution in w for w in warnings), warnings
+        else:
+            assert warnings == [], warnings
+
+
 def test_what_gdmlt_leaves_out_is_named_and_kept_in_the_last_render_panel(bpy_mod, tmp_out):
     """Issue 17: hair curves, point clouds, volume objects, a material's Volume output and
     motion blur were dropped silently, and the warnings that existed flashed in the status
