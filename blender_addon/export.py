@@ -632,8 +632,12 @@ def _mesh_local_arrays(ob):
 
 
 def _light(ob, matrix, warnings):
+    """The scene dict entry of a light object, or None when it sends no light: a Cycles
+    portal (an area light marking a window, which only guides Cycles' sampling of the world)."""
     light = ob.data
     name = ob.name
+    if light.type == "AREA" and getattr(getattr(light, "cycles", None), "is_portal", False):
+        return None
     scale = 2.0 ** float(getattr(light, "exposure", 0.0))
     color = np.array(light.color[:3], dtype=np.float64)
     if getattr(light, "use_temperature", False):  # Blender's blackbody colour (luminance 1)

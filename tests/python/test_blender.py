@@ -431,6 +431,25 @@ def test_a_mirrored_object_keeps_its_outside(bpy_mod):
         assert (np.einsum("ij,ij->i", ng, ns) > 0).all(), mesh["name"]
 
 
+def test_a_cycles_portal_sends_no_light(bpy_mod):
+    """An area light marked as a portal (Object Data › Light › Portal, how artists help Cycles
+    light an interior through its windows) only guides Cycles' sampling of the world and
+    emits nothing. It was exported as an area light of its power: a room open to a sky
+    through a portalled ceiling rendered 9% bright (block differences 75× the noise)."""
+    from gdmlt_blender import export
+
+    bpy = bpy_mod
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    scene = bpy.context.scene
+    for name, portal in (("Window", True), ("Lamp", False)):
+        ob = bpy.data.objects.new(name, bpy.data.lights.new(name, "AREA"))
+        ob.data.cycles.is_portal = portal
+        scene.collection.objects.link(ob)
+    desc, warnings = export.export_scene(bpy.context.evaluated_depsgraph_get(), need_camera=False)
+    assert [light["name"] for light in desc["lights"]] == ["Lamp"]
+    assert warnings == []
+
+
 def test_area_and_point_light_agree_with_cycles(bpy_mod, tmp_out):
     def _lights_scene(bpy, engine, spp, seed):
         return open_scene(bpy, "lights", engine, spp, seed, keep={"Area", "Point"})
