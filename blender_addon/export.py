@@ -34,7 +34,13 @@ def _visibility_warnings(ob, what, warnings, light=False):
     if off:
         warnings.append(f"{what} '{ob.name}': ray visibility ({', '.join(off)} off) is not rendered; "
                         "every ray sees it")
+    linking = getattr(ob, "light_linking", None)
+    if linking is not None and (linking.receiver_collection is not None or linking.blocker_collection is not None):
+        warnings.append(f"{what} '{ob.name}': light linking is not rendered; it lights, and is blocked by, "
+                        "every object")
     if light:
+        if not getattr(ob.data, "use_shadow", True):
+            warnings.append(f"{what} '{ob.name}': Cast Shadow off is not rendered; the light casts shadows")
         return
     for attr, label in (("is_holdout", "holdout"), ("is_shadow_catcher", "shadow catcher")):
         if getattr(ob, attr, False):

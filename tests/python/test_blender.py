@@ -111,7 +111,7 @@ def test_glossy_distributions_rendered_as_ggx_are_named(bpy_mod):
 
 def test_what_gdmlt_leaves_out_is_named_and_kept_in_the_last_render_panel(bpy_mod, tmp_out):
     """Issue 17: hair curves, point clouds, volume objects, a material's Volume output and
-    motion blur were dropped silently, and the warnings that existed flashed in the status
+    motion blur (and, found later, a light's Cast Shadow off and light linking) were dropped silently, and the warnings that existed flashed in the status
     bar and were gone. Each is now a warning naming the object, material or setting, and the
     last render's warnings stay in the Render Properties' "Last Render" panel (its lines
     wrapped to fit) until the next render, which replaces them."""
@@ -136,12 +136,18 @@ def test_what_gdmlt_leaves_out_is_named_and_kept_in_the_last_render_panel(bpy_mo
     lamp = bpy.data.objects.new("Lamp", bpy.data.lights.new("Lamp", "POINT"))
     lamp.visible_glossy = False
     scene.collection.objects.link(lamp)
+    # a light that casts no shadow, and light linking (Blender 4's Object › Shading)
+    fill = bpy.data.objects.new("Fill", bpy.data.lights.new("Fill", "AREA"))
+    fill.data.use_shadow = False
+    fill.light_linking.receiver_collection = bpy.data.collections.new("Lit")
+    scene.collection.objects.link(fill)
     render_to_exr(bpy, scene, tmp_out / "dropped.exr")
     text = "\n".join(engine.last_warnings)
     for needle in ("object 'Hair': hair curves", "object 'Cloud': point clouds", "object 'Smoke': volumes",
                    "material 'Red': its Volume output", "motion blur", "object 'TallBlock': ray visibility (shadow off)",
                    "object 'ShortBlock': ray visibility (camera off)", "object 'ShortBlock': holdout",
-                   "light 'Lamp': ray visibility (glossy off)"):
+                   "light 'Lamp': ray visibility (glossy off)", "light 'Fill': Cast Shadow off",
+                   "light 'Fill': light linking"):
         assert needle in text, (needle, engine.last_warnings)
     assert ui.GDMLT_PT_last_render.poll(bpy.context)
     lines = [line for w in engine.last_warnings for line in ui.wrapped(w)]
