@@ -280,6 +280,7 @@ def _node_params(node, textures, warnings, what):
             out["glass_sqrt_tint"] = True
         _warn_unsupported_layers(node, warnings, what)
         _emission(node, "Emission Color", "Emission Strength", out, textures, warnings, what, (0, 0, 0, 1), 0.0)
+        _coat(node, out, warnings, what)
         alpha_tex = _linked_texture(node, "Alpha", textures, warnings, what, output="Alpha")
         if alpha_tex is not None:  # coverage from the image's alpha channel, per shading point
             out["alpha_texture"], out["alpha"] = alpha_tex, 1.0
@@ -365,8 +366,30 @@ def _specular_layer_ior(ior, level):
 
 
 # Principled inputs whose layers the core does not render: (input, value that means "off").
-_UNSUPPORTED_LAYERS = (("Coat Weight", 0.0), ("Sheen Weight", 0.0), ("Subsurface Weight", 0.0),
+_UNSUPPORTED_LAYERS = (("Sheen Weight", 0.0), ("Subsurface Weight", 0.0),
                        ("Anisotropic", 0.0), ("Thin Film Thickness", 0.0))
+
+
+COAT_KEYS = ("coat", "coat_roughness", "coat_ior", "coat_tint")
+
+
+def _coat(node, out, warnings, what):
+    """The Principled BSDF's coat (weight, roughness, IOR, tint), as Cycles layers it over the
+    other lobes (src/bsdf/coat.rs). Its own normal input is not read."""
+    weight = _unit(_input_value(node, "Coat Weight", warnings, what, 0.0))
+    if weight <= 0.0:
+        return
+    out["coat"] = weight
+    out["coat_roughness"] = _unit(_input_value(node, "Coat Roughness", warnings, what, 0.03))
+    out["coat_ior"] = max(float(_input_value(node, "Coat IOR", warnings, what, 1.5)), 1.0)
+    out["coat_tint"] = tuple(max(float(c), 0.0) for c in _input_value(node, "Coat Tint", warnings, what,
+                                                                      (1.0, 1.0, 1.0, 1.0))[:3])
+    sock = node.inputs.get("Coat Normal")
+    if sock is not None and sock.is_linked:
+        warnings.append(f"{what}: the Coat Normal input of '{node.name}' is not read; the coat follows "
+                        f"the surface's normal")
+    if max(out.get("emission", (0.0,))) > 0.0 or "emission_texture" in out:
+        warnings.append(f"{what}: emission under the coat of '{node.name}' is not dimmed by the coat")
 
 
 def _unit(x):
@@ -502,6 +525,7 @@ def _combine(leaves, warnings, what):
     pass-through lobe; the lobe weights and colours; the specular layer; roughness; IOR;
     textures; the metal distribution; the normal map."""
     mix = _gather(leaves, warnings, what)
+    coated = [p for _, p in leaves if p.get("coat", 0.0) > 0.0]
     total = mix.bsdf_weight
     total_all = total + mix.passing.weight
     out = {"emission": tuple(mix.emission.tolist()), "metallic": 0.0, "transmission": 0.0, "roughness": 0.5,
@@ -535,6 +559,10 @@ def _combine(leaves, warnings, what):
     if len(set(mix.iors)) > 1:
         warnings.append(f"{what}: the mixed glass lobes have different IOR; {mix.iors[0]} is used")
     _combined_textures(mix, out, colour, warnings, what)
+    if coated and mix.bsdf_leaves == 1:
+        out.update({k: coated[0][k] for k in COAT_KEYS})  # one coated Principled beside pass-through
+    elif coated:
+        warnings.append(f"{what}: a Principled coat inside a Mix/Add Shader is not rendered (the coat is left out)")
     return out
 
 

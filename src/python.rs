@@ -145,6 +145,10 @@ fn parse_material(d: &Bound<'_, PyDict>) -> PyResult<MaterialDesc> {
         glass_sqrt_tint: get_or(d, "glass_sqrt_tint", false, &ctx)?,
         specular_ior: get_or(d, "specular_ior", def.specular_ior, &ctx)?,
         specular: get_or(d, "specular", def.specular, &ctx)?,
+        coat: get_or(d, "coat", def.coat, &ctx)?,
+        coat_roughness: get_or(d, "coat_roughness", def.coat_roughness, &ctx)?,
+        coat_ior: get_or(d, "coat_ior", def.coat_ior, &ctx)?,
+        coat_tint: rgb(d, "coat_tint", def.coat_tint, &ctx)?,
         transparency: get_or(d, "transparency", def.transparency, &ctx)?,
         transparent_color: rgb(d, "transparent_color", def.transparent_color, &ctx)?,
         pass_index: get_or(d, "pass_index", 0, &ctx)?,
@@ -784,9 +788,12 @@ fn builtin_scene<'py>(py: Python<'py>, name: &str, width: u32, height: u32) -> P
     for m in &d.materials {
         let md = PyDict::new(py);
         md.set_item("name", &m.name)?;
-        for (key, c) in
-            [("base_color", m.base_color), ("emission", m.emission), ("transparent_color", m.transparent_color)]
-        {
+        for (key, c) in [
+            ("base_color", m.base_color),
+            ("emission", m.emission),
+            ("transparent_color", m.transparent_color),
+            ("coat_tint", m.coat_tint),
+        ] {
             md.set_item(key, c)?;
         }
         for (key, v) in [
@@ -799,6 +806,9 @@ fn builtin_scene<'py>(py: Python<'py>, name: &str, width: u32, height: u32) -> P
             ("specular", m.specular),
             ("transparency", m.transparency),
             ("normal_strength", m.normal_strength),
+            ("coat", m.coat),
+            ("coat_roughness", m.coat_roughness),
+            ("coat_ior", m.coat_ior),
         ] {
             md.set_item(key, v)?;
         }

@@ -216,6 +216,35 @@ def spots(bpy):
     return scene
 
 
+def coat(bpy):
+    """The Principled BSDF's coat, as car paint and varnish use it: a ball of half-metallic
+    paint under a rough tinted coat of IOR 1.6, on a green floor under a clear glossy coat,
+    lit by an area light and a small lamp."""
+    scene, _ = _grey_room(bpy, smooth=False)
+    paint = _material(bpy, "Paint", "ShaderNodeBsdfPrincipled", **{
+        "Base Color": (0.8, 0.8, 0.8, 1.0), "Metallic": 0.5, "Roughness": 0.3, "Coat Weight": 0.7,
+        "Coat Roughness": 0.2, "Coat IOR": 1.6, "Coat Tint": (0.9, 0.5, 0.2, 1.0)})
+    _uv_sphere(bpy, scene, "Ball", (0.1, 0.2, 0.35), 0.35, 32, 16, paint, smooth=True)
+    varnish = _material(bpy, "Varnish", "ShaderNodeBsdfPrincipled", **{
+        "Base Color": (0.1, 0.3, 0.1, 1.0), "Roughness": 0.6, "Coat Weight": 1.0, "Coat Roughness": 0.05})
+    room = bpy.data.objects["Room"].data
+    room.materials.clear()
+    room.materials.append(varnish)
+    for name, kind, energy, location, size in (("Area", "AREA", 60.0, (-0.3, 0.3, 1.45), 0.6),
+                                               ("Lamp", "POINT", 30.0, (0.6, -0.6, 1.0), 0.1)):
+        light = bpy.data.lights.new(name, kind)
+        light.energy = energy
+        if kind == "AREA":
+            light.size = size
+        else:
+            light.shadow_soft_size = size
+        ob = bpy.data.objects.new(name, light)
+        ob.location = location
+        scene.collection.objects.link(ob)
+    _camera_and_world(bpy, scene)
+    return scene
+
+
 def checked_in(name, keep=None):
     """One of tests/scenes/*.blend (tools/make_test_scenes.py) at this module's size and
     bounce limit; `keep` names the lights left on."""
@@ -276,6 +305,7 @@ SCENES = {
                                                             "IOR": 1.45})), 1024, 32),
     "rough_diffuse": (rough_diffuse, 512, 16),
     "spots": (spots, 512, 16),
+    "coat": (coat, 512, 16),
     "all_lights": (checked_in("lights", {"Area", "Point", "Spot", "Sun", "World"}), 512, 16),
     "specular": (checked_in("specular"), 1024, 32),
     "textures": (checked_in("textures"), 512, 16),

@@ -193,12 +193,13 @@ class _Reader:
             out["transparency"] = 1.0 - opacity
         if p("useSpecularWorkflow", 0.0):
             self.warn(f"{what}: the specular workflow is rendered as the metallic one")
-        if p("clearcoat", 0.0) > 0.0:
-            self.warn(f"{what}: clearcoat is not rendered")
+        clearcoat = min(max(float(p("clearcoat", 0.0)), 0.0), 1.0)
+        if clearcoat > 0.0:  # (the schema's coat: IOR 1.5, untinted; Blender reads it as Coat Weight)
+            out["coat"], out["coat_roughness"] = clearcoat, min(max(float(p("clearcoatRoughness", 0.01)), 0.0), 1.0)
         self._normal_input(shader, "normal", out, what)
 
     # MaterialX / OpenPBR inputs the core leaves out, with their "off" value
-    _OPEN_PBR_UNSUPPORTED = (("coat_weight", 0.0), ("fuzz_weight", 0.0), ("subsurface_weight", 0.0),
+    _OPEN_PBR_UNSUPPORTED = (("fuzz_weight", 0.0), ("subsurface_weight", 0.0),
                              ("thin_film_weight", 0.0), ("specular_roughness_anisotropy", 0.0))
 
     def _materialx(self, surface, out, what) -> bool:
@@ -213,6 +214,12 @@ class _Reader:
             out["base_color"] = tuple(c * weight for c in color)
             out["metallic"] = p(surface, "base_metalness", 0.0)
             out["diffuse_roughness"] = min(max(float(p(surface, "base_diffuse_roughness", 0.0)), 0.0), 1.0)
+            coat = min(max(float(p(surface, "coat_weight", 0.0)), 0.0), 1.0)
+            if coat > 0.0:  # (Blender writes its Principled coat here: weight, roughness, IOR, tint)
+                out["coat"] = coat
+                out["coat_roughness"] = min(max(float(p(surface, "coat_roughness", 0.0)), 0.0), 1.0)
+                out["coat_ior"] = max(float(p(surface, "coat_ior", 1.6)), 1.0)
+                out["coat_tint"] = tuple(max(float(c), 0.0) for c in p(surface, "coat_color", (1.0, 1.0, 1.0)))
             out["multiscatter"] = True  # OpenPBR's metal conserves energy (Blender's default, too)
             out["roughness"] = p(surface, "specular_roughness", 0.3, "roughness_texture")
             out["ior"] = p(surface, "specular_ior", 1.5)

@@ -104,6 +104,12 @@ pub struct MaterialDesc {
     /// The metal and glass lobes compensate the energy single scattering loses (Blender's
     /// Multiscatter GGX, its default distribution).
     pub multiscatter: bool,
+    /// The Principled BSDF's coat: weight (0 = none), roughness, IOR and tint (Cycles'
+    /// layering: `bsdf/coat.rs`).
+    pub coat: f32,
+    pub coat_roughness: f32,
+    pub coat_ior: f32,
+    pub coat_tint: [f32; 3],
     /// Probability τ of passing straight through the surface (Blender's Transparent BSDF, or
     /// Principled alpha = 1 − τ as coverage); the other lobes share 1 − τ.
     pub transparency: f32,
@@ -139,6 +145,10 @@ impl Default for MaterialDesc {
             metal_roughness: None,
             glass_roughness: None,
             multiscatter: false,
+            coat: 0.0,
+            coat_roughness: 0.03,
+            coat_ior: 1.5,
+            coat_tint: [1.0; 3],
             transparency: 0.0,
             transparent_color: [1.0; 3],
             pass_index: 0,

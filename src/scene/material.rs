@@ -4,7 +4,7 @@
 //! lobe (Transparent BSDF, alpha as coverage) that takes probability τ from all of them.
 
 use super::desc::MaterialDesc;
-use crate::bsdf::{Bsdf, Conductor, Dielectric, Lambert, Layered};
+use crate::bsdf::{Bsdf, Coat, Conductor, Dielectric, Lambert, Layered};
 use crate::error::SceneError;
 use crate::math::Spectrum;
 use glam::Vec3;
@@ -38,6 +38,8 @@ pub struct Material {
     pub metal_roughness: Option<f32>,
     pub glass_roughness: Option<f32>,
     pub multiscatter: bool,
+    /// The Principled coat over the other lobes (weight 0: none).
+    pub coat: Coat,
     /// Pass-through probability τ and tint (Transparent BSDF, alpha as coverage).
     pub transparency: f32,
     pub transparent_color: Spectrum,
@@ -69,6 +71,9 @@ impl Material {
             d.specular_ior,
             d.specular,
             d.normal_strength,
+            d.coat,
+            d.coat_roughness,
+            d.coat_ior,
         ];
         let lobe_colors = d
             .metal_color
@@ -77,6 +82,7 @@ impl Material {
             .chain(d.glass_reflection_tint.iter())
             .flatten()
             .chain(d.transparent_color.iter())
+            .chain(d.coat_tint.iter())
             .chain(d.metal_roughness.iter())
             .chain(d.glass_roughness.iter());
         if d.base_color.iter().chain(d.emission.iter()).chain(scalars.iter()).chain(lobe_colors).any(|x| !x.is_finite())
@@ -127,6 +133,13 @@ impl Material {
             metal_roughness: d.metal_roughness.map(|r| r.clamp(0.0, 1.0)),
             glass_roughness: d.glass_roughness.map(|r| r.clamp(0.0, 1.0)),
             multiscatter: d.multiscatter,
+            coat: Coat {
+                weight: d.coat.clamp(0.0, 1.0),
+                // (Cycles clamps the IOR at 1; the albedo table covers η ≤ 3)
+                eta: d.coat_ior.clamp(1.0, 3.0),
+                roughness: d.coat_roughness.clamp(0.0, 1.0),
+                tint: Vec3::from_array(d.coat_tint).max(Vec3::ZERO),
+            },
             transparency: d.transparency.clamp(0.0, 1.0),
             transparent_color: Vec3::from_array(d.transparent_color).clamp(Vec3::ZERO, Vec3::ONE),
             general: false,
@@ -182,8 +195,9 @@ impl Material {
             roughness: rg,
             multiscatter: self.multiscatter,
         };
-        if tau > 0.0 || self.general {
-            Bsdf::Principled { diffuse, metal, glass, w, pass: tau, pass_tint: self.transparent_color }
+        let coat = self.coat;
+        if tau > 0.0 || self.general || coat.is_some() {
+            Bsdf::Principled { diffuse, metal, glass, w, pass: tau, pass_tint: self.transparent_color, coat }
         } else if w[1] <= 0.0 && w[2] <= 0.0 && !diffuse.has_layer() {
             Bsdf::Lambert(diffuse.base)
         } else if w[1] <= 0.0 && w[2] <= 0.0 {
@@ -193,7 +207,7 @@ impl Material {
         } else if w[0] <= 0.0 && w[1] <= 0.0 {
             Bsdf::Dielectric(glass)
         } else {
-            Bsdf::Principled { diffuse, metal, glass, w, pass: 0.0, pass_tint: Spectrum::ZERO }
+            Bsdf::Principled { diffuse, metal, glass, w, pass: 0.0, pass_tint: Spectrum::ZERO, coat }
         }
     }
 }
