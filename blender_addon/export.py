@@ -286,6 +286,11 @@ def _node_params(node, textures, warnings, what):
             out["alpha_texture"], out["alpha"] = alpha_tex, 1.0
         else:
             out["alpha"] = min(max(_input_value(node, "Alpha", warnings, what, 1.0), 0.0), 1.0)
+    elif t == "BSDF_TRANSLUCENT":
+        # diffuse transmission towards the far side (its colour a constant)
+        out["base_color"] = (0.0, 0.0, 0.0)
+        out["translucency"] = 1.0
+        out["translucent_color"] = tuple(_input_value(node, "Color", warnings, what, (0.8, 0.8, 0.8, 1))[:3])
     elif t == "BSDF_TRANSPARENT":
         out["base_color"] = (0.0, 0.0, 0.0)
         out["pass"] = tuple(_input_value(node, "Color", warnings, what, (1, 1, 1, 1))[:3])
@@ -450,7 +455,7 @@ class _LobeSum:
 class _Mixture:
     """What the weighted leaves of a Mix/Add Shader tree add up to (`_gather`), before it is
     turned into one material (`_combine`)."""
-    lobes: dict = field(default_factory=lambda: {"d": _LobeSum(), "m": _LobeSum(), "g": _LobeSum()})
+    lobes: dict = field(default_factory=lambda: {"d": _LobeSum(), "m": _LobeSum(), "g": _LobeSum(), "t": _LobeSum()})
     glass_reflection: _LobeSum = field(default_factory=_LobeSum)  # the glass lobes' reflection colours
     passing: _LobeSum = field(default_factory=_LobeSum)  # Transparent BSDF leaves (and 1 − alpha)
     emission: np.ndarray = field(default_factory=lambda: np.zeros(3))
@@ -482,8 +487,11 @@ def _gather(leaves, warnings, what) -> _Mixture:
         if not p.get("bsdf", True):
             continue
         mix.bsdf_leaves += 1
-        m, t = p["metallic"], p["transmission"]
+        m, t, tl = p["metallic"], p["transmission"], p.get("translucency", 0.0)
         colour = np.array(p["base_color"][:3], dtype=np.float64)
+        if w * tl > 0:
+            mix.lobes["t"].add(w * tl, np.array(p.get("translucent_color", colour), dtype=np.float64))
+        w = w * (1 - tl)  # (the other lobes share the rest)
         for k, wk in (("d", (1 - m) * (1 - t)), ("m", m), ("g", (1 - m) * t)):
             if w * wk > 0:
                 # (a Principled leaf's glass transmits √colour per interface)
@@ -542,7 +550,11 @@ def _combine(leaves, warnings, what):
         out["base_color"] = (0.0, 0.0, 0.0)
         return out
     colour = {k: v.mean(scale) for k, v in mix.lobes.items()}
-    out["metallic"] = mix.lobes["m"].weight / total
+    translucent = mix.lobes["t"].weight
+    if translucent > 0:
+        out["translucency"] = translucent / total
+        out["translucent_color"] = colour["t"]
+    out["metallic"] = mix.lobes["m"].weight / (total - translucent) if total > translucent else 0.0
     dg = mix.lobes["d"].weight + mix.lobes["g"].weight
     out["transmission"] = mix.lobes["g"].weight / dg if dg > 0 else 0.0
     out["base_color"], out["metal_color"], out["glass_color"] = colour["d"], colour["m"], colour["g"]

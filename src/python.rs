@@ -149,6 +149,8 @@ fn parse_material(d: &Bound<'_, PyDict>) -> PyResult<MaterialDesc> {
         coat_roughness: get_or(d, "coat_roughness", def.coat_roughness, &ctx)?,
         coat_ior: get_or(d, "coat_ior", def.coat_ior, &ctx)?,
         coat_tint: rgb(d, "coat_tint", def.coat_tint, &ctx)?,
+        translucency: get_or(d, "translucency", def.translucency, &ctx)?,
+        translucent_color: get_or(d, "translucent_color", None, &ctx)?,
         transparency: get_or(d, "transparency", def.transparency, &ctx)?,
         transparent_color: rgb(d, "transparent_color", def.transparent_color, &ctx)?,
         pass_index: get_or(d, "pass_index", 0, &ctx)?,
@@ -809,6 +811,7 @@ fn builtin_scene<'py>(py: Python<'py>, name: &str, width: u32, height: u32) -> P
             ("coat", m.coat),
             ("coat_roughness", m.coat_roughness),
             ("coat_ior", m.coat_ior),
+            ("translucency", m.translucency),
         ] {
             md.set_item(key, v)?;
         }
@@ -830,6 +833,7 @@ fn builtin_scene<'py>(py: Python<'py>, name: &str, width: u32, height: u32) -> P
             ("metal_color", m.metal_color),
             ("glass_color", m.glass_color),
             ("glass_reflection_tint", m.glass_reflection_tint),
+            ("translucent_color", m.translucent_color),
         ] {
             if let Some(c) = value {
                 md.set_item(key, c)?;

@@ -245,6 +245,43 @@ def coat(bpy):
     return scene
 
 
+def translucent(bpy):
+    """Leaves and lampshades: a thin panel (one plane) of Mix(Diffuse, Translucent) between
+    an area light facing the camera and the camera, lit from behind, and a ball of a
+    Translucent BSDF alone beside it, a lamp in front of both."""
+    scene, grey = _grey_room(bpy, smooth=False)
+    mat = bpy.data.materials.new("Leaf")
+    mat.use_nodes = True
+    nt = mat.node_tree
+    nt.nodes.clear()
+    out, mix = nt.nodes.new("ShaderNodeOutputMaterial"), nt.nodes.new("ShaderNodeMixShader")
+    diffuse, thin = nt.nodes.new("ShaderNodeBsdfDiffuse"), nt.nodes.new("ShaderNodeBsdfTranslucent")
+    diffuse.inputs["Color"].default_value = (0.3, 0.6, 0.2, 1.0)
+    thin.inputs["Color"].default_value = (0.5, 0.8, 0.3, 1.0)
+    mix.inputs["Fac"].default_value = 0.6
+    nt.links.new(diffuse.outputs[0], mix.inputs[1])
+    nt.links.new(thin.outputs[0], mix.inputs[2])
+    nt.links.new(mix.outputs[0], out.inputs["Surface"])
+    _mesh(bpy, scene, "Panel", [(-0.7, 0.2, 0.1), (0.1, 0.2, 0.1), (0.1, 0.2, 1.3), (-0.7, 0.2, 1.3)], [(0, 1, 2, 3)],
+          mat, smooth=False)
+    shade = _material(bpy, "Shade", "ShaderNodeBsdfTranslucent", Color=(0.9, 0.7, 0.4, 1.0))
+    _uv_sphere(bpy, scene, "Ball", (0.45, 0.1, 0.3), 0.28, 24, 12, shade, smooth=True)
+    for name, kind, energy, location, rotation, size in (
+            ("Back", "AREA", 80.0, (-0.3, 0.8, 0.7), (math.radians(-90.0), 0.0, 0.0), 0.6),
+            ("Lamp", "POINT", 20.0, (0.4, -0.8, 1.2), (0.0, 0.0, 0.0), 0.1)):
+        light = bpy.data.lights.new(name, kind)
+        light.energy = energy
+        if kind == "AREA":
+            light.size = size
+        else:
+            light.shadow_soft_size = size
+        ob = bpy.data.objects.new(name, light)
+        ob.location, ob.rotation_euler = location, rotation
+        scene.collection.objects.link(ob)
+    _camera_and_world(bpy, scene)
+    return scene
+
+
 def checked_in(name, keep=None):
     """One of tests/scenes/*.blend (tools/make_test_scenes.py) at this module's size and
     bounce limit; `keep` names the lights left on."""
@@ -306,6 +343,7 @@ SCENES = {
     "rough_diffuse": (rough_diffuse, 512, 16),
     "spots": (spots, 512, 16),
     "coat": (coat, 512, 16),
+    "translucent": (translucent, 512, 16),
     "all_lights": (checked_in("lights", {"Area", "Point", "Spot", "Sun", "World"}), 512, 16),
     "specular": (checked_in("specular"), 1024, 32),
     "textures": (checked_in("textures"), 512, 16),

@@ -15,12 +15,14 @@ pub mod microfacet;
 mod oren_nayar;
 #[cfg(test)]
 pub(crate) mod testing;
+mod translucent;
 
 pub use coat::Coat;
 pub use conductor::Conductor;
 pub use dielectric::{refraction_half_vector, Dielectric};
 pub use lambert::Lambert;
 pub use layered::Layered;
+pub use translucent::Translucent;
 
 use crate::math::{luminance, power_heuristic, Spectrum};
 use glam::{Vec2, Vec3};
@@ -95,6 +97,8 @@ pub enum Bsdf {
         pass: f32,
         pass_tint: Spectrum,
         coat: Coat,
+        /// Diffuse transmission (Translucent BSDF), its weight a fourth share beside w.
+        translucent: Translucent,
     },
 }
 
@@ -129,8 +133,8 @@ impl Bsdf {
             Bsdf::Conductor(b) => b.eval(wo, wi),
             Bsdf::Dielectric(b) => b.eval(wo, wi),
             Bsdf::Layered(b) => b.eval(wo, wi),
-            Bsdf::Principled { diffuse, metal, glass, w, pass, coat, .. } => {
-                let mut f = Spectrum::ZERO;
+            Bsdf::Principled { diffuse, metal, glass, w, pass, coat, translucent, .. } => {
+                let mut f = translucent.eval(wi);
                 if w[0] > 0.0 {
                     f += diffuse.eval(wo, wi) * w[0];
                 }
@@ -156,8 +160,8 @@ impl Bsdf {
             Bsdf::Conductor(b) => b.pdf(wo, wi),
             Bsdf::Dielectric(b) => b.pdf(wo, wi),
             Bsdf::Layered(b) => b.pdf(wo, wi),
-            Bsdf::Principled { diffuse, metal, glass, w, pass, coat, .. } => {
-                let mut p = 0.0;
+            Bsdf::Principled { diffuse, metal, glass, w, pass, coat, translucent, .. } => {
+                let mut p = translucent.weight * translucent.pdf(wi);
                 if w[0] > 0.0 {
                     p += diffuse.pdf(wo, wi) * w[0];
                 }
@@ -221,7 +225,7 @@ impl Bsdf {
             Bsdf::Conductor(b) => b.sample(wo, u),
             Bsdf::Dielectric(b) => b.sample(wo, u_lobe, u),
             Bsdf::Layered(b) => b.sample(wo, u_lobe, u),
-            Bsdf::Principled { diffuse, metal, glass, w, pass, pass_tint, coat } => {
+            Bsdf::Principled { diffuse, metal, glass, w, pass, pass_tint, coat, translucent } => {
                 // the coat first, with probability pc of the lobes' share 1 − τ
                 let pc = if coat.is_some() { self.coat_choice(wo) } else { 0.0 };
                 let pc_abs = pc * (1.0 - pass);
@@ -260,12 +264,15 @@ impl Bsdf {
                     u_lobe
                 };
                 // choose a lobe ∝ weight, reusing the rest of u_lobe inside the lobe
+                let (c2, c3) = (w[0] + w[1] + w[2], w[0] + w[1] + w[2] + translucent.weight);
                 let (k, u_rest) = if u_lobe < w[0] {
                     (0, u_lobe / w[0])
                 } else if u_lobe < w[0] + w[1] {
                     (1, (u_lobe - w[0]) / w[1])
-                } else if *pass <= 0.0 || u_lobe < w[0] + w[1] + w[2] {
+                } else if u_lobe < c2 || (*pass <= 0.0 && !translucent.is_some()) {
                     (2, ((u_lobe - w[0] - w[1]) / w[2].max(1e-12)).min(0.999_999))
+                } else if u_lobe < c3 || *pass <= 0.0 {
+                    (3, 0.0)
                 } else {
                     // straight through: f = τ·tint as a discrete measure, probability τ
                     let wi = -wo;
@@ -281,7 +288,19 @@ impl Bsdf {
                 let mut bs = match k {
                     0 => diffuse.sample(wo, u_rest.min(0.999_999), u)?,
                     1 => metal.sample(wo, u)?,
-                    _ => glass.sample(wo, u_rest, u)?,
+                    2 => glass.sample(wo, u_rest, u)?,
+                    _ => {
+                        // (weight and pdf are the mixture's, set below)
+                        let wi = translucent.sample_wi(u)?;
+                        BsdfSample {
+                            wi,
+                            weight: Spectrum::ZERO,
+                            pdf: 0.0,
+                            lobe: LobeKind::Diffuse,
+                            eta: 1.0,
+                            scatter: Scatter::Transmission,
+                        }
+                    }
                 };
                 if bs.lobe == LobeKind::Specular {
                     // discrete probability of this delta event; its weight is the lobe's, under the coat
@@ -307,13 +326,16 @@ impl Bsdf {
     /// beneath reflect (their albedos, floored at 5%, dimmed by the coat). 0 without a coat.
     #[inline]
     fn coat_choice(&self, wo: Vec3) -> f32 {
-        let Bsdf::Principled { diffuse, metal, w, coat, .. } = self else { return 0.0 };
+        let Bsdf::Principled { diffuse, metal, w, coat, translucent, .. } = self else { return 0.0 };
         let c = coat.albedo(wo.z);
         if c <= 0.0 {
             return 0.0;
         }
-        let lobes = w[0] + w[1] + w[2];
-        let beneath = (w[0] * luminance(diffuse.base.albedo).max(0.05) + w[1] * luminance(metal.f0).max(0.05) + w[2])
+        let lobes = w[0] + w[1] + w[2] + translucent.weight;
+        let beneath = (w[0] * luminance(diffuse.base.albedo).max(0.05)
+            + w[1] * luminance(metal.f0).max(0.05)
+            + w[2]
+            + translucent.weight * luminance(translucent.albedo).max(0.05))
             / lobes.max(1e-12);
         let p = c / (c + luminance(coat.factor(wo.z)) * beneath);
         p.clamp(0.0, 0.95)
@@ -326,9 +348,10 @@ impl Bsdf {
             Bsdf::Lambert(_) | Bsdf::Layered(_) => false,
             Bsdf::Conductor(b) => b.is_delta(),
             Bsdf::Dielectric(b) => b.is_delta(),
-            Bsdf::Principled { metal, glass, w, coat, .. } => {
+            Bsdf::Principled { metal, glass, w, coat, translucent, .. } => {
                 // (the pass-through lobe is a delta lobe)
                 w[0] <= 0.0
+                    && !translucent.is_some()
                     && (w[1] <= 0.0 || metal.is_delta())
                     && (w[2] <= 0.0 || glass.is_delta())
                     && (!coat.is_some() || coat.is_smooth())
@@ -342,7 +365,9 @@ impl Bsdf {
     pub fn transmits(&self) -> bool {
         match self {
             Bsdf::Dielectric(b) => !b.is_delta(),
-            Bsdf::Principled { glass, w, .. } => w[2] > 0.0 && !glass.is_delta(),
+            Bsdf::Principled { glass, w, translucent, .. } => {
+                (w[2] > 0.0 && !glass.is_delta()) || translucent.is_some()
+            }
             _ => false,
         }
     }
@@ -442,8 +467,8 @@ impl Bsdf {
             Bsdf::Conductor(b) if sharp(b.roughness) => (0.0, 1.0, b.f0),
             Bsdf::Dielectric(b) if sharp(b.roughness) => (0.0, 1.0, b.tint),
             Bsdf::Conductor(_) | Bsdf::Dielectric(_) => (1.0, 0.0, Spectrum::ZERO),
-            Bsdf::Principled { metal, glass, w, .. } => {
-                let (mut rough, mut sharp_w, mut albedo) = (w[0], 0.0, Spectrum::ZERO);
+            Bsdf::Principled { metal, glass, w, translucent, .. } => {
+                let (mut rough, mut sharp_w, mut albedo) = (w[0] + translucent.weight, 0.0, Spectrum::ZERO);
                 for (wk, r, a) in [(w[1], metal.roughness, metal.f0), (w[2], glass.roughness, glass.tint)] {
                     if sharp(r) {
                         sharp_w += wk;
@@ -469,8 +494,11 @@ impl Bsdf {
             Bsdf::Conductor(b) => b.f0,
             Bsdf::Dielectric(b) => b.tint,
             Bsdf::Layered(b) => b.base.albedo,
-            Bsdf::Principled { diffuse, metal, glass, w, .. } => {
-                diffuse.base.albedo * w[0] + metal.f0 * w[1] + glass.tint * w[2]
+            Bsdf::Principled { diffuse, metal, glass, w, translucent, .. } => {
+                diffuse.base.albedo * w[0]
+                    + metal.f0 * w[1]
+                    + glass.tint * w[2]
+                    + translucent.albedo * translucent.weight
             }
         }
     }
@@ -486,7 +514,7 @@ mod tests {
     #[test]
     fn guides_look_through_mostly_mirror_like_surfaces() {
         let tinted = |w: [f32; 3], roughness: f32| match principled(w, roughness) {
-            Bsdf::Principled { diffuse, metal, glass, w, pass, pass_tint, coat } => Bsdf::Principled {
+            Bsdf::Principled { diffuse, metal, glass, w, pass, pass_tint, coat, translucent } => Bsdf::Principled {
                 diffuse,
                 metal: Conductor { f0: Spectrum::new(0.9, 0.6, 0.3), ..metal },
                 glass: Dielectric {
@@ -498,6 +526,7 @@ mod tests {
                 pass,
                 pass_tint,
                 coat,
+                translucent,
             },
             b => b,
         };
@@ -524,6 +553,7 @@ mod tests {
             pass: 0.0,
             pass_tint: Spectrum::ONE,
             coat: Coat::NONE,
+            translucent: Translucent::NONE,
         }
     }
 
@@ -549,6 +579,7 @@ mod tests {
             pass: 0.6,
             pass_tint: tint,
             coat: Coat::NONE,
+            translucent: Translucent::NONE,
         };
         let wo = Vec3::new(0.3, -0.2, 0.9).normalize();
         let mut s = crate::sampler::IndependentSampler::new(5, 0);
@@ -592,6 +623,7 @@ mod tests {
             pass,
             pass_tint: Spectrum::splat(0.5),
             coat,
+            translucent: Translucent::NONE,
         }
     }
 
@@ -646,5 +678,42 @@ mod tests {
         let (f, p, wi) = b.delta_eval(wo, false).unwrap();
         assert!((f.x - clear(0.0).albedo(wo.z)).abs() < 1e-6 && p > 0.0 && p < 1.0 && (wi.z - wo.z).abs() < 1e-6);
         assert!(b.delta_eval(wo, true).is_none() && !b.is_delta() && b.min_roughness() == 0.0);
+    }
+
+    /// Diffuse transmission (Translucent BSDF) in the mixture: a white translucent lobe sends
+    /// all light to the far side (white furnace 1, none on the viewer's side), beside a
+    /// diffuse lobe it shares the light by weight; sampling matches pdf (χ²); the surface
+    /// then transmits (light is sampled through it).
+    #[test]
+    fn translucent_lobe_transmits_diffusely() {
+        let mixed = |wd: f32, wt: f32, coat: Coat| Bsdf::Principled {
+            diffuse: Layered::plain(Lambert::new(Spectrum::splat(0.5))),
+            metal: Conductor { f0: Spectrum::ONE, roughness: 0.4, multiscatter: false },
+            glass: Dielectric::clear(1.5, 0.3),
+            w: [wd, 0.0, 0.0],
+            pass: 1.0 - wd - wt,
+            pass_tint: Spectrum::ONE,
+            coat,
+            translucent: Translucent { weight: wt, albedo: Spectrum::ONE },
+        };
+        let wo = Vec3::new(0.6, 0.0, 0.8);
+        let white = mixed(0.0, 1.0, Coat::NONE);
+        let (albedo, by_quadrature) = white_furnace(&white, wo, 200_000, 41);
+        assert!((albedo - 1.0).abs() < 1e-3 && (by_quadrature - 1.0).abs() < 0.01, "{albedo} {by_quadrature}");
+        assert!(white.eval(wo, Vec3::new(0.0, 0.6, 0.8)) == Spectrum::ZERO);
+        assert!(white.eval(wo, Vec3::new(0.0, 0.6, -0.8)).x > 0.0);
+        assert!(white.transmits() && !white.is_delta());
+        // half diffuse (albedo ½), half translucent: ½·½ + ½·1
+        let (albedo, _) = white_furnace(&mixed(0.5, 0.5, Coat::NONE), wo, 200_000, 42);
+        assert!((albedo - 0.75).abs() < 0.005, "{albedo}");
+        for b in [
+            mixed(0.5, 0.5, Coat::NONE),
+            mixed(0.3, 0.4, Coat::NONE),
+            mixed(0.6, 0.4, Coat { weight: 1.0, eta: 1.5, roughness: 0.2, tint: Spectrum::ONE }),
+        ] {
+            for wo in [Vec3::Z, Vec3::new(-0.5, 0.3, 0.81).normalize()] {
+                chi2_test(&b, wo, 43);
+            }
+        }
     }
 }

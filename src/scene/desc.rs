@@ -110,6 +110,10 @@ pub struct MaterialDesc {
     pub coat_roughness: f32,
     pub coat_ior: f32,
     pub coat_tint: [f32; 3],
+    /// Share of diffuse transmission (Translucent BSDF) among the BSDF's lobes, and its colour
+    /// when not the base colour.
+    pub translucency: f32,
+    pub translucent_color: Option<[f32; 3]>,
     /// Probability τ of passing straight through the surface (Blender's Transparent BSDF, or
     /// Principled alpha = 1 − τ as coverage); the other lobes share 1 − τ.
     pub transparency: f32,
@@ -149,6 +153,8 @@ impl Default for MaterialDesc {
             coat_roughness: 0.03,
             coat_ior: 1.5,
             coat_tint: [1.0; 3],
+            translucency: 0.0,
+            translucent_color: None,
             transparency: 0.0,
             transparent_color: [1.0; 3],
             pass_index: 0,

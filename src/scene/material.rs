@@ -4,7 +4,7 @@
 //! lobe (Transparent BSDF, alpha as coverage) that takes probability τ from all of them.
 
 use super::desc::MaterialDesc;
-use crate::bsdf::{Bsdf, Coat, Conductor, Dielectric, Lambert, Layered};
+use crate::bsdf::{Bsdf, Coat, Conductor, Dielectric, Lambert, Layered, Translucent};
 use crate::error::SceneError;
 use crate::math::Spectrum;
 use glam::Vec3;
@@ -40,6 +40,9 @@ pub struct Material {
     pub multiscatter: bool,
     /// The Principled coat over the other lobes (weight 0: none).
     pub coat: Coat,
+    /// Share of diffuse transmission among the lobes, and its colour (None: the base colour).
+    pub translucency: f32,
+    pub translucent_color: Option<Spectrum>,
     /// Pass-through probability τ and tint (Transparent BSDF, alpha as coverage).
     pub transparency: f32,
     pub transparent_color: Spectrum,
@@ -74,6 +77,7 @@ impl Material {
             d.coat,
             d.coat_roughness,
             d.coat_ior,
+            d.translucency,
         ];
         let lobe_colors = d
             .metal_color
@@ -83,6 +87,7 @@ impl Material {
             .flatten()
             .chain(d.transparent_color.iter())
             .chain(d.coat_tint.iter())
+            .chain(d.translucent_color.iter().flatten())
             .chain(d.metal_roughness.iter())
             .chain(d.glass_roughness.iter());
         if d.base_color.iter().chain(d.emission.iter()).chain(scalars.iter()).chain(lobe_colors).any(|x| !x.is_finite())
@@ -140,6 +145,8 @@ impl Material {
                 roughness: d.coat_roughness.clamp(0.0, 1.0),
                 tint: Vec3::from_array(d.coat_tint).max(Vec3::ZERO),
             },
+            translucency: d.translucency.clamp(0.0, 1.0),
+            translucent_color: d.translucent_color.map(|c| Vec3::from_array(c).clamp(Vec3::ZERO, Vec3::ONE)),
             transparency: d.transparency.clamp(0.0, 1.0),
             transparent_color: Vec3::from_array(d.transparent_color).clamp(Vec3::ZERO, Vec3::ONE),
             general: false,
@@ -167,8 +174,11 @@ impl Material {
     /// replace them).
     #[inline]
     pub fn bsdf_with(&self, front: bool, base_color: Spectrum, roughness: f32, tau: f32) -> Bsdf {
-        let (m, t) = (self.metallic, self.transmission);
-        let w = [(1.0 - m) * (1.0 - t) * (1.0 - tau), m * (1.0 - tau), (1.0 - m) * t * (1.0 - tau)];
+        let (m, t, tl) = (self.metallic, self.transmission, self.translucency);
+        let rest = (1.0 - tau) * (1.0 - tl);
+        let w = [(1.0 - m) * (1.0 - t) * rest, m * rest, (1.0 - m) * t * rest];
+        let translucent =
+            Translucent { weight: (1.0 - tau) * tl, albedo: self.translucent_color.unwrap_or(base_color) };
         // the specular layer has the same IOR seen from either side (Cycles inverts it on
         // back faces; opaque surfaces are rarely seen from behind)
         let diffuse = Layered {
@@ -196,8 +206,17 @@ impl Material {
             multiscatter: self.multiscatter,
         };
         let coat = self.coat;
-        if tau > 0.0 || self.general || coat.is_some() {
-            Bsdf::Principled { diffuse, metal, glass, w, pass: tau, pass_tint: self.transparent_color, coat }
+        if tau > 0.0 || self.general || coat.is_some() || translucent.is_some() {
+            Bsdf::Principled {
+                diffuse,
+                metal,
+                glass,
+                w,
+                pass: tau,
+                pass_tint: self.transparent_color,
+                coat,
+                translucent,
+            }
         } else if w[1] <= 0.0 && w[2] <= 0.0 && !diffuse.has_layer() {
             Bsdf::Lambert(diffuse.base)
         } else if w[1] <= 0.0 && w[2] <= 0.0 {
@@ -207,7 +226,16 @@ impl Material {
         } else if w[0] <= 0.0 && w[1] <= 0.0 {
             Bsdf::Dielectric(glass)
         } else {
-            Bsdf::Principled { diffuse, metal, glass, w, pass: 0.0, pass_tint: Spectrum::ZERO, coat }
+            Bsdf::Principled {
+                diffuse,
+                metal,
+                glass,
+                w,
+                pass: 0.0,
+                pass_tint: Spectrum::ZERO,
+                coat,
+                translucent: Translucent::NONE,
+            }
         }
     }
 }

@@ -1,6 +1,6 @@
 """Every method, with and without next-event estimation, converges to Cycles' image on
 scenes built the way artists build them in Blender, with Cycles rendered in the same test:
-a smooth-shaded low-poly room, an area light narrowed by Spread, a room of rough diffuse clay, a scaled spot and a spot of some radius, coated paint and varnish, a bulb in smooth, rough, frosted and orange glass, every Blender light type
+a smooth-shaded low-poly room, an area light narrowed by Spread, a room of rough diffuse clay, a scaled spot and a spot of some radius, coated paint and varnish, a translucent leaf and lampshade, a bulb in smooth, rough, frosted and orange glass, every Blender light type
 with a coloured world, mirror / glass / layered plastic, image textures (sRGB and Non-Color,
 alpha), Mix and Add shaders, and an HDRI world alone, as it is and turned by a Mapping node (tools/convergence.py builds and
 compares them; `python tools/convergence.py` regenerates docs/convergence.md the same way).
@@ -36,7 +36,8 @@ def test_every_method_converges_to_cycles(bpy_mod, tmp_out, name):
     scaled unevenly was +20% with block differences 75% — its cone was round — and a spot of
     radius 0.1 had block differences 2.6× the noise at its cone's edge, attenuated by the
     direction from its centre instead of each ray's) and the Principled coat (coat: −15%
-    and block differences 37% while the coat was left out). The textures and HDRI scenes failed for gdpt without
+    and block differences 37% while the coat was left out) and the Translucent BSDF
+    (translucent: a grey diffuse fallback before). The textures and HDRI scenes failed for gdpt without
     NEE until the mean's noise was measured from the seeds' image means: the reconstruction
     correlates blocks, and the independent-block σ understated it 3×; at 4× the samples both
     agree (6 seeds, L1 and L2)."""
