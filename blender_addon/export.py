@@ -810,6 +810,11 @@ def camera_dict(scene, cam_ob):
         d["film_transparent"] = True
     if cam.dof.use_dof:
         d["fstop"] = cam.dof.aperture_fstop
+        # the aperture's shape: blades (a polygon; fewer than 3 is round), their rotation and
+        # the anamorphic ratio, as Cycles reads them
+        d["aperture_blades"] = int(cam.dof.aperture_blades)
+        d["aperture_rotation"] = float(cam.dof.aperture_rotation)
+        d["aperture_ratio"] = float(cam.dof.aperture_ratio)
         focus = cam.dof.focus_distance
         if cam.dof.focus_object is not None:
             m = _matrix(cam_ob.matrix_world)

@@ -32,6 +32,10 @@ pub struct Camera {
     clip_end: f32,
     aperture_radius: f32,
     focus_distance: f32,
+    /// Polygonal aperture: corners (0 = round), rotation, and 1/anamorphic ratio.
+    blades: u32,
+    blade_rotation: f32,
+    inv_aperture_ratio: f32,
     /// Where a pixel's samples fall (pixel_filter.rs).
     pub filter: crate::pixel_filter::PixelFilter,
     /// The world seen by camera rays is left out of the image (CameraDesc::film_transparent).
@@ -169,6 +173,13 @@ impl Camera {
             clip_end,
             aperture_radius,
             focus_distance,
+            blades: if d.aperture_blades >= 3 { d.aperture_blades.min(1024) } else { 0 },
+            blade_rotation: if d.aperture_rotation.is_finite() { d.aperture_rotation } else { 0.0 },
+            inv_aperture_ratio: if d.aperture_ratio.is_finite() && d.aperture_ratio > 0.0 {
+                1.0 / d.aperture_ratio
+            } else {
+                1.0
+            },
             filter,
             film_transparent: d.film_transparent,
         })
@@ -198,6 +209,27 @@ impl Camera {
         Vec2::new(self.center.x + (u - 0.5) * self.ext.x, self.center.y + (v - 0.5) * self.ext.y)
     }
 
+    /// A point of the unit aperture, uniform over its area, as Cycles samples it: the disk,
+    /// or the regular polygon of `blades` corners inscribed in it (a corner's triangle chosen
+    /// by u.x, a uniform point in it, turned by the rotation), its width divided by the
+    /// anamorphic ratio.
+    pub fn aperture_point(&self, u: Vec2) -> Vec2 {
+        let mut p = if self.blades < 3 {
+            square_to_disk_concentric(u)
+        } else {
+            let n = self.blades as f32;
+            let corner = (u.x * n).floor().min(n - 1.0);
+            let s = (u.x * n - corner).clamp(0.0, 1.0).sqrt();
+            let (a, b) = (1.0 - s, u.y * s); // barycentrics of the two outer corners
+            let half = std::f32::consts::PI / n;
+            let q = Vec2::new((a + b) * half.cos(), (a - b) * half.sin());
+            let (sin, cos) = (self.blade_rotation + corner * 2.0 * half).sin_cos();
+            Vec2::new(cos * q.x - sin * q.y, sin * q.x + cos * q.y)
+        };
+        p.x *= self.inv_aperture_ratio;
+        p
+    }
+
     /// Primary ray through `raster` (pixels, origin top-left), lens sample `u_lens`.
     pub fn generate_ray(&self, raster: Vec2, u_lens: Vec2) -> CameraRay {
         let q = self.plane_point(raster);
@@ -205,7 +237,7 @@ impl Camera {
             Projection::Perspective => {
                 let d = Vec3::new(q.x, q.y, -1.0);
                 if self.aperture_radius > 0.0 {
-                    let lens = square_to_disk_concentric(u_lens) * self.aperture_radius;
+                    let lens = self.aperture_point(u_lens) * self.aperture_radius;
                     let focus = d * self.focus_distance;
                     let o = Vec3::new(lens.x, lens.y, 0.0);
                     let dir = focus - o;
@@ -347,5 +379,45 @@ mod tests {
         let mut d = look_down_neg_z();
         d.resolution_percentage = 0;
         assert!(Camera::new(&d).is_err());
+    }
+
+    /// The aperture as Cycles samples it: a pentagon of blades inscribed in the unit disk,
+    /// turned, its width halved by an anamorphic ratio of 2 — every point inside it, spread
+    /// uniformly (its mean squared radius that of the pentagon, R²(2 + cos(2π/n))/6, within
+    /// 4σ); no blades is the disk (mean squared radius ½).
+    #[test]
+    fn the_aperture_is_the_blades_polygon_squeezed_by_the_ratio() {
+        use crate::sampler::{IndependentSampler, Sampler};
+        let (n, rot, ratio) = (5u32, 0.4f32, 2.0f32);
+        let cam = Camera::new(&CameraDesc {
+            fstop: 2.8,
+            aperture_blades: n,
+            aperture_rotation: rot,
+            aperture_ratio: ratio,
+            ..look_down_neg_z()
+        })
+        .unwrap();
+        let round = Camera::new(&CameraDesc { fstop: 2.8, ..look_down_neg_z() }).unwrap();
+        let half = std::f32::consts::PI / n as f32;
+        let mut s = IndependentSampler::new(3, 0);
+        let count = 200_000;
+        let (mut m2, mut m2_round) = (0.0f64, 0.0f64);
+        for _ in 0..count {
+            let u = s.next_2d();
+            let p = cam.aperture_point(u);
+            let q = Vec2::new(p.x * ratio, p.y); // undo the ratio
+                                                 // inside: within every edge (edge normals at rot + 2k·π/n, apothem cos(π/n))
+            for k in 0..n {
+                let a = rot + 2.0 * half * k as f32;
+                assert!(q.dot(Vec2::new(a.cos(), a.sin())) <= half.cos() + 1e-5, "{q} outside edge {k}");
+            }
+            m2 += q.length_squared() as f64;
+            m2_round += round.aperture_point(u).length_squared() as f64;
+        }
+        let want = (2.0 + (2.0 * half as f64).cos()) / 6.0;
+        // (|q|² ≤ 1: its σ is below ½)
+        let tol = 4.0 * 0.5 / (count as f64).sqrt();
+        assert!((m2 / count as f64 - want).abs() < tol, "{} vs {want}", m2 / count as f64);
+        assert!((m2_round / count as f64 - 0.5).abs() < tol);
     }
 }

@@ -249,6 +249,12 @@ pub struct CameraDesc {
     /// Depth of field: f-stop (0 = pinhole) and focus distance along the view axis.
     pub fstop: f32,
     pub focus_distance: f32,
+    /// The aperture's shape, as Blender's: blades (a regular polygon of that many corners
+    /// inscribed in the round aperture; below 3, round), their rotation [rad], and the
+    /// anamorphic ratio (the bokeh's width divided by it).
+    pub aperture_blades: u32,
+    pub aperture_rotation: f32,
+    pub aperture_ratio: f32,
     /// Render region (Blender's border): [x, y, width, height] in pixels of the final image,
     /// y from the top. Only that window is rendered; the image is the window's size.
     pub window: Option<[u32; 4]>,
@@ -284,6 +290,9 @@ impl Default for CameraDesc {
             pixel_aspect_y: 1.0,
             fstop: 0.0,
             focus_distance: 10.0,
+            aperture_blades: 0,
+            aperture_rotation: 0.0,
+            aperture_ratio: 1.0,
             window: None,
             pixel_filter: "BLACKMAN_HARRIS".into(),
             filter_width: 1.5,
