@@ -143,7 +143,8 @@ impl Material {
                 // (Cycles clamps the IOR at 1; the albedo table covers η ≤ 3)
                 eta: d.coat_ior.clamp(1.0, 3.0),
                 roughness: d.coat_roughness.clamp(0.0, 1.0),
-                tint: Vec3::from_array(d.coat_tint).max(Vec3::ZERO),
+                // (a tint above 1 would add energy at every crossing, as a base colour above 1)
+                tint: Vec3::from_array(d.coat_tint).clamp(Vec3::ZERO, Vec3::ONE),
             },
             translucency: d.translucency.clamp(0.0, 1.0),
             translucent_color: d.translucent_color.map(|c| Vec3::from_array(c).clamp(Vec3::ZERO, Vec3::ONE)),
@@ -267,6 +268,33 @@ mod tests {
             let p = glass_of(&principled, front);
             assert!((p.tint - Vec3::new(0.9, 0.7, 0.5)).abs().max_element() < 1e-6, "{}", p.tint);
             assert_eq!(p.reflection_tint, Vec3::ONE);
+        }
+    }
+
+    /// Out-of-range layer inputs cannot add energy: a coat tint above 1 (a linked colour can
+    /// be), a coat weight, translucency or diffuse roughness outside [0, 1] are clamped, so
+    /// a white furnace of the material stays at most 1. A tint of 5 made a Cornell box's
+    /// image mean 4·10³³ before.
+    #[test]
+    fn out_of_range_layer_inputs_are_clamped() {
+        let d = MaterialDesc {
+            coat: 5.0,
+            coat_tint: [-1.0, 5.0, 0.5],
+            coat_ior: 0.0,
+            translucency: 2.0,
+            translucent_color: Some([9.0, -1.0, 0.5]),
+            diffuse_roughness: 7.0,
+            base_color: [1.0; 3],
+            ..MaterialDesc::default()
+        };
+        let m = Material::from_desc(&d, 0).unwrap();
+        assert_eq!(m.coat.weight, 1.0);
+        assert_eq!(m.coat.tint, Vec3::new(0.0, 1.0, 0.5));
+        assert!(m.coat.eta >= 1.0 && m.translucency == 1.0 && m.diffuse_roughness == 1.0);
+        let b = m.bsdf(true);
+        for wo in [Vec3::Z, Vec3::new(0.6, 0.0, 0.8)] {
+            let (albedo, _) = crate::bsdf::testing::white_furnace(&b, wo, 50_000, 3);
+            assert!(albedo <= 1.0 + 0.01, "{albedo}");
         }
     }
 }
