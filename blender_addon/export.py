@@ -319,6 +319,9 @@ def _node_params(node, textures, warnings, what):
     else:
         warnings.append(f"{what}: shader node '{node.name}' ({t}) is not supported; rendered as grey diffuse")
     _normal_map(node, out, textures, warnings, what)
+    if out.get("coat", 0.0) > 0.0 and "normal_texture" in out:
+        warnings.append(f"{what}: the coat of '{node.name}' follows its normal map (Cycles' coat keeps the "
+                        f"unmapped normal unless its Coat Normal is linked)")
     if t in ("BSDF_PRINCIPLED", "BSDF_GLOSSY", "BSDF_ANISOTROPIC", "BSDF_GLASS", "BSDF_REFRACTION"):
         # Multiscatter GGX (Blender's default) compensates the energy the metal and glass lobes
         # lose to single scattering (the Refraction BSDF has no such option)

@@ -1003,9 +1003,18 @@ def test_the_coat_reaches_the_core_from_blender_and_usd(bpy_mod, tmp_out):
             keys = ("coat", "coat_roughness", "coat_ior", "coat_tint") if materialx else ("coat", "coat_roughness")
             for k in keys:
                 assert got[name][k] == pytest.approx(want[k], abs=1e-4), (materialx, name, k)
-    # inside a Mix Shader
     nt = bpy.data.materials["Paint"].node_tree
     principled = next(n for n in nt.nodes if n.type == "BSDF_PRINCIPLED")
+    # over a normal map: the coat follows it here, Cycles' keeps the unmapped normal (named)
+    tex, normal_map = nt.nodes.new("ShaderNodeTexImage"), nt.nodes.new("ShaderNodeNormalMap")
+    tex.image = bpy.data.images.new("Bumps", 4, 4)
+    nt.links.new(tex.outputs["Color"], normal_map.inputs["Color"])
+    nt.links.new(normal_map.outputs["Normal"], principled.inputs["Normal"])
+    warnings = []
+    params = export.material_params(bpy.data.materials["Paint"], warnings, export.Textures())
+    assert params["coat"] == pytest.approx(0.7) and "normal_texture" in params
+    assert any("follows its normal map" in w for w in warnings), warnings
+    # inside a Mix Shader
     mix, diffuse = nt.nodes.new("ShaderNodeMixShader"), nt.nodes.new("ShaderNodeBsdfDiffuse")
     nt.links.new(principled.outputs[0], mix.inputs[1])
     nt.links.new(diffuse.outputs[0], mix.inputs[2])
