@@ -279,6 +279,7 @@ def _node_params(node, textures, warnings, what):
             out["glass_reflection_tint"] = (1.0, 1.0, 1.0)
             out["glass_sqrt_tint"] = True
         _warn_unsupported_layers(node, warnings, what)
+        _specular_tint(node, out, warnings, what)
         _emission(node, "Emission Color", "Emission Strength", out, textures, warnings, what, (0, 0, 0, 1), 0.0)
         _coat(node, out, warnings, what)
         alpha_tex = _linked_texture(node, "Alpha", textures, warnings, what, output="Alpha")
@@ -410,9 +411,20 @@ def _warn_unsupported_layers(node, warnings, what):
         sock = node.inputs.get(name)
         if sock is not None and (sock.is_linked or abs(float(sock.default_value) - off) > 1e-6):
             warnings.append(f"{what}: Principled '{name}' is not rendered (the layer is left out)")
-    tint = node.inputs.get("Specular Tint")
-    if tint is not None and (tint.is_linked or any(abs(c - 1.0) > 1e-6 for c in tuple(tint.default_value)[:3])):
-        warnings.append(f"{what}: Principled 'Specular Tint' is not rendered (white is used)")
+
+
+
+def _specular_tint(node, out, warnings, what):
+    """Specular Tint: it colours the dielectric specular layer over the base (F0·tint, as
+    Cycles); the metallic and transmissive parts are rendered untinted, with a warning."""
+    tint = tuple(min(max(float(c), 0.0), 1.0) for c in _input_value(node, "Specular Tint", warnings, what,
+                                                                    (1.0, 1.0, 1.0, 1.0))[:3])
+    if all(abs(c - 1.0) <= 1e-6 for c in tint):
+        return
+    out["specular_tint"] = tint
+    if out.get("metallic", 0.0) > 0.0 or out.get("transmission", 0.0) > 0.0:
+        warnings.append(f"{what}: Principled 'Specular Tint' colours the dielectric layer only; the metallic "
+                        f"and transmissive parts are rendered untinted")
 
 
 def _shader_leaves(node, weight, leaves, textures, warnings, what, branch=()):
@@ -574,6 +586,11 @@ def _combine(leaves, warnings, what):
     if len(set(mix.iors)) > 1:
         warnings.append(f"{what}: the mixed glass lobes have different IOR; {mix.iors[0]} is used")
     _combined_textures(mix, out, colour, warnings, what)
+    tinted = [p for _, p in leaves if "specular_tint" in p]
+    if tinted and mix.bsdf_leaves == 1:
+        out["specular_tint"] = tinted[0]["specular_tint"]
+    elif tinted:
+        warnings.append(f"{what}: a Principled Specular Tint inside a Mix/Add Shader is not rendered (white is used)")
     if coated and mix.bsdf_leaves == 1:
         out.update({k: coated[0][k] for k in COAT_KEYS})  # one coated Principled beside pass-through
     elif coated:

@@ -149,6 +149,7 @@ fn parse_material(d: &Bound<'_, PyDict>) -> PyResult<MaterialDesc> {
         coat_roughness: get_or(d, "coat_roughness", def.coat_roughness, &ctx)?,
         coat_ior: get_or(d, "coat_ior", def.coat_ior, &ctx)?,
         coat_tint: rgb(d, "coat_tint", def.coat_tint, &ctx)?,
+        specular_tint: rgb(d, "specular_tint", def.specular_tint, &ctx)?,
         translucency: get_or(d, "translucency", def.translucency, &ctx)?,
         translucent_color: get_or(d, "translucent_color", None, &ctx)?,
         transparency: get_or(d, "transparency", def.transparency, &ctx)?,
@@ -798,6 +799,7 @@ fn builtin_scene<'py>(py: Python<'py>, name: &str, width: u32, height: u32) -> P
             ("emission", m.emission),
             ("transparent_color", m.transparent_color),
             ("coat_tint", m.coat_tint),
+            ("specular_tint", m.specular_tint),
         ] {
             md.set_item(key, c)?;
         }

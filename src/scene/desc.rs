@@ -110,6 +110,9 @@ pub struct MaterialDesc {
     pub coat_roughness: f32,
     pub coat_ior: f32,
     pub coat_tint: [f32; 3],
+    /// Specular Tint of the dielectric layer over the diffuse base (Principled; white:
+    /// untinted): its F0 becomes F0·tint, as in Cycles.
+    pub specular_tint: [f32; 3],
     /// Share of diffuse transmission (Translucent BSDF) among the BSDF's lobes, and its colour
     /// when not the base colour.
     pub translucency: f32,
@@ -153,6 +156,7 @@ impl Default for MaterialDesc {
             coat_roughness: 0.03,
             coat_ior: 1.5,
             coat_tint: [1.0; 3],
+            specular_tint: [1.0; 3],
             translucency: 0.0,
             translucent_color: None,
             transparency: 0.0,

@@ -40,6 +40,8 @@ pub struct Material {
     pub multiscatter: bool,
     /// The Principled coat over the other lobes (weight 0: none).
     pub coat: Coat,
+    /// Specular Tint of the dielectric layer over the base (white: untinted).
+    pub specular_tint: Spectrum,
     /// Share of diffuse transmission among the lobes, and its colour (None: the base colour).
     pub translucency: f32,
     pub translucent_color: Option<Spectrum>,
@@ -87,6 +89,7 @@ impl Material {
             .flatten()
             .chain(d.transparent_color.iter())
             .chain(d.coat_tint.iter())
+            .chain(d.specular_tint.iter())
             .chain(d.translucent_color.iter().flatten())
             .chain(d.metal_roughness.iter())
             .chain(d.glass_roughness.iter());
@@ -146,6 +149,7 @@ impl Material {
                 // (a tint above 1 would add energy at every crossing, as a base colour above 1)
                 tint: Vec3::from_array(d.coat_tint).clamp(Vec3::ZERO, Vec3::ONE),
             },
+            specular_tint: Vec3::from_array(d.specular_tint).clamp(Vec3::ZERO, Vec3::ONE),
             translucency: d.translucency.clamp(0.0, 1.0),
             translucent_color: d.translucent_color.map(|c| Vec3::from_array(c).clamp(Vec3::ZERO, Vec3::ONE)),
             transparency: d.transparency.clamp(0.0, 1.0),
@@ -187,6 +191,7 @@ impl Material {
             eta: self.specular_ior,
             roughness,
             coverage: self.specular,
+            tint: self.specular_tint,
         };
         // a roughness texture drives every lobe; else each lobe may have its own
         let (rm, rg) = if self.roughness_texture.is_some() {

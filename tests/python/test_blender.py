@@ -802,6 +802,40 @@ def test_polygonal_and_anamorphic_bokeh_agree_with_cycles(bpy_mod, tmp_out):
     assert_agrees_with_cycles(bpy_mod, build, tmp_out, "bokeh", spp=(4096, 4096), block=2)
 
 
+def test_specular_tint_agrees_with_cycles(bpy_mod, tmp_out):
+    """Principled Specular Tint colours the dielectric layer (F0·tint, the base dimmed by the
+    layer's largest channel) as in Cycles: a black and a dark blue ball of roughness 0.3
+    and 0 under an orange tint, in a grey room. Was rendered white with a warning: block
+    differences 3.2× the noise."""
+    sys.path.insert(0, str(ROOT / "tools"))
+    import convergence
+
+    def build(bpy, engine, spp, seed):
+        scene, _ = convergence._grey_room(bpy, smooth=False)
+        for name, colour, roughness, x in (("Black", (0.0, 0.0, 0.0, 1.0), 0.3, -0.3),
+                                           ("Blue", (0.05, 0.05, 0.3, 1.0), 0.0, 0.4)):
+            mat = convergence._material(bpy, name, "ShaderNodeBsdfPrincipled", **{
+                "Base Color": colour, "Roughness": roughness, "Specular Tint": (1.0, 0.4, 0.05, 1.0)})
+            convergence._uv_sphere(bpy, scene, name, (x, 0.2, 0.35), 0.3, 32, 16, mat, smooth=True)
+        light = bpy.data.lights.new("Area", "AREA")
+        light.energy, light.size = 80.0, 0.8
+        ob = bpy.data.objects.new("Area", light)
+        ob.location = (0.0, -0.4, 1.4)
+        scene.collection.objects.link(ob)
+        convergence._camera_and_world(bpy, scene)
+        if engine == "CYCLES":
+            from gdmlt_bench.peers import cycles_unbiased
+
+            cycles_unbiased(scene, spp, seed, scene.gdmlt.max_bounces)
+        else:
+            scene.render.engine = "GDMLT"
+            scene.gdmlt.samples, scene.gdmlt.seed, scene.gdmlt.method = spp, seed, "PT"
+            scene.gdmlt.use_adaptive_sampling = False
+        return scene
+
+    assert_agrees_with_cycles(bpy_mod, build, tmp_out, "tint", spp=(1024, 512), block=5)
+
+
 def test_hdri_world_agrees_with_cycles(bpy_mod, tmp_out):
     """Equirectangular mapping (axes as Cycles), linear EXR data, importance sampling + MIS."""
     assert_agrees_with_cycles(bpy_mod, _hdri_scene, tmp_out, "hdri", block=5)
