@@ -957,7 +957,7 @@ def test_usd_materialx_materials_match_the_addons_translation(bpy_mod, tmp_out, 
             continue
         want, got = export.material_params(mat, [], textures), read[mat.name]
         metal, glass = want.get("metallic", 0.0), want.get("transmission", 0.0)
-        keys = ["metallic", "transmission", "emission", "diffuse_roughness", "coat"]
+        keys = ["metallic", "transmission", "emission", "diffuse_roughness", "coat", "specular_tint"]
         keys += ["roughness"] if metal > 0 or glass > 0 or want.get("specular_ior", 1.0) > 1.0 else []
         keys += ["ior"] if glass > 0 else []
         keys += ["base_color"] if "base_color_texture" not in want else []
@@ -1021,9 +1021,12 @@ def test_the_coat_reaches_the_core_from_blender_and_usd(bpy_mod, tmp_out):
     import convergence
 
     convergence.coat(bpy)
+    varnish = next(n for n in bpy.data.materials["Varnish"].node_tree.nodes if n.type == "BSDF_PRINCIPLED")
+    varnish.inputs["Specular Tint"].default_value = (1.0, 0.5, 0.2, 1.0)  # (and Specular Tint the same way)
     desc, warnings = export.export_scene(bpy.context.evaluated_depsgraph_get())
     assert warnings == []
     mats = {m["name"]: m for m in desc["materials"]}
+    assert mats["Varnish"]["specular_tint"] == pytest.approx((1.0, 0.5, 0.2))
     paint = mats["Paint"]
     assert (paint["coat"], paint["coat_roughness"], paint["coat_ior"]) == pytest.approx((0.7, 0.2, 1.6))
     assert paint["coat_tint"] == pytest.approx((0.9, 0.5, 0.2))
@@ -1035,6 +1038,8 @@ def test_the_coat_reaches_the_core_from_blender_and_usd(bpy_mod, tmp_out):
         for name in ("Paint", "Varnish"):
             want = mats[name]
             keys = ("coat", "coat_roughness", "coat_ior", "coat_tint") if materialx else ("coat", "coat_roughness")
+            if materialx and name == "Varnish":
+                keys += ("specular_tint",)
             for k in keys:
                 assert got[name][k] == pytest.approx(want[k], abs=1e-4), (materialx, name, k)
     nt = bpy.data.materials["Paint"].node_tree
