@@ -415,16 +415,17 @@ def _warn_unsupported_layers(node, warnings, what):
 
 
 def _specular_tint(node, out, warnings, what):
-    """Specular Tint: it colours the dielectric specular layer over the base (F0·tint, as
-    Cycles); the metallic and transmissive parts are rendered untinted, with a warning."""
+    """Specular Tint: it colours the dielectric specular layer over the base (F0·tint) and the
+    metal's edge (its F82 tint), as Cycles; the transmissive part is rendered untinted, with a
+    warning."""
     tint = tuple(min(max(float(c), 0.0), 1.0) for c in _input_value(node, "Specular Tint", warnings, what,
                                                                     (1.0, 1.0, 1.0, 1.0))[:3])
     if all(abs(c - 1.0) <= 1e-6 for c in tint):
         return
     out["specular_tint"] = tint
-    if out.get("metallic", 0.0) > 0.0 or out.get("transmission", 0.0) > 0.0:
-        warnings.append(f"{what}: Principled 'Specular Tint' colours the dielectric layer only; the metallic "
-                        f"and transmissive parts are rendered untinted")
+    if out.get("transmission", 0.0) > 0.0:
+        warnings.append(f"{what}: Principled 'Specular Tint' is not applied to the transmissive part (its "
+                        f"glass reflects untinted)")
 
 
 def _shader_leaves(node, weight, leaves, textures, warnings, what, branch=()):

@@ -240,9 +240,8 @@ class _Reader:
             tint = tuple(min(max(float(c), 0.0), 1.0) for c in p(surface, "specular_color", (1.0, 1.0, 1.0)))
             if any(abs(c - 1.0) > 1e-6 for c in tint):  # (Blender writes its Specular Tint here)
                 out["specular_tint"] = tint
-                if out["metallic"] > 0.0 or out["transmission"] > 0.0:
-                    self.warn(f"{what}: OpenPBR 'specular_color' colours the dielectric layer only; the "
-                              f"metallic and transmissive parts are rendered untinted")
+                if out["transmission"] > 0.0:
+                    self.warn(f"{what}: OpenPBR 'specular_color' is not applied to the transmissive part")
             self._normal_input(surface, "geometry_normal", out, what)
             return True
         if kind != "ND_surface":

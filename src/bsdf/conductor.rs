@@ -1,6 +1,9 @@
 //! Conductors: a perfect mirror (roughness at or below the specular threshold) or a GGX
 //! microfacet conductor (Walter et al. 2007) with visible-normal sampling. Fresnel: Schlick's
-//! approximation with F0 = the base colour (Blender's metallic colour).
+//! approximation with F0 = the base colour (Blender's metallic colour), bent at grazing
+//! angles by the F82 tint as Cycles' Principled metal (Hoffman 2023's F82-tint model:
+//! F = Schlick(F0) − b·μ(1 − μ)⁶, b chosen so that F(1/7) = F82·Schlick(F0, 1/7); F82 = the
+//! Specular Tint, white: plain Schlick).
 //!
 //! Blender's "Multiscatter GGX" (its default) adds the energy single scattering loses: the
 //! lobe is scaled by 1 + F_ms·(1 − E(θo))/E(θo), where E is the white lobe's albedo and
@@ -21,6 +24,8 @@ pub struct Conductor {
     pub roughness: f32,
     /// Energy compensation for multiple scattering (Blender's Multiscatter GGX).
     pub multiscatter: bool,
+    /// The F82 tint (white: Schlick's Fresnel).
+    pub f82: Spectrum,
 }
 
 #[inline]
@@ -30,6 +35,23 @@ fn schlick(f0: Spectrum, cos: f32) -> Spectrum {
 }
 
 impl Conductor {
+    /// b of the F82-tint model: Schlick(F0, 1/7)·(1 − F82) / ((1/7)(6/7)⁶).
+    #[inline]
+    fn f82_b(&self) -> Spectrum {
+        let f = 6.0f32 / 7.0;
+        schlick(self.f0, 1.0 / 7.0) * (7.0 / f.powi(6)) * (Spectrum::ONE - self.f82)
+    }
+
+    /// The Fresnel term at cos θ.
+    #[inline]
+    fn fresnel(&self, cos: f32) -> Spectrum {
+        if self.f82 == Spectrum::ONE {
+            return schlick(self.f0, cos);
+        }
+        let c = cos.clamp(0.0, 1.0);
+        (schlick(self.f0, c) - self.f82_b() * (c * (1.0 - c).powi(6))).clamp(Spectrum::ZERO, Spectrum::ONE)
+    }
+
     #[inline]
     pub fn is_delta(&self) -> bool {
         self.roughness <= SPECULAR_ROUGHNESS_THRESHOLD
@@ -43,8 +65,11 @@ impl Conductor {
         }
         let e = ggx_albedo(cos_o, self.roughness).max(1e-3);
         let e_avg = ggx_albedo_average(self.roughness);
-        // hemispherical average of Schlick's Fresnel: F0 + (1 − F0)/21
-        let f_avg = self.f0 + (Spectrum::ONE - self.f0) / 21.0;
+        // hemispherical average of the Fresnel term: F0 + (1 − F0)/21 − b/126 (2∫μ²(1−μ)⁶ dμ = 1/126)
+        let mut f_avg = self.f0 + (Spectrum::ONE - self.f0) / 21.0;
+        if self.f82 != Spectrum::ONE {
+            f_avg -= self.f82_b() / 126.0;
+        }
         let f_ms = f_avg * e_avg / (Spectrum::ONE - f_avg * (1.0 - e_avg));
         Spectrum::ONE + f_ms * ((1.0 - e) / e)
     }
@@ -56,7 +81,7 @@ impl Conductor {
         let h = (wo + wi).normalize();
         let g = Ggx::from_roughness(self.roughness);
         // f·cos θi = F·D·G2 / (4 cos θo)
-        schlick(self.f0, wo.dot(h)) * (g.d(h) * g.g2(wo, wi) / (4.0 * wo.z)) * self.energy_scale(wo.z)
+        self.fresnel(wo.dot(h)) * (g.d(h) * g.g2(wo, wi) / (4.0 * wo.z)) * self.energy_scale(wo.z)
     }
 
     pub fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
@@ -73,7 +98,7 @@ impl Conductor {
         if !self.is_delta() || wo.z <= 0.0 {
             return None;
         }
-        Some((schlick(self.f0, wo.z), 1.0, Vec3::new(-wo.x, -wo.y, wo.z)))
+        Some((self.fresnel(wo.z), 1.0, Vec3::new(-wo.x, -wo.y, wo.z)))
     }
 
     pub fn sample(&self, wo: Vec3, u: Vec2) -> Option<BsdfSample> {
@@ -84,7 +109,7 @@ impl Conductor {
             let wi = Vec3::new(-wo.x, -wo.y, wo.z);
             return Some(BsdfSample {
                 wi,
-                weight: schlick(self.f0, wo.z),
+                weight: self.fresnel(wo.z),
                 pdf: 1.0,
                 lobe: LobeKind::Specular,
                 eta: 1.0,
@@ -102,7 +127,7 @@ impl Conductor {
             return None;
         }
         // weight = F·G2/G1(wo) (the VNDF estimator)
-        let weight = schlick(self.f0, wo.dot(h)) * (g.g2(wo, wi) / g.g1(wo)) * self.energy_scale(wo.z);
+        let weight = self.fresnel(wo.dot(h)) * (g.g2(wo, wi) / g.g1(wo)) * self.energy_scale(wo.z);
         Some(BsdfSample { wi, weight, pdf, lobe: LobeKind::Diffuse, eta: 1.0, scatter: Scatter::Glossy })
     }
 }
@@ -118,7 +143,8 @@ mod tests {
     #[test]
     fn rough_conductor_chi2() {
         for r in [0.3f32, 0.5, 0.7, 1.0] {
-            let b = Bsdf::Conductor(Conductor { f0: Spectrum::ONE, roughness: r, multiscatter: false });
+            let b =
+                Bsdf::Conductor(Conductor { f0: Spectrum::ONE, roughness: r, multiscatter: false, f82: Spectrum::ONE });
             for wo in [Vec3::Z, Vec3::new(0.6, 0.0, 0.8), Vec3::new(-0.9, 0.2, 0.15).normalize()] {
                 chi2_test(&b, wo, 7);
             }
@@ -130,7 +156,8 @@ mod tests {
     #[test]
     fn rough_conductor_white_furnace() {
         for r in [0.1f32, 0.3, 0.5, 1.0] {
-            let b = Bsdf::Conductor(Conductor { f0: Spectrum::ONE, roughness: r, multiscatter: false });
+            let b =
+                Bsdf::Conductor(Conductor { f0: Spectrum::ONE, roughness: r, multiscatter: false, f82: Spectrum::ONE });
             for wo in [Vec3::Z, Vec3::new(0.6, 0.0, 0.8)] {
                 let (s, q) = white_furnace(&b, wo, 400_000, 3);
                 assert!(s <= 1.0 + 1e-3 && (r > 0.5 || s > 0.75), "r={r} sampled albedo {s}");
@@ -148,7 +175,7 @@ mod tests {
 
     #[test]
     fn mirror_reflects_with_fresnel_one_at_f0_one() {
-        let b = Conductor { f0: Spectrum::ONE, roughness: 0.0, multiscatter: true };
+        let b = Conductor { f0: Spectrum::ONE, roughness: 0.0, multiscatter: true, f82: Spectrum::ONE };
         let wo = Vec3::new(0.3, -0.2, 0.93).normalize();
         let s = b.sample(wo, Vec2::new(0.5, 0.5)).unwrap();
         assert!((s.wi - Vec3::new(-wo.x, -wo.y, wo.z)).length() < 1e-6);
@@ -163,17 +190,52 @@ mod tests {
     fn multiscatter_conductor_conserves_energy() {
         for r in [0.2f32, 0.5, 0.8, 1.0] {
             for wo in [Vec3::Z, Vec3::new(0.6, 0.0, 0.8), Vec3::new(0.9, 0.0, 0.2).normalize()] {
-                let white = Bsdf::Conductor(Conductor { f0: Spectrum::ONE, roughness: r, multiscatter: true });
+                let white = Bsdf::Conductor(Conductor {
+                    f0: Spectrum::ONE,
+                    roughness: r,
+                    multiscatter: true,
+                    f82: Spectrum::ONE,
+                });
                 let (a, _) = white_furnace(&white, wo, 200_000, 11);
                 assert!((a - 1.0).abs() < 0.015, "r={r} wo={wo}: albedo {a}");
                 let gold = Spectrum::new(0.9, 0.7, 0.3);
-                let ms = Bsdf::Conductor(Conductor { f0: gold, roughness: r, multiscatter: true });
-                let ss = Bsdf::Conductor(Conductor { f0: gold, roughness: r, multiscatter: false });
+                let ms = Bsdf::Conductor(Conductor { f0: gold, roughness: r, multiscatter: true, f82: Spectrum::ONE });
+                let ss = Bsdf::Conductor(Conductor { f0: gold, roughness: r, multiscatter: false, f82: Spectrum::ONE });
                 let (a_ms, a_ss) = (white_furnace(&ms, wo, 100_000, 12).0, white_furnace(&ss, wo, 100_000, 12).0);
                 assert!(a_ss < a_ms && a_ms < 1.0, "r={r}: single {a_ss}, multi {a_ms}");
             }
-            let b = Bsdf::Conductor(Conductor { f0: Spectrum::new(0.9, 0.7, 0.3), roughness: r, multiscatter: true });
+            let b = Bsdf::Conductor(Conductor {
+                f0: Spectrum::new(0.9, 0.7, 0.3),
+                roughness: r,
+                multiscatter: true,
+                f82: Spectrum::ONE,
+            });
             chi2_test(&b, Vec3::new(0.6, 0.0, 0.8), 13);
         }
+    }
+
+    /// The F82-tint Fresnel (Principled metal's Specular Tint): F(1) = F0, F(0) = 1,
+    /// F(1/7) = F82·Schlick(F0, 1/7); its hemispherical average 2∫F(μ)μ dμ is the closed form
+    /// the multiscatter scale uses; white F82 is Schlick's; sampling matches pdf (χ²).
+    #[test]
+    fn f82_tint_bends_the_edge_as_its_definition() {
+        let (f0, f82) = (Spectrum::new(0.95, 0.65, 0.3), Spectrum::new(0.9, 0.5, 0.8));
+        let c = Conductor { f0, roughness: 0.3, multiscatter: true, f82 };
+        assert!((c.fresnel(1.0) - f0).abs().max_element() < 1e-6);
+        assert!((c.fresnel(0.0) - Spectrum::ONE).abs().max_element() < 1e-6);
+        let want = f82 * schlick(f0, 1.0 / 7.0);
+        assert!((c.fresnel(1.0 / 7.0) - want).abs().max_element() < 1e-5, "{} vs {want}", c.fresnel(1.0 / 7.0));
+        let n = 100_000;
+        let avg = (0..n).fold(Spectrum::ZERO, |a, k| {
+            let mu = (k as f32 + 0.5) / n as f32;
+            a + c.fresnel(mu) * (2.0 * mu / n as f32)
+        });
+        let closed = f0 + (Spectrum::ONE - f0) / 21.0 - c.f82_b() / 126.0;
+        assert!((avg - closed).abs().max_element() < 1e-4, "{avg} vs {closed}");
+        let white = Conductor { f82: Spectrum::ONE, ..c };
+        for mu in [0.05f32, 0.3, 0.8] {
+            assert_eq!(white.fresnel(mu), schlick(f0, mu));
+        }
+        chi2_test(&Bsdf::Conductor(c), Vec3::new(0.6, 0.0, 0.8), 23);
     }
 }

@@ -200,7 +200,13 @@ impl Material {
             (self.metal_roughness.unwrap_or(roughness), self.glass_roughness.unwrap_or(roughness))
         };
         let metal =
-            Conductor { f0: self.metal_color.unwrap_or(base_color), roughness: rm, multiscatter: self.multiscatter };
+            // (the Principled metal's edge takes the Specular Tint as its F82 tint)
+            Conductor {
+                f0: self.metal_color.unwrap_or(base_color),
+                roughness: rm,
+                multiscatter: self.multiscatter,
+                f82: self.specular_tint,
+            };
         let eta = if front { self.ior } else { 1.0 / self.ior };
         let colour = self.glass_color.unwrap_or(base_color);
         let tint = if self.glass_sqrt_tint { colour.max(Vec3::ZERO).powf(0.5) } else { colour };
