@@ -97,6 +97,20 @@ def _room(bpy, scene, mat, smooth, ceiling=True):
     return _mesh(bpy, scene, "Room", v, faces, mat, smooth)
 
 
+def _lamp(bpy, scene, name, kind, energy, location, size, rotation=(0.0, 0.0, 0.0)):
+    """A Blender light: an area light of that size, or a point/spot lamp of that radius."""
+    light = bpy.data.lights.new(name, kind)
+    light.energy = energy
+    if kind == "AREA":
+        light.size = size
+    else:
+        light.shadow_soft_size = size
+    ob = bpy.data.objects.new(name, light)
+    ob.location, ob.rotation_euler = location, rotation
+    scene.collection.objects.link(ob)
+    return ob
+
+
 def _camera_and_world(bpy, scene):
     import mathutils
 
@@ -181,17 +195,8 @@ def rough_diffuse(bpy):
     ball = _material(bpy, "Chalk", "ShaderNodeBsdfPrincipled", **{"Base Color": (0.5, 0.7, 0.9, 1.0),
                                                                   "Roughness": 0.4, "Diffuse Roughness": 0.8})
     _uv_sphere(bpy, scene, "Ball", (0.2, 0.3, 0.35), 0.35, 24, 12, ball, smooth=True)
-    for name, kind, energy, location in (("Lamp", "POINT", 60.0, (0.35, -2.3, 1.1)),
-                                         ("Area", "AREA", 40.0, (-0.4, 0.4, 1.45))):
-        light = bpy.data.lights.new(name, kind)
-        light.energy = energy
-        if kind == "AREA":
-            light.size = 0.5
-        else:
-            light.shadow_soft_size = 0.05
-        ob = bpy.data.objects.new(name, light)
-        ob.location = location
-        scene.collection.objects.link(ob)
+    _lamp(bpy, scene, "Lamp", "POINT", 60.0, (0.35, -2.3, 1.1), 0.05)
+    _lamp(bpy, scene, "Area", "AREA", 40.0, (-0.4, 0.4, 1.45), 0.5)
     _camera_and_world(bpy, scene)
     return scene
 
@@ -230,17 +235,8 @@ def coat(bpy):
     room = bpy.data.objects["Room"].data
     room.materials.clear()
     room.materials.append(varnish)
-    for name, kind, energy, location, size in (("Area", "AREA", 60.0, (-0.3, 0.3, 1.45), 0.6),
-                                               ("Lamp", "POINT", 30.0, (0.6, -0.6, 1.0), 0.1)):
-        light = bpy.data.lights.new(name, kind)
-        light.energy = energy
-        if kind == "AREA":
-            light.size = size
-        else:
-            light.shadow_soft_size = size
-        ob = bpy.data.objects.new(name, light)
-        ob.location = location
-        scene.collection.objects.link(ob)
+    _lamp(bpy, scene, "Area", "AREA", 60.0, (-0.3, 0.3, 1.45), 0.6)
+    _lamp(bpy, scene, "Lamp", "POINT", 30.0, (0.6, -0.6, 1.0), 0.1)
     _camera_and_world(bpy, scene)
     return scene
 
@@ -266,18 +262,8 @@ def translucent(bpy):
           mat, smooth=False)
     shade = _material(bpy, "Shade", "ShaderNodeBsdfTranslucent", Color=(0.9, 0.7, 0.4, 1.0))
     _uv_sphere(bpy, scene, "Ball", (0.45, 0.1, 0.3), 0.28, 24, 12, shade, smooth=True)
-    for name, kind, energy, location, rotation, size in (
-            ("Back", "AREA", 80.0, (-0.3, 0.8, 0.7), (math.radians(-90.0), 0.0, 0.0), 0.6),
-            ("Lamp", "POINT", 20.0, (0.4, -0.8, 1.2), (0.0, 0.0, 0.0), 0.1)):
-        light = bpy.data.lights.new(name, kind)
-        light.energy = energy
-        if kind == "AREA":
-            light.size = size
-        else:
-            light.shadow_soft_size = size
-        ob = bpy.data.objects.new(name, light)
-        ob.location, ob.rotation_euler = location, rotation
-        scene.collection.objects.link(ob)
+    _lamp(bpy, scene, "Back", "AREA", 80.0, (-0.3, 0.8, 0.7), 0.6, (math.radians(-90.0), 0.0, 0.0))
+    _lamp(bpy, scene, "Lamp", "POINT", 20.0, (0.4, -0.8, 1.2), 0.1)
     _camera_and_world(bpy, scene)
     return scene
 

@@ -308,6 +308,12 @@ def open_scene(bpy, name, engine, spp, seed, keep=None):
     scene = bpy.context.scene
     if keep is not None:
         keep_lights(bpy, scene, keep)
+    return for_engine(scene, engine, spp, seed)
+
+
+def for_engine(scene, engine, spp, seed, method=None):
+    """`scene` set up for `engine`: Cycles as an unbiased reference with the scene's bounce
+    limit, or GDMLT with its settings (`method` if given), both `spp` samples per pixel."""
     if engine == "CYCLES":
         from gdmlt_bench.peers import cycles_unbiased
 
@@ -315,6 +321,8 @@ def open_scene(bpy, name, engine, spp, seed, keep=None):
     else:
         scene.render.engine = "GDMLT"
         scene.gdmlt.samples, scene.gdmlt.seed = spp, seed
+        if method is not None:
+            scene.gdmlt.method = method
         scene.gdmlt.use_adaptive_sampling = False  # every pixel `spp` samples, as the Cycles reference
     return scene
 
@@ -789,15 +797,7 @@ def test_polygonal_and_anamorphic_bokeh_agree_with_cycles(bpy_mod, tmp_out):
         dof = scene.camera.data.dof
         dof.use_dof, dof.focus_distance, dof.aperture_fstop = True, 1.0, 0.05
         dof.aperture_blades, dof.aperture_rotation, dof.aperture_ratio = 5, 0.4, 2.0
-        if engine == "CYCLES":
-            from gdmlt_bench.peers import cycles_unbiased
-
-            cycles_unbiased(scene, spp, seed, scene.gdmlt.max_bounces)
-        else:
-            scene.render.engine = "GDMLT"
-            scene.gdmlt.samples, scene.gdmlt.seed, scene.gdmlt.method = spp, seed, "PT"
-            scene.gdmlt.use_adaptive_sampling = False
-        return scene
+        return for_engine(scene, engine, spp, seed, method="PT")
 
     assert_agrees_with_cycles(bpy_mod, build, tmp_out, "bokeh", spp=(4096, 4096), block=2)
 
@@ -826,15 +826,7 @@ def test_specular_tint_agrees_with_cycles(bpy_mod, tmp_out):
         ob.location = (0.0, -0.4, 1.4)
         scene.collection.objects.link(ob)
         convergence._camera_and_world(bpy, scene)
-        if engine == "CYCLES":
-            from gdmlt_bench.peers import cycles_unbiased
-
-            cycles_unbiased(scene, spp, seed, scene.gdmlt.max_bounces)
-        else:
-            scene.render.engine = "GDMLT"
-            scene.gdmlt.samples, scene.gdmlt.seed, scene.gdmlt.method = spp, seed, "PT"
-            scene.gdmlt.use_adaptive_sampling = False
-        return scene
+        return for_engine(scene, engine, spp, seed, method="PT")
 
     assert_agrees_with_cycles(bpy_mod, build, tmp_out, "tint", spp=(4096, 2048), block=5)
 
