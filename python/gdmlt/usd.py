@@ -267,6 +267,9 @@ class _Reader:
                 out["roughness"] = 1.0
                 # (Oren–Nayar above 0, compensated for multiple scattering as Cycles renders it)
                 out["diffuse_roughness"] = min(max(float(p(sh, "roughness", 0.0)), 0.0), 1.0)
+            elif bkind == "ND_translucent_bsdf":  # (Blender's Translucent BSDF: diffuse transmission)
+                out["base_color"], out["translucency"] = (0.0, 0.0, 0.0), 1.0
+                out["translucent_color"] = tuple(c * weight for c in p(sh, "color", (1.0, 1.0, 1.0)))
             elif bkind == "ND_conductor_bsdf":
                 ior = self._source(sh.GetInput("ior"))
                 if ior is None or ior[0].GetIdAttr().Get() != "ND_artistic_ior":

@@ -1003,6 +1003,33 @@ def test_rough_diffuse_reaches_the_core_from_blender_and_usd(bpy_mod, tmp_out):
     assert (got["Clay"], got["Chalk"]) == pytest.approx((exported["Clay"], exported["Chalk"]))
 
 
+def test_a_translucent_bsdf_reaches_the_core_from_blender_and_usd(bpy_mod, tmp_out):
+    """A Translucent BSDF is diffuse transmission of its colour, from Blender (alone and in a
+    Mix Shader with a Diffuse: its share) and from Blender's USD export with MaterialX (a
+    translucent_bsdf alone; that file's mix_bsdf falls back to its UsdPreviewSurface). It was
+    grey diffuse with a warning (tools/convergence.py `translucent`: −32% without the lobe)."""
+    from gdmlt import usd
+    from gdmlt_blender import export
+
+    bpy = bpy_mod
+    sys.path.insert(0, str(ROOT / "tools"))
+    import convergence
+
+    convergence.translucent(bpy)
+    desc, warnings = export.export_scene(bpy.context.evaluated_depsgraph_get())
+    assert warnings == []
+    mats = {m["name"]: m for m in desc["materials"]}
+    assert mats["Shade"]["translucency"] == 1.0 and mats["Shade"]["translucent_color"] == pytest.approx((0.9, 0.7, 0.4))
+    leaf = mats["Leaf"]  # Mix(Diffuse, Translucent) at 0.6: the translucent share 0.6
+    assert leaf["translucency"] == pytest.approx(0.6) and leaf["translucent_color"] == pytest.approx((0.5, 0.8, 0.3))
+    assert leaf["base_color"] == pytest.approx((0.3, 0.6, 0.2))
+    path = tmp_out / "translucent" / "scene.usdc"
+    bpy.ops.wm.usd_export(filepath=str(path), generate_materialx_network=True)
+    read, _ = usd.load(path, width=8, height=8)
+    shade = next(m for m in read["materials"] if m["name"] == "Shade")
+    assert shade["translucency"] == 1.0 and shade["translucent_color"] == pytest.approx((0.9, 0.7, 0.4))
+
+
 def test_the_coat_reaches_the_core_from_blender_and_usd(bpy_mod, tmp_out):
     """The Principled coat (weight, roughness, IOR, tint) is exported, read back from
     Blender's USD export with MaterialX (OpenPBR coat_*) and from a UsdPreviewSurface
