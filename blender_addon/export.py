@@ -304,6 +304,7 @@ def _node_params(node, textures, warnings, what):
         _color_or_texture(node, "Color", out, "base_color", textures, warnings, what, (0.8, 0.8, 0.8, 1))
         _color_or_texture(node, "Roughness", out, "roughness", textures, warnings, what, 0.5)
         out["metallic"] = 1.0
+        out["metal_constant_fresnel"] = True  # (Cycles' Glossy BSDF reflects its colour at every angle)
         if t == "BSDF_ANISOTROPIC":
             warnings.append(f"{what}: anisotropy is ignored (rendered as isotropic glossy)")
     elif t == "BSDF_GLASS" or t == "BSDF_REFRACTION":
@@ -484,6 +485,7 @@ class _Mixture:
     rough_textures: list = field(default_factory=list)
     normals: list = field(default_factory=list)  # the leaves' normal maps (texture, strength)
     multiscatter: list = field(default_factory=list)  # the metal and glass leaves' distributions
+    constant_fresnel: list = field(default_factory=list)  # the metal leaves': Glossy (True) or Principled
     bsdf_leaves: int = 0
 
     @property
@@ -536,6 +538,8 @@ def _gather(leaves, warnings, what) -> _Mixture:
             mix.normals.append((p["normal_texture"], p["normal_strength"]))
         if w * m > 0 or w * (1 - m) * t > 0:
             mix.multiscatter.append(p.get("multiscatter", False))
+        if w * m > 0:
+            mix.constant_fresnel.append(p.get("metal_constant_fresnel", False))
     return mix
 
 
@@ -652,6 +656,11 @@ def _combined_textures(mix, out, colour, warnings, what):
         if len(set(mix.multiscatter)) > 1:
             warnings.append(f"{what}: the mixed glossy/metal/glass lobes use different distributions; "
                             f"{'Multiscatter GGX' if mix.multiscatter[0] else 'GGX'} is used for all")
+    if mix.constant_fresnel:
+        out["metal_constant_fresnel"] = mix.constant_fresnel[0]
+        if len(set(mix.constant_fresnel)) > 1:
+            warnings.append(f"{what}: a Glossy BSDF mixed with a metallic Principled: their metal lobes share "
+                            f"{'the Glossy' if mix.constant_fresnel[0] else 'the Principled'} Fresnel term")
     if mix.normals:
         # one shading normal per point in the core: a normal map shared by every BSDF leaf
         out["normal_texture"], out["normal_strength"] = mix.normals[0]

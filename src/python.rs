@@ -150,6 +150,7 @@ fn parse_material(d: &Bound<'_, PyDict>) -> PyResult<MaterialDesc> {
         coat_ior: get_or(d, "coat_ior", def.coat_ior, &ctx)?,
         coat_tint: rgb(d, "coat_tint", def.coat_tint, &ctx)?,
         specular_tint: rgb(d, "specular_tint", def.specular_tint, &ctx)?,
+        metal_constant_fresnel: get_or(d, "metal_constant_fresnel", false, &ctx)?,
         translucency: get_or(d, "translucency", def.translucency, &ctx)?,
         translucent_color: get_or(d, "translucent_color", None, &ctx)?,
         transparency: get_or(d, "transparency", def.transparency, &ctx)?,
@@ -821,6 +822,7 @@ fn builtin_scene<'py>(py: Python<'py>, name: &str, width: u32, height: u32) -> P
             md.set_item(key, v)?;
         }
         md.set_item("glass_sqrt_tint", m.glass_sqrt_tint)?;
+        md.set_item("metal_constant_fresnel", m.metal_constant_fresnel)?;
         md.set_item("multiscatter", m.multiscatter)?;
         md.set_item("pass_index", m.pass_index)?;
         for (key, value) in [

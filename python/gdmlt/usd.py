@@ -277,6 +277,7 @@ class _Reader:
                     return False
                 out["base_color"] = tuple(c * weight for c in p(ior[0], "reflectivity", (0.8, 0.8, 0.8)))
                 out["metallic"], out["roughness"], out["multiscatter"] = 1.0, rough(), True
+                out["metal_constant_fresnel"] = True  # (Blender writes its Glossy BSDF so: its colour at every angle)
             elif bkind == "ND_dielectric_bsdf" and p(sh, "scatter_mode", "R") in ("RT", "T"):
                 out["base_color"] = tuple(c * weight for c in p(sh, "tint", (1.0, 1.0, 1.0)))
                 out["transmission"], out["ior"], out["roughness"] = 1.0, p(sh, "ior", 1.5), rough()

@@ -3,7 +3,9 @@
 //! approximation with F0 = the base colour (Blender's metallic colour), bent at grazing
 //! angles by the F82 tint as Cycles' Principled metal (Hoffman 2023's F82-tint model:
 //! F = Schlick(F0) − b·μ(1 − μ)⁶, b chosen so that F(1/7) = F82·Schlick(F0, 1/7); F82 = the
-//! Specular Tint, white: plain Schlick).
+//! Specular Tint, white: plain Schlick). Blender's Glossy BSDF has no Fresnel term at all:
+//! its colour is the reflectance at every angle (`constant`; Cycles bakes the colour into the
+//! closure's weight and compensates multiple scattering with F_avg = the colour).
 //!
 //! Blender's "Multiscatter GGX" (its default) adds the energy single scattering loses: the
 //! lobe is scaled by 1 + F_ms·(1 − E(θo))/E(θo), where E is the white lobe's albedo and
@@ -26,6 +28,8 @@ pub struct Conductor {
     pub multiscatter: bool,
     /// The F82 tint (white: Schlick's Fresnel).
     pub f82: Spectrum,
+    /// The reflectance is f0 at every angle (the Glossy BSDF), not Schlick's.
+    pub constant: bool,
 }
 
 #[inline]
@@ -45,6 +49,9 @@ impl Conductor {
     /// The Fresnel term at cos θ.
     #[inline]
     fn fresnel(&self, cos: f32) -> Spectrum {
+        if self.constant {
+            return self.f0;
+        }
         if self.f82 == Spectrum::ONE {
             return schlick(self.f0, cos);
         }
@@ -66,8 +73,8 @@ impl Conductor {
         let e = ggx_albedo(cos_o, self.roughness).max(1e-3);
         let e_avg = ggx_albedo_average(self.roughness);
         // hemispherical average of the Fresnel term: F0 + (1 − F0)/21 − b/126 (2∫μ²(1−μ)⁶ dμ = 1/126)
-        let mut f_avg = self.f0 + (Spectrum::ONE - self.f0) / 21.0;
-        if self.f82 != Spectrum::ONE {
+        let mut f_avg = if self.constant { self.f0 } else { self.f0 + (Spectrum::ONE - self.f0) / 21.0 };
+        if self.f82 != Spectrum::ONE && !self.constant {
             f_avg -= self.f82_b() / 126.0;
         }
         let f_ms = f_avg * e_avg / (Spectrum::ONE - f_avg * (1.0 - e_avg));
@@ -143,8 +150,13 @@ mod tests {
     #[test]
     fn rough_conductor_chi2() {
         for r in [0.3f32, 0.5, 0.7, 1.0] {
-            let b =
-                Bsdf::Conductor(Conductor { f0: Spectrum::ONE, roughness: r, multiscatter: false, f82: Spectrum::ONE });
+            let b = Bsdf::Conductor(Conductor {
+                f0: Spectrum::ONE,
+                roughness: r,
+                multiscatter: false,
+                f82: Spectrum::ONE,
+                constant: false,
+            });
             for wo in [Vec3::Z, Vec3::new(0.6, 0.0, 0.8), Vec3::new(-0.9, 0.2, 0.15).normalize()] {
                 chi2_test(&b, wo, 7);
             }
@@ -156,8 +168,13 @@ mod tests {
     #[test]
     fn rough_conductor_white_furnace() {
         for r in [0.1f32, 0.3, 0.5, 1.0] {
-            let b =
-                Bsdf::Conductor(Conductor { f0: Spectrum::ONE, roughness: r, multiscatter: false, f82: Spectrum::ONE });
+            let b = Bsdf::Conductor(Conductor {
+                f0: Spectrum::ONE,
+                roughness: r,
+                multiscatter: false,
+                f82: Spectrum::ONE,
+                constant: false,
+            });
             for wo in [Vec3::Z, Vec3::new(0.6, 0.0, 0.8)] {
                 let (s, q) = white_furnace(&b, wo, 400_000, 3);
                 assert!(s <= 1.0 + 1e-3 && (r > 0.5 || s > 0.75), "r={r} sampled albedo {s}");
@@ -175,7 +192,8 @@ mod tests {
 
     #[test]
     fn mirror_reflects_with_fresnel_one_at_f0_one() {
-        let b = Conductor { f0: Spectrum::ONE, roughness: 0.0, multiscatter: true, f82: Spectrum::ONE };
+        let b =
+            Conductor { f0: Spectrum::ONE, roughness: 0.0, multiscatter: true, f82: Spectrum::ONE, constant: false };
         let wo = Vec3::new(0.3, -0.2, 0.93).normalize();
         let s = b.sample(wo, Vec2::new(0.5, 0.5)).unwrap();
         assert!((s.wi - Vec3::new(-wo.x, -wo.y, wo.z)).length() < 1e-6);
@@ -195,12 +213,25 @@ mod tests {
                     roughness: r,
                     multiscatter: true,
                     f82: Spectrum::ONE,
+                    constant: false,
                 });
                 let (a, _) = white_furnace(&white, wo, 200_000, 11);
                 assert!((a - 1.0).abs() < 0.015, "r={r} wo={wo}: albedo {a}");
                 let gold = Spectrum::new(0.9, 0.7, 0.3);
-                let ms = Bsdf::Conductor(Conductor { f0: gold, roughness: r, multiscatter: true, f82: Spectrum::ONE });
-                let ss = Bsdf::Conductor(Conductor { f0: gold, roughness: r, multiscatter: false, f82: Spectrum::ONE });
+                let ms = Bsdf::Conductor(Conductor {
+                    f0: gold,
+                    roughness: r,
+                    multiscatter: true,
+                    f82: Spectrum::ONE,
+                    constant: false,
+                });
+                let ss = Bsdf::Conductor(Conductor {
+                    f0: gold,
+                    roughness: r,
+                    multiscatter: false,
+                    f82: Spectrum::ONE,
+                    constant: false,
+                });
                 let (a_ms, a_ss) = (white_furnace(&ms, wo, 100_000, 12).0, white_furnace(&ss, wo, 100_000, 12).0);
                 assert!(a_ss < a_ms && a_ms < 1.0, "r={r}: single {a_ss}, multi {a_ms}");
             }
@@ -209,6 +240,7 @@ mod tests {
                 roughness: r,
                 multiscatter: true,
                 f82: Spectrum::ONE,
+                constant: false,
             });
             chi2_test(&b, Vec3::new(0.6, 0.0, 0.8), 13);
         }
@@ -220,7 +252,7 @@ mod tests {
     #[test]
     fn f82_tint_bends_the_edge_as_its_definition() {
         let (f0, f82) = (Spectrum::new(0.95, 0.65, 0.3), Spectrum::new(0.9, 0.5, 0.8));
-        let c = Conductor { f0, roughness: 0.3, multiscatter: true, f82 };
+        let c = Conductor { f0, roughness: 0.3, multiscatter: true, f82, constant: false };
         assert!((c.fresnel(1.0) - f0).abs().max_element() < 1e-6);
         assert!((c.fresnel(0.0) - Spectrum::ONE).abs().max_element() < 1e-6);
         let want = f82 * schlick(f0, 1.0 / 7.0);
@@ -237,5 +269,38 @@ mod tests {
             assert_eq!(white.fresnel(mu), schlick(f0, mu));
         }
         chi2_test(&Bsdf::Conductor(c), Vec3::new(0.6, 0.0, 0.8), 23);
+    }
+
+    /// The Glossy BSDF's constant Fresnel: the lobe is exactly its colour times the white
+    /// lobe, at normal and grazing incidence, with or without multiscatter (whose F_avg is the
+    /// colour then); Schlick's curve would brighten it towards white at grazing angles.
+    #[test]
+    fn a_constant_fresnel_lobe_is_its_colour_times_the_white_lobe() {
+        let colour = Spectrum::new(0.5, 0.3, 0.1);
+        for multiscatter in [false, true] {
+            let glossy = Conductor { f0: colour, roughness: 0.25, multiscatter, f82: Spectrum::ONE, constant: true };
+            let white = Conductor { f0: Spectrum::ONE, ..glossy };
+            for (wo, wi) in [
+                (Vec3::Z, Vec3::new(0.1, 0.0, 0.995).normalize()),
+                (Vec3::new(0.97, 0.0, 0.243).normalize(), Vec3::new(-0.95, 0.1, 0.3).normalize()),
+            ] {
+                let (g, w) = (glossy.eval(wo, wi), white.eval(wo, wi));
+                let ratio = if multiscatter {
+                    // the scale 1 + F_ms(1 − E)/E with F_avg = the colour, against white's
+                    let e = ggx_albedo(wo.z, 0.25).max(1e-3);
+                    let e_avg = ggx_albedo_average(0.25);
+                    let f_ms = colour * e_avg / (Spectrum::ONE - colour * (1.0 - e_avg));
+                    colour * (Spectrum::ONE + f_ms * ((1.0 - e) / e)) / (1.0 + (1.0 - e) / e)
+                } else {
+                    colour
+                };
+                assert!((g - w * ratio).abs().max_element() < 1e-5 * w.max_element().max(1.0), "{g} vs {}", w * ratio);
+            }
+        }
+        let schlick_one =
+            Conductor { f0: colour, roughness: 0.25, multiscatter: false, f82: Spectrum::ONE, constant: false };
+        let grazing = (Vec3::new(0.97, 0.0, 0.243).normalize(), Vec3::new(-0.95, 0.1, 0.3).normalize());
+        let constant = Conductor { constant: true, ..schlick_one };
+        assert!(schlick_one.eval(grazing.0, grazing.1).z > 1.5 * constant.eval(grazing.0, grazing.1).z);
     }
 }

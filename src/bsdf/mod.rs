@@ -547,7 +547,7 @@ mod tests {
     fn principled(w: [f32; 3], roughness: f32) -> Bsdf {
         Bsdf::Principled {
             diffuse: Layered::plain(Lambert::new(Spectrum::ONE)),
-            metal: Conductor { f0: Spectrum::ONE, roughness, multiscatter: false, f82: Spectrum::ONE },
+            metal: Conductor { f0: Spectrum::ONE, roughness, multiscatter: false, f82: Spectrum::ONE, constant: false },
             glass: Dielectric::clear(1.5, 0.0),
             w,
             pass: 0.0,
@@ -573,7 +573,13 @@ mod tests {
         let tint = Spectrum::new(0.5, 0.5, 0.5);
         let b = Bsdf::Principled {
             diffuse: Layered::plain(Lambert::new(Spectrum::ONE)),
-            metal: Conductor { f0: Spectrum::ONE, roughness: 0.5, multiscatter: false, f82: Spectrum::ONE },
+            metal: Conductor {
+                f0: Spectrum::ONE,
+                roughness: 0.5,
+                multiscatter: false,
+                f82: Spectrum::ONE,
+                constant: false,
+            },
             glass: Dielectric::clear(1.5, 0.0),
             w: [0.4, 0.0, 0.0],
             pass: 0.6,
@@ -622,6 +628,7 @@ mod tests {
                 roughness: 0.4,
                 multiscatter: false,
                 f82: Spectrum::ONE,
+                constant: false,
             },
             glass: Dielectric::clear(1.5, 0.3),
             w,
@@ -693,7 +700,13 @@ mod tests {
     fn translucent_lobe_transmits_diffusely() {
         let mixed = |wd: f32, wt: f32, coat: Coat| Bsdf::Principled {
             diffuse: Layered::plain(Lambert::new(Spectrum::splat(0.5))),
-            metal: Conductor { f0: Spectrum::ONE, roughness: 0.4, multiscatter: false, f82: Spectrum::ONE },
+            metal: Conductor {
+                f0: Spectrum::ONE,
+                roughness: 0.4,
+                multiscatter: false,
+                f82: Spectrum::ONE,
+                constant: false,
+            },
             glass: Dielectric::clear(1.5, 0.3),
             w: [wd, 0.0, 0.0],
             pass: 1.0 - wd - wt,

@@ -113,6 +113,9 @@ pub struct MaterialDesc {
     /// Specular Tint of the dielectric layer over the diffuse base (Principled; white:
     /// untinted): its F0 becomes F0·tint, as in Cycles.
     pub specular_tint: [f32; 3],
+    /// The metal lobe's reflectance is its colour at every angle, as Blender's Glossy BSDF
+    /// (false: Schlick's Fresnel from it, as the Principled BSDF's metal).
+    pub metal_constant_fresnel: bool,
     /// Share of diffuse transmission (Translucent BSDF) among the BSDF's lobes, and its colour
     /// when not the base colour.
     pub translucency: f32,
@@ -157,6 +160,7 @@ impl Default for MaterialDesc {
             coat_ior: 1.5,
             coat_tint: [1.0; 3],
             specular_tint: [1.0; 3],
+            metal_constant_fresnel: false,
             translucency: 0.0,
             translucent_color: None,
             transparency: 0.0,

@@ -40,6 +40,8 @@ pub struct Material {
     pub multiscatter: bool,
     /// The Principled coat over the other lobes (weight 0: none).
     pub coat: Coat,
+    /// The metal lobe reflects its colour at every angle (Glossy BSDF), not Schlick's curve.
+    pub metal_constant_fresnel: bool,
     /// Specular Tint of the dielectric layer over the base (white: untinted).
     pub specular_tint: Spectrum,
     /// Share of diffuse transmission among the lobes, and its colour (None: the base colour).
@@ -150,6 +152,7 @@ impl Material {
                 tint: Vec3::from_array(d.coat_tint).clamp(Vec3::ZERO, Vec3::ONE),
             },
             specular_tint: Vec3::from_array(d.specular_tint).clamp(Vec3::ZERO, Vec3::ONE),
+            metal_constant_fresnel: d.metal_constant_fresnel,
             translucency: d.translucency.clamp(0.0, 1.0),
             translucent_color: d.translucent_color.map(|c| Vec3::from_array(c).clamp(Vec3::ZERO, Vec3::ONE)),
             transparency: d.transparency.clamp(0.0, 1.0),
@@ -206,6 +209,7 @@ impl Material {
                 roughness: rm,
                 multiscatter: self.multiscatter,
                 f82: self.specular_tint,
+                constant: self.metal_constant_fresnel,
             };
         let eta = if front { self.ior } else { 1.0 / self.ior };
         let colour = self.glass_color.unwrap_or(base_color);
