@@ -39,6 +39,12 @@ fn schlick(f0: Spectrum, cos: f32) -> Spectrum {
 }
 
 impl Conductor {
+    /// A conductor with Schlick's Fresnel from `f0` (no F82 tint; the Principled metal's
+    /// default), single-scattering or with Blender's Multiscatter GGX compensation.
+    pub fn new(f0: Spectrum, roughness: f32, multiscatter: bool) -> Conductor {
+        Conductor { f0, roughness, multiscatter, f82: Spectrum::ONE, constant: false }
+    }
+
     /// b of the F82-tint model: Schlick(F0, 1/7)·(1 − F82) / ((1/7)(6/7)⁶).
     #[inline]
     fn f82_b(&self) -> Spectrum {
@@ -150,13 +156,7 @@ mod tests {
     #[test]
     fn rough_conductor_chi2() {
         for r in [0.3f32, 0.5, 0.7, 1.0] {
-            let b = Bsdf::Conductor(Conductor {
-                f0: Spectrum::ONE,
-                roughness: r,
-                multiscatter: false,
-                f82: Spectrum::ONE,
-                constant: false,
-            });
+            let b = Bsdf::Conductor(Conductor::new(Spectrum::ONE, r, false));
             for wo in [Vec3::Z, Vec3::new(0.6, 0.0, 0.8), Vec3::new(-0.9, 0.2, 0.15).normalize()] {
                 chi2_test(&b, wo, 7);
             }
@@ -168,13 +168,7 @@ mod tests {
     #[test]
     fn rough_conductor_white_furnace() {
         for r in [0.1f32, 0.3, 0.5, 1.0] {
-            let b = Bsdf::Conductor(Conductor {
-                f0: Spectrum::ONE,
-                roughness: r,
-                multiscatter: false,
-                f82: Spectrum::ONE,
-                constant: false,
-            });
+            let b = Bsdf::Conductor(Conductor::new(Spectrum::ONE, r, false));
             for wo in [Vec3::Z, Vec3::new(0.6, 0.0, 0.8)] {
                 let (s, q) = white_furnace(&b, wo, 400_000, 3);
                 assert!(s <= 1.0 + 1e-3 && (r > 0.5 || s > 0.75), "r={r} sampled albedo {s}");
@@ -192,8 +186,7 @@ mod tests {
 
     #[test]
     fn mirror_reflects_with_fresnel_one_at_f0_one() {
-        let b =
-            Conductor { f0: Spectrum::ONE, roughness: 0.0, multiscatter: true, f82: Spectrum::ONE, constant: false };
+        let b = Conductor::new(Spectrum::ONE, 0.0, true);
         let wo = Vec3::new(0.3, -0.2, 0.93).normalize();
         let s = b.sample(wo, Vec2::new(0.5, 0.5)).unwrap();
         assert!((s.wi - Vec3::new(-wo.x, -wo.y, wo.z)).length() < 1e-6);
@@ -208,40 +201,16 @@ mod tests {
     fn multiscatter_conductor_conserves_energy() {
         for r in [0.2f32, 0.5, 0.8, 1.0] {
             for wo in [Vec3::Z, Vec3::new(0.6, 0.0, 0.8), Vec3::new(0.9, 0.0, 0.2).normalize()] {
-                let white = Bsdf::Conductor(Conductor {
-                    f0: Spectrum::ONE,
-                    roughness: r,
-                    multiscatter: true,
-                    f82: Spectrum::ONE,
-                    constant: false,
-                });
+                let white = Bsdf::Conductor(Conductor::new(Spectrum::ONE, r, true));
                 let (a, _) = white_furnace(&white, wo, 200_000, 11);
                 assert!((a - 1.0).abs() < 0.015, "r={r} wo={wo}: albedo {a}");
                 let gold = Spectrum::new(0.9, 0.7, 0.3);
-                let ms = Bsdf::Conductor(Conductor {
-                    f0: gold,
-                    roughness: r,
-                    multiscatter: true,
-                    f82: Spectrum::ONE,
-                    constant: false,
-                });
-                let ss = Bsdf::Conductor(Conductor {
-                    f0: gold,
-                    roughness: r,
-                    multiscatter: false,
-                    f82: Spectrum::ONE,
-                    constant: false,
-                });
+                let ms = Bsdf::Conductor(Conductor::new(gold, r, true));
+                let ss = Bsdf::Conductor(Conductor::new(gold, r, false));
                 let (a_ms, a_ss) = (white_furnace(&ms, wo, 100_000, 12).0, white_furnace(&ss, wo, 100_000, 12).0);
                 assert!(a_ss < a_ms && a_ms < 1.0, "r={r}: single {a_ss}, multi {a_ms}");
             }
-            let b = Bsdf::Conductor(Conductor {
-                f0: Spectrum::new(0.9, 0.7, 0.3),
-                roughness: r,
-                multiscatter: true,
-                f82: Spectrum::ONE,
-                constant: false,
-            });
+            let b = Bsdf::Conductor(Conductor::new(Spectrum::new(0.9, 0.7, 0.3), r, true));
             chi2_test(&b, Vec3::new(0.6, 0.0, 0.8), 13);
         }
     }
@@ -297,8 +266,7 @@ mod tests {
                 assert!((g - w * ratio).abs().max_element() < 1e-5 * w.max_element().max(1.0), "{g} vs {}", w * ratio);
             }
         }
-        let schlick_one =
-            Conductor { f0: colour, roughness: 0.25, multiscatter: false, f82: Spectrum::ONE, constant: false };
+        let schlick_one = Conductor::new(colour, 0.25, false);
         let grazing = (Vec3::new(0.97, 0.0, 0.243).normalize(), Vec3::new(-0.95, 0.1, 0.3).normalize());
         let constant = Conductor { constant: true, ..schlick_one };
         assert!(schlick_one.eval(grazing.0, grazing.1).z > 1.5 * constant.eval(grazing.0, grazing.1).z);

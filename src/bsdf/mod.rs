@@ -547,7 +547,7 @@ mod tests {
     fn principled(w: [f32; 3], roughness: f32) -> Bsdf {
         Bsdf::Principled {
             diffuse: Layered::plain(Lambert::new(Spectrum::ONE)),
-            metal: Conductor { f0: Spectrum::ONE, roughness, multiscatter: false, f82: Spectrum::ONE, constant: false },
+            metal: Conductor::new(Spectrum::ONE, roughness, false),
             glass: Dielectric::clear(1.5, 0.0),
             w,
             pass: 0.0,
@@ -573,13 +573,7 @@ mod tests {
         let tint = Spectrum::new(0.5, 0.5, 0.5);
         let b = Bsdf::Principled {
             diffuse: Layered::plain(Lambert::new(Spectrum::ONE)),
-            metal: Conductor {
-                f0: Spectrum::ONE,
-                roughness: 0.5,
-                multiscatter: false,
-                f82: Spectrum::ONE,
-                constant: false,
-            },
+            metal: Conductor::new(Spectrum::ONE, 0.5, false),
             glass: Dielectric::clear(1.5, 0.0),
             w: [0.4, 0.0, 0.0],
             pass: 0.6,
@@ -623,13 +617,7 @@ mod tests {
     fn coated(base: Spectrum, w: [f32; 3], pass: f32, coat: Coat) -> Bsdf {
         Bsdf::Principled {
             diffuse: Layered::plain(Lambert::new(base)),
-            metal: Conductor {
-                f0: Spectrum::new(0.9, 0.7, 0.4),
-                roughness: 0.4,
-                multiscatter: false,
-                f82: Spectrum::ONE,
-                constant: false,
-            },
+            metal: Conductor::new(Spectrum::new(0.9, 0.7, 0.4), 0.4, false),
             glass: Dielectric::clear(1.5, 0.3),
             w,
             pass,
@@ -700,13 +688,7 @@ mod tests {
     fn translucent_lobe_transmits_diffusely() {
         let mixed = |wd: f32, wt: f32, coat: Coat| Bsdf::Principled {
             diffuse: Layered::plain(Lambert::new(Spectrum::splat(0.5))),
-            metal: Conductor {
-                f0: Spectrum::ONE,
-                roughness: 0.4,
-                multiscatter: false,
-                f82: Spectrum::ONE,
-                constant: false,
-            },
+            metal: Conductor::new(Spectrum::ONE, 0.4, false),
             glass: Dielectric::clear(1.5, 0.3),
             w: [wd, 0.0, 0.0],
             pass: 1.0 - wd - wt,
