@@ -414,13 +414,11 @@ def _warn_unsupported_layers(node, warnings, what):
             warnings.append(f"{what}: Principled '{name}' is not rendered (the layer is left out)")
 
 
-
 def _specular_tint(node, out, warnings, what):
     """Specular Tint: it colours the dielectric specular layer over the base (F0·tint) and the
     metal's edge (its F82 tint), as Cycles; the transmissive part is rendered untinted, with a
     warning."""
-    tint = tuple(min(max(float(c), 0.0), 1.0) for c in _input_value(node, "Specular Tint", warnings, what,
-                                                                    (1.0, 1.0, 1.0, 1.0))[:3])
+    tint = tuple(_unit(c) for c in _input_value(node, "Specular Tint", warnings, what, (1.0, 1.0, 1.0, 1.0))[:3])
     if all(abs(c - 1.0) <= 1e-6 for c in tint):
         return
     out["specular_tint"] = tint
@@ -553,7 +551,6 @@ def _combine(leaves, warnings, what):
     pass-through lobe; the lobe weights and colours; the specular layer; roughness; IOR;
     textures; the metal distribution; the normal map."""
     mix = _gather(leaves, warnings, what)
-    coated = [p for _, p in leaves if p.get("coat", 0.0) > 0.0]
     total = mix.bsdf_weight
     total_all = total + mix.passing.weight
     out = {"emission": tuple(mix.emission.tolist()), "metallic": 0.0, "transmission": 0.0, "roughness": 0.5,
@@ -591,15 +588,14 @@ def _combine(leaves, warnings, what):
     if len(set(mix.iors)) > 1:
         warnings.append(f"{what}: the mixed glass lobes have different IOR; {mix.iors[0]} is used")
     _combined_textures(mix, out, colour, warnings, what)
-    tinted = [p for _, p in leaves if "specular_tint" in p]
-    if tinted and mix.bsdf_leaves == 1:
-        out["specular_tint"] = tinted[0]["specular_tint"]
-    elif tinted:
-        warnings.append(f"{what}: a Principled Specular Tint inside a Mix/Add Shader is not rendered (white is used)")
-    if coated and mix.bsdf_leaves == 1:
-        out.update({k: coated[0][k] for k in COAT_KEYS})  # one coated Principled beside pass-through
-    elif coated:
-        warnings.append(f"{what}: a Principled coat inside a Mix/Add Shader is not rendered (the coat is left out)")
+    # a coat or Specular Tint is kept for one Principled beside pass-through only
+    for keys, name, fallback in ((COAT_KEYS, "coat", "the coat is left out"),
+                                 (("specular_tint",), "Specular Tint", "white is used")):
+        having = [p for _, p in leaves if keys[0] in p]
+        if having and mix.bsdf_leaves == 1:
+            out.update({k: having[0][k] for k in keys})
+        elif having:
+            warnings.append(f"{what}: a Principled {name} inside a Mix/Add Shader is not rendered ({fallback})")
     return out
 
 
