@@ -7,7 +7,9 @@ of instanced triangles). Lights follow Cycles' conventions; the conversion to ra
 happens in the core. Everything unsupported is reported as a warning with a fallback.
 """
 
+import hashlib
 import math
+import os
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -61,20 +63,19 @@ def _input_value(node, name, warnings, what, default=None):
         return default
     v = getattr(sock, "default_value", default)
     if sock.is_linked:
-        src = sock.links[0].from_node
-        if src.type in ("RGB", "VALUE"):
-            c = src.outputs[0].default_value
-            try:
-                rgb = tuple(c)[:3]
-            except TypeError:
-                rgb = (float(c),) * 3
+        from . import texture_graph
+
+        try:
+            kind, c = texture_graph.evaluate(sock, None, None)  # (constant: no image under it)
+        except texture_graph.Unsupported as e:
+            warnings.append(f"{what}: input '{name}' of node '{node.name}' is linked through {e}, which GDMLT "
+                            f"does not evaluate here; its unlinked value is used")
+        else:
             try:
                 n = len(v)
             except TypeError:
-                return float(0.2126 * rgb[0] + 0.7152 * rgb[1] + 0.0722 * rgb[2])
-            return (*rgb, 1.0)[:n]
-        warnings.append(f"{what}: input '{name}' of node '{node.name}' is linked (e.g. a texture); "
-                        f"GDMLT uses its unlinked value instead")
+                return float(c)
+            return (*c, 1.0)[:n]
     try:
         return tuple(v)
     except TypeError:
@@ -90,6 +91,7 @@ class Textures:
     def __init__(self):
         self.items = []
         self.index = {}
+        self.pixels = {}  # image name → its RGBA pixels, for node graphs (read once per export)
 
     def add(self, node, warnings, what, alpha=False):
         """Index of the texture of an Image (or Environment) Texture node, or None (with a
@@ -105,14 +107,12 @@ class Textures:
         key = (img.name, node.interpolation, ext, alpha, transform)
         if key in self.index:
             return self.index[key]
-        w, h = img.size
-        if w == 0 or h == 0 or not img.has_data and not _load(img):
+        px = _image_pixels(img)
+        if px is None:
             warnings.append(f"{what}: image '{img.name}' has no pixels (missing file '{img.filepath}'?); "
                             f"its input uses the socket value")
             return None
-        buf = np.empty(w * h * img.channels, np.float32)
-        img.pixels.foreach_get(buf)
-        px = buf.reshape(-1, img.channels)
+        w, h = img.size
         rgb = np.repeat(px[:, :1], 3, axis=1) if img.channels < 3 else px[:, :3]
         if alpha:
             a = px[:, 3:4] if img.channels == 4 else np.ones((len(px), 1), np.float32)
@@ -137,6 +137,85 @@ class Textures:
         if transform is not None:
             self.items[-1]["transform"] = transform
         return self.index[key]
+
+    def add_graph(self, sock, warnings, what):
+        """The linked input `sock` through a graph of colour and value nodes over image
+        textures (texture_graph.py): ('texture', index) of the evaluated texture,
+        ('constant', value) when no image feeds it, or None (warned) when the graph has a
+        node the evaluator does not render."""
+        from . import texture_graph
+
+        uv_keys = {}
+
+        def uv_key(node):
+            if node.name not in uv_keys:
+                closest = node.interpolation == "Closest"
+                uv_keys[node.name] = (_uv_transform(node, warnings, what), node.extension, closest)
+            return uv_keys[node.name]
+
+        def image_identity(node):
+            """The file and its time stamp for an image read from disk and not edited since;
+            else a hash of its pixels."""
+            img = node.image
+            path = bpy_path_abs(img.filepath) if img.source == "FILE" and img.packed_file is None else ""
+            if path and not img.is_dirty and os.path.isfile(path):
+                return (img.name, path, os.path.getmtime(path), tuple(img.size), img.colorspace_settings.name)
+            px = image_pixels(node)[0]
+            return (img.name, hashlib.blake2b(px.tobytes(), digest_size=16).digest(), tuple(img.size),
+                    img.colorspace_settings.name)
+
+        def image_pixels(node):
+            img = node.image
+            if img.name in self.pixels:
+                return self.pixels[img.name]
+            px = _image_pixels(img)
+            if px is None:
+                raise texture_graph.Unsupported(f"image '{img.name}' has no pixels (missing file "
+                                                f"'{img.filepath}'?)")
+            rgba = np.ones((len(px), 4), np.float32)
+            rgba[:, :3] = np.repeat(px[:, :1], 3, axis=1) if px.shape[1] < 3 else px[:, :3]
+            if px.shape[1] == 4:
+                rgba[:, 3] = px[:, 3]
+            self.pixels[img.name] = (rgba, img.size[0], img.size[1],
+                                     img.colorspace_settings.name == "sRGB" and not img.is_float)
+            return self.pixels[img.name]
+
+        node = sock.node
+        try:
+            r = texture_graph.evaluate(sock, image_pixels, uv_key, image_identity)
+        except texture_graph.Unsupported as e:
+            warnings.append(f"{what}: input '{sock.name}' of node '{node.name}' is linked through {e}, which "
+                            f"GDMLT does not evaluate; its unlinked value is used")
+            return None
+        if r[0] == "constant":
+            return r
+        _, rgb, w, h, transform, ext, closest = r
+        if ext not in ("REPEAT", "EXTEND", "CLIP"):
+            ext = "REPEAT"
+        self.items.append(scenedict.texture(f"{what}: {node.name} › {sock.name}", rgb, w, h,
+                                            interpolation="Closest" if closest else "Linear",
+                                            extension=ext, srgb=False))
+        if transform is not None:
+            self.items[-1]["transform"] = transform
+        return ("texture", len(self.items) - 1)
+
+
+def bpy_path_abs(path):
+    import bpy
+
+    return bpy.path.abspath(path)
+
+
+def _image_pixels(img):
+    """A Blender image's pixels as stored ((w·h, channels) float32, row 0 at the bottom;
+    8-bit sRGB values still encoded), or None when it has none (a missing file)."""
+    w, h = img.size
+    if w == 0 or h == 0 or not img.has_data and not _load(img):
+        return None
+    w, h = img.size
+    buf = np.empty(w * h * img.channels, np.float32)
+    img.pixels.foreach_get(buf)
+    return buf.reshape(-1, img.channels)
 
 
 def _mapping_on(link, is_source):
@@ -215,13 +294,37 @@ def _linked_texture(node, name, textures, warnings, what, output="Color"):
     return textures.add(src, warnings, what, alpha=output == "Alpha")
 
 
+def _graph_texture(node, name, textures, warnings, what):
+    """Input `name` of `node` linked through colour and value nodes over image textures
+    (texture_graph.py): the evaluated texture's index; None when it is not linked that way
+    (unlinked, a plain image, a constant graph: `_input_value` reads those); False when the
+    graph cannot be evaluated (warned: the input keeps its unlinked value)."""
+    sock = node.inputs.get(name)
+    if sock is None or not sock.is_linked or textures is None:
+        return None
+    r = textures.add_graph(sock, warnings, what)
+    if r is None:
+        return False
+    return r[1] if r[0] == "texture" else None
+
+
 def _color_or_texture(node, name, out, key, textures, warnings, what, default):
-    """Sets out[key] from an unlinked colour input, or out[key + '_texture'] from an image."""
+    """Sets out[key] from an unlinked colour or value input (or a constant graph), or
+    out[key + '_texture'] from an image or a graph of nodes over images; a value texture
+    (`key` other than base_color) also sets out[key] to its mean, which mixes of shaders use."""
     tex = _linked_texture(node, name, textures, warnings, what)
-    if tex is not None:
+    if tex is None:
+        tex = _graph_texture(node, name, textures, warnings, what)
+    if tex is False:
+        v = node.inputs[name].default_value
+    elif tex is not None:
         out[key + "_texture"] = tex
+        if key != "base_color":
+            px = np.asarray(textures.items[tex]["pixels"]).reshape(-1, 3)[::7]  # (a sample is enough)
+            out[key] = float(np.clip(px @ np.array([0.2126, 0.7152, 0.0722], np.float32), 0.0, 1.0).mean())
         return
-    v = _input_value(node, name, warnings, what, default)  # (warns if linked to something else)
+    else:
+        v = _input_value(node, name, warnings, what, default)  # (warns if linked to something else)
     out[key] = tuple(v)[:3] if key == "base_color" else float(v)
 
 
@@ -265,7 +368,7 @@ def _node_params(node, textures, warnings, what):
     t = node.type
     if t == "BSDF_PRINCIPLED":
         _color_or_texture(node, "Base Color", out, "base_color", textures, warnings, what, (0.8, 0.8, 0.8, 1))
-        out["metallic"] = _input_value(node, "Metallic", warnings, what, 0.0)
+        _color_or_texture(node, "Metallic", out, "metallic", textures, warnings, what, 0.0)
         _color_or_texture(node, "Roughness", out, "roughness", textures, warnings, what, 0.5)
         out["diffuse_roughness"] = _unit(_input_value(node, "Diffuse Roughness", warnings, what, 0.0))
         out["ior"] = _input_value(node, "IOR", warnings, what, 1.5)
@@ -283,7 +386,11 @@ def _node_params(node, textures, warnings, what):
         _emission(node, "Emission Color", "Emission Strength", out, textures, warnings, what, (0, 0, 0, 1), 0.0)
         _coat(node, out, warnings, what)
         alpha_tex = _linked_texture(node, "Alpha", textures, warnings, what, output="Alpha")
-        if alpha_tex is not None:  # coverage from the image's alpha channel, per shading point
+        if alpha_tex is None:  # (through nodes: a Math on the image's alpha, a Color Ramp)
+            alpha_tex = _graph_texture(node, "Alpha", textures, warnings, what)
+        if alpha_tex is False:
+            out["alpha"] = _unit(node.inputs["Alpha"].default_value)
+        elif alpha_tex is not None:  # coverage from the image's alpha channel, per shading point
             out["alpha_texture"], out["alpha"] = alpha_tex, 1.0
         else:
             out["alpha"] = min(max(_input_value(node, "Alpha", warnings, what, 1.0), 0.0), 1.0)
@@ -363,7 +470,11 @@ def _emission(node, color, strength, out, textures, warnings, what, default_colo
     (out['emission_texture']) times the strength."""
     s = _input_value(node, strength, warnings, what, default_strength)
     tex = _linked_texture(node, color, textures, warnings, what)
-    if tex is not None:
+    if tex is None:
+        tex = _graph_texture(node, color, textures, warnings, what)
+    if tex is False:
+        out["emission"] = tuple(c * s for c in node.inputs[color].default_value[:3])
+    elif tex is not None:
         out["emission_texture"], out["emission"] = tex, (s, s, s)
     else:
         out["emission"] = tuple(c * s for c in _input_value(node, color, warnings, what, default_color)[:3])
@@ -529,6 +640,9 @@ def _gather(leaves, warnings, what) -> _Mixture:
             mix.textures.append((p["base_color_texture"], (1 - m) * (1 - t) > 0.999))
         if "roughness_texture" in p:
             mix.rough_textures.append(p["roughness_texture"])
+        if "metallic_texture" in p:
+            warnings.append(f"{what}: a metallic map inside a Mix/Add Shader is not supported; its mean "
+                            f"{m:.3f} is used")
         if "alpha_texture" in p:
             warnings.append(f"{what}: an image's alpha inside a Mix/Add Shader is not supported; that shader is "
                             f"rendered opaque")

@@ -132,6 +132,7 @@ fn parse_material(d: &Bound<'_, PyDict>) -> PyResult<MaterialDesc> {
         ior: get_or(d, "ior", def.ior, &ctx)?,
         base_color_texture: get_or(d, "base_color_texture", None, &ctx)?,
         roughness_texture: get_or(d, "roughness_texture", None, &ctx)?,
+        metallic_texture: get_or(d, "metallic_texture", None, &ctx)?,
         alpha_texture: get_or(d, "alpha_texture", None, &ctx)?,
         normal_texture: get_or(d, "normal_texture", None, &ctx)?,
         normal_strength: get_or(d, "normal_strength", def.normal_strength, &ctx)?,
@@ -828,6 +829,7 @@ fn builtin_scene<'py>(py: Python<'py>, name: &str, width: u32, height: u32) -> P
         for (key, value) in [
             ("base_color_texture", m.base_color_texture),
             ("roughness_texture", m.roughness_texture),
+            ("metallic_texture", m.metallic_texture),
             ("alpha_texture", m.alpha_texture),
             ("normal_texture", m.normal_texture),
             ("emission_texture", m.emission_texture),

@@ -268,6 +268,83 @@ def translucent(bpy):
     return scene
 
 
+def texture_graphs(bpy):
+    """Colour and value nodes between images and a Principled BSDF, as real assets wire them
+    (bilinear images, magnified: 8×8 and 16×16 texels over a room): the floor's Base Color is
+    Mix › Multiply of an sRGB checker and an orange; its Roughness a constant Color Ramp of a
+    grey noise image; its Metallic the blue channel (Separate Color) of a packed map of
+    stripes; its IOR a Math node of two values. A card behind the ball is Hue/Saturation of an
+    Invert of an image, its Alpha the image's alpha squared (Math › Power)."""
+    sys.path.insert(0, str(ROOT / "tools"))
+    from make_test_scenes import uv_card
+
+    def sock(sockets, identifier):
+        return next(x for x in sockets if x.identifier == identifier)
+
+    def image_node(nt, name, pixels, colorspace):
+        h, w, _ = pixels.shape
+        img = bpy.data.images.new(name, w, h, alpha=True)
+        img.colorspace_settings.name = colorspace
+        img.pixels.foreach_set(np.ascontiguousarray(pixels, dtype=np.float32).ravel())
+        tex = nt.nodes.new("ShaderNodeTexImage")
+        tex.image = img
+        return tex
+
+    scene, grey = _grey_room(bpy, smooth=False)
+    _uv_sphere(bpy, scene, "Ball", (0.35, -0.1, 0.25), 0.25, 24, 12, grey, smooth=True)
+    yy, xx = np.mgrid[0:8, 0:8]
+    checker = np.where(((xx + yy) % 2 == 0)[..., None], [0.9, 0.8, 0.6, 1.0], [0.2, 0.5, 0.7, 1.0])
+    noise = np.ones((8, 8, 4))
+    noise[..., :3] = np.random.default_rng(3).random((8, 8, 1))
+    packed = np.ones((8, 8, 4))
+    packed[..., 1], packed[..., 2] = 0.3, (xx // 2) % 2  # (occlusion, roughness, metallic)
+    nt, out = uv_card(bpy, scene, "Floor", [(-0.95, -0.95, 0.01), (0.95, -0.95, 0.01), (0.95, 0.95, 0.01),
+                                            (-0.95, 0.95, 0.01)], "FloorGraph")
+    bsdf = nt.nodes.new("ShaderNodeBsdfPrincipled")
+    mix = nt.nodes.new("ShaderNodeMix")
+    mix.data_type, mix.blend_type = "RGBA", "MULTIPLY"
+    sock(mix.inputs, "Factor_Float").default_value = 1.0
+    sock(mix.inputs, "B_Color").default_value = (1.0, 0.6, 0.3, 1.0)
+    nt.links.new(image_node(nt, "Checker", checker, "sRGB").outputs["Color"], sock(mix.inputs, "A_Color"))
+    nt.links.new(sock(mix.outputs, "Result_Color"), bsdf.inputs["Base Color"])
+    ramp = nt.nodes.new("ShaderNodeValToRGB")
+    ramp.color_ramp.interpolation = "CONSTANT"
+    ramp.color_ramp.elements[0].color = (0.1, 0.1, 0.1, 1.0)
+    ramp.color_ramp.elements[1].position, ramp.color_ramp.elements[1].color = 0.5, (0.7, 0.7, 0.7, 1.0)
+    nt.links.new(image_node(nt, "Noise", noise, "Non-Color").outputs["Color"], ramp.inputs["Fac"])
+    nt.links.new(ramp.outputs["Color"], bsdf.inputs["Roughness"])
+    separate = nt.nodes.new("ShaderNodeSeparateColor")
+    nt.links.new(image_node(nt, "Packed", packed, "Non-Color").outputs["Color"], separate.inputs["Color"])
+    nt.links.new(separate.outputs["Blue"], bsdf.inputs["Metallic"])
+    ior = nt.nodes.new("ShaderNodeMath")
+    ior.operation, ior.inputs[0].default_value, ior.inputs[1].default_value = "ADD", 1.0, 0.45
+    nt.links.new(ior.outputs[0], bsdf.inputs["IOR"])
+    nt.links.new(bsdf.outputs[0], out.inputs["Surface"])
+    r = np.hypot(*(np.mgrid[0:16, 0:16] + 0.5 - 8) / 8)
+    disc = np.ones((16, 16, 4))
+    disc[..., 0], disc[..., 1] = np.linspace(0.1, 0.9, 16)[None, :], 0.4
+    disc[..., 2], disc[..., 3] = np.linspace(0.9, 0.1, 16)[:, None], np.where(r < 0.7, 1.0, 0.3)
+    nt, out = uv_card(bpy, scene, "Card", [(-0.8, 0.5, 0.1), (0.2, 0.5, 0.1), (0.2, 0.5, 1.2), (-0.8, 0.5, 1.2)],
+                      "CardGraph")
+    bsdf = nt.nodes.new("ShaderNodeBsdfPrincipled")
+    bsdf.inputs["Roughness"].default_value = 0.8
+    tex = image_node(nt, "Disc", disc, "sRGB")
+    invert, hue = nt.nodes.new("ShaderNodeInvert"), nt.nodes.new("ShaderNodeHueSaturation")
+    invert.inputs["Fac"].default_value = 0.7
+    hue.inputs["Hue"].default_value, hue.inputs["Saturation"].default_value = 0.6, 1.5
+    nt.links.new(tex.outputs["Color"], invert.inputs["Color"])
+    nt.links.new(invert.outputs["Color"], hue.inputs["Color"])
+    nt.links.new(hue.outputs["Color"], bsdf.inputs["Base Color"])
+    power = nt.nodes.new("ShaderNodeMath")
+    power.operation, power.inputs[1].default_value = "POWER", 2.0
+    nt.links.new(tex.outputs["Alpha"], power.inputs[0])
+    nt.links.new(power.outputs[0], bsdf.inputs["Alpha"])
+    nt.links.new(bsdf.outputs[0], out.inputs["Surface"])
+    _lamp(bpy, scene, "Area", "AREA", 80.0, (0.0, -0.2, 1.45), 0.6)
+    _camera_and_world(bpy, scene)
+    return scene
+
+
 def checked_in(name, keep=None):
     """One of tests/scenes/*.blend (tools/make_test_scenes.py) at this module's size and
     bounce limit; `keep` names the lights left on."""
@@ -330,6 +407,7 @@ SCENES = {
     "spots": (spots, 512, 16),
     "coat": (coat, 512, 16),
     "translucent": (translucent, 512, 16),
+    "texture_graphs": (texture_graphs, 512, 16),
     "all_lights": (checked_in("lights", {"Area", "Point", "Spot", "Sun", "World"}), 512, 16),
     "specular": (checked_in("specular"), 1024, 32),
     "textures": (checked_in("textures"), 512, 16),

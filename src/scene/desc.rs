@@ -74,6 +74,8 @@ pub struct MaterialDesc {
     /// the roughness (the texture's luminance), where the material links them.
     pub base_color_texture: Option<u32>,
     pub roughness_texture: Option<u32>,
+    /// A texture whose luminance replaces `metallic` (a metallic map).
+    pub metallic_texture: Option<u32>,
     /// A texture whose luminance is the alpha (coverage) of the surface: transparency
     /// 1 − alpha(uv) replaces `transparency` (an image's alpha channel into Principled Alpha).
     pub alpha_texture: Option<u32>,
@@ -144,6 +146,7 @@ impl Default for MaterialDesc {
             specular: 1.0,
             base_color_texture: None,
             roughness_texture: None,
+            metallic_texture: None,
             alpha_texture: None,
             normal_texture: None,
             normal_strength: 1.0,

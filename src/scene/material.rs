@@ -25,6 +25,7 @@ pub struct Material {
     pub specular: f32,
     pub base_color_texture: Option<u32>,
     pub roughness_texture: Option<u32>,
+    pub metallic_texture: Option<u32>,
     pub alpha_texture: Option<u32>,
     pub normal_texture: Option<u32>,
     pub normal_strength: f32,
@@ -62,7 +63,14 @@ pub const MAX_RADIANCE: f32 = 1e20;
 impl Material {
     pub fn from_desc(d: &MaterialDesc, textures: usize) -> Result<Material, SceneError> {
         let bad = |what: &str| SceneError::Material { material: d.name.clone(), what: what.to_string() };
-        let used = [d.base_color_texture, d.roughness_texture, d.alpha_texture, d.normal_texture, d.emission_texture];
+        let used = [
+            d.base_color_texture,
+            d.roughness_texture,
+            d.metallic_texture,
+            d.alpha_texture,
+            d.normal_texture,
+            d.emission_texture,
+        ];
         for t in used.into_iter().flatten() {
             if t as usize >= textures {
                 return Err(bad(&format!("uses texture {t} but the scene has {textures}")));
@@ -132,6 +140,7 @@ impl Material {
             specular: d.specular.clamp(0.0, 1.0),
             base_color_texture: d.base_color_texture,
             roughness_texture: d.roughness_texture,
+            metallic_texture: d.metallic_texture,
             alpha_texture: d.alpha_texture,
             normal_texture: d.normal_texture,
             normal_strength: d.normal_strength.max(0.0),
@@ -169,7 +178,7 @@ impl Material {
     /// geometric normal points to (outside of a closed mesh), which orients refraction.
     #[inline]
     pub fn bsdf(&self, front: bool) -> Bsdf {
-        self.bsdf_with(front, self.base_color, self.roughness, self.transparency)
+        self.bsdf_with(front, self.base_color, self.roughness, self.metallic, self.transparency)
     }
 
     /// May the surface let light straight through (a transparency, constant or textured)?
@@ -178,11 +187,11 @@ impl Material {
         self.transparency > 0.0 || self.alpha_texture.is_some()
     }
 
-    /// The BSDF with base colour, roughness and transparency τ given (where textures
-    /// replace them).
+    /// The BSDF with base colour, roughness, metallic and transparency τ given (where
+    /// textures replace them).
     #[inline]
-    pub fn bsdf_with(&self, front: bool, base_color: Spectrum, roughness: f32, tau: f32) -> Bsdf {
-        let (m, t, tl) = (self.metallic, self.transmission, self.translucency);
+    pub fn bsdf_with(&self, front: bool, base_color: Spectrum, roughness: f32, metallic: f32, tau: f32) -> Bsdf {
+        let (m, t, tl) = (metallic, self.transmission, self.translucency);
         let rest = (1.0 - tau) * (1.0 - tl);
         let w = [(1.0 - m) * (1.0 - t) * rest, m * rest, (1.0 - m) * t * rest];
         let translucent =

@@ -403,14 +403,19 @@ impl Scene {
     #[inline]
     pub fn bsdf(&self, material: u32, front: bool, uv: Vec2) -> Bsdf {
         let m = &self.materials[material as usize];
-        if m.base_color_texture.is_none() && m.roughness_texture.is_none() && m.alpha_texture.is_none() {
+        if m.base_color_texture.is_none()
+            && m.roughness_texture.is_none()
+            && m.metallic_texture.is_none()
+            && m.alpha_texture.is_none()
+        {
             return m.bsdf(front);
         }
         let base = m.base_color_texture.map_or(m.base_color, |t| self.textures[t as usize].eval(uv).min(Spectrum::ONE));
-        let rough = m
-            .roughness_texture
-            .map_or(m.roughness, |t| crate::math::luminance(self.textures[t as usize].eval(uv)).clamp(0.0, 1.0));
-        m.bsdf_with(front, base, rough, self.transparency(m, uv))
+        let grey = |t: Option<u32>, constant: f32| {
+            t.map_or(constant, |t| crate::math::luminance(self.textures[t as usize].eval(uv)).clamp(0.0, 1.0))
+        };
+        let (rough, metallic) = (grey(m.roughness_texture, m.roughness), grey(m.metallic_texture, m.metallic));
+        m.bsdf_with(front, base, rough, metallic, self.transparency(m, uv))
     }
 
     /// Transparency τ of a material at `uv`: 1 − alpha from its alpha texture, else its constant.

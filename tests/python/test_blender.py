@@ -1446,3 +1446,152 @@ def test_a_mapping_node_turns_the_environment_as_in_cycles(bpy_mod):
     assert np.allclose(got, r, atol=1e-6) and any("only its rotation" in w for w in warnings)
     nt.links.new(coord.outputs["Generated"], env.inputs["Vector"])
     assert exported()[0] is None
+
+
+# Every node and mode the texture-graph evaluator renders (blender_addon/texture_graph.py):
+# (node type, settings, inputs fed by images A and B: {input identifier: (image, output)}).
+_ZOO = ([("ShaderNodeMix", {"data_type": "RGBA", "blend_type": mode}, {"A_Color": "A", "B_Color": "B"})
+         for mode in ("MIX", "ADD", "MULTIPLY", "SCREEN", "DIVIDE", "DIFFERENCE", "EXCLUSION", "DARKEN",
+                      "LIGHTEN", "OVERLAY", "SOFT_LIGHT", "DODGE", "BURN", "HUE", "SATURATION", "VALUE",
+                      "COLOR")]
+        + [("ShaderNodeMix", {"data_type": "RGBA", "blend_type": mode}, {"A_Color": "C", "B_Color": "B"})
+           for mode in ("SUBTRACT", "LINEAR_LIGHT")]
+        + [("ShaderNodeMix", {"data_type": "FLOAT"}, {"Factor_Float": "A", "A_Float": "B"}),
+           ("ShaderNodeMix", {"data_type": "RGBA", "blend_type": "ADD", "clamp_result": True},
+            {"Factor_Float": "A", "A_Color": "B", "B_Color": "A"})]
+        + [("ShaderNodeMath", {"operation": "SUBTRACT"}, {"Value": "C", "Value_001": "B"})]
+        + [("ShaderNodeMath", {"operation": op}, {"Value": "A", "Value_001": "B", "Value_002": "B"})
+           for op in ("ADD", "MULTIPLY", "DIVIDE", "MULTIPLY_ADD", "POWER", "LOGARITHM", "SQRT",
+                      "INVERSE_SQRT", "ABSOLUTE", "EXPONENT", "MINIMUM", "MAXIMUM", "LESS_THAN", "GREATER_THAN",
+                      "SIGN", "COMPARE", "ROUND", "FLOOR", "CEIL", "TRUNC", "FRACT", "MODULO", "FLOORED_MODULO",
+                      "SNAP", "SINE", "COSINE", "TANGENT", "ARCSINE", "ARCCOSINE", "ARCTANGENT", "ARCTAN2",
+                      "RADIANS", "DEGREES")]
+        + [("ShaderNodeValToRGB", {"interpolation": i}, {"Fac": "A"})
+           for i in ("LINEAR", "CONSTANT", "EASE", "B_SPLINE", "CARDINAL")]
+        + [("ShaderNodeInvert", {}, {"Fac": "B", "Color": "A"}),
+           ("ShaderNodeGamma", {}, {"Color": "A", "Gamma": "B"}),
+           ("ShaderNodeBrightContrast", {}, {"Color": "A", "Bright": "B", "Contrast": "B"}),
+           ("ShaderNodeHueSaturation", {}, {"Hue": "B", "Saturation": "B", "Fac": "B", "Color": "A"}),
+           ("ShaderNodeSeparateColor", {}, {"Color": "A"}),
+           ("ShaderNodeCombineColor", {}, {"Red": "A", "Green": "B", "Blue": "A"}),
+           ("ShaderNodeRGBToBW", {}, {"Color": "A"}),
+           ("ShaderNodeClamp", {"clamp_type": "RANGE"}, {"Value": "A", "Min": "B"})]
+        + [("ShaderNodeMapRange", {"interpolation_type": i}, {"Value": "A", "From Min": "B"})
+           for i in ("LINEAR", "STEPPED", "SMOOTHSTEP", "SMOOTHERSTEP")])
+
+
+def test_texture_graph_nodes_agree_with_cycles(bpy_mod, tmp_out):
+    """Each colour and value node (and each blend mode and math operation) the exporter
+    evaluates into a texture, against Cycles running the node itself: a quad per node, its
+    Emission Color the node applied to two 4×4 images (Closest: the lookups are exact), seen
+    through an orthographic camera — noise-free but for the pixel filter's jitter."""
+    sys.path.insert(0, str(ROOT / "tools"))
+    from make_test_scenes import uv_card
+
+    cols = 8
+    rows = (len(_ZOO) + cols - 1) // cols
+    rng = np.random.default_rng(7)
+    pix = {"A": rng.uniform(0.05, 0.95, (4, 4, 4)), "B": rng.uniform(0.05, 0.95, (4, 4, 4))}
+    pix["A"][..., 3] = pix["B"][..., 3] = 1.0
+    pix["C"] = pix["A"] + 1.0  # (above B: what subtracts B stays positive, as light must)
+
+    def build(bpy, engine, spp, seed):
+        bpy.ops.wm.read_factory_settings(use_empty=True)
+        scene = bpy.context.scene
+        images = {}
+        for k, px in pix.items():
+            images[k] = bpy.data.images.new(k, 4, 4, alpha=True, float_buffer=True)
+            images[k].colorspace_settings.name = "Non-Color"
+            images[k].pixels.foreach_set(px.astype(np.float32).ravel())
+        for i, (kind, settings, feeds) in enumerate(_ZOO):
+            x, y = i % cols, -(i // cols)
+            nt, out = uv_card(bpy, scene, f"Q{i}", [(x, y, 0), (x + 0.9, y, 0), (x + 0.9, y + 0.9, 0), (x, y + 0.9, 0)],
+                              f"Zoo{i}")
+            node = nt.nodes.new(kind)
+            for key, value in settings.items():
+                setattr(node.color_ramp if kind == "ShaderNodeValToRGB" else node, key, value)
+            if kind == "ShaderNodeValToRGB":  # three stops
+                ramp = node.color_ramp
+                ramp.elements[0].color, ramp.elements[1].color = (0.9, 0.2, 0.1, 1.0), (0.1, 0.3, 0.9, 1.0)
+                ramp.elements.new(0.4).color = (0.2, 0.9, 0.3, 1.0)
+            for ident, image in feeds.items():
+                tex = nt.nodes.new("ShaderNodeTexImage")
+                tex.image, tex.interpolation = images[image], "Closest"
+                sock = next(s for s in node.inputs if s.identifier == ident)
+                src = tex.outputs["Color"]
+                nt.links.new(src, sock)
+            emit = nt.nodes.new("ShaderNodeEmission")
+            result = [s for s in node.outputs if s.enabled][0]
+            if kind == "ShaderNodeSeparateColor":
+                result = node.outputs["Green"]
+            nt.links.new(result, emit.inputs["Color"])
+            nt.links.new(emit.outputs[0], out.inputs["Surface"])
+        cam = bpy.data.cameras.new("Camera")
+        cam.type, cam.ortho_scale, cam.sensor_fit = "ORTHO", float(cols), "HORIZONTAL"
+        ob = bpy.data.objects.new("Camera", cam)
+        ob.location = (cols / 2 - 0.05, -rows / 2 + 0.95, 5.0)
+        scene.collection.objects.link(ob)
+        scene.camera = ob
+        world = bpy.data.worlds.new("World")
+        scene.world = world
+        world.color = (0.0, 0.0, 0.0)
+        r = scene.render
+        r.resolution_x, r.resolution_y, r.resolution_percentage = 16 * cols, 16 * rows, 100
+        return for_engine(scene, engine, spp, seed, method="PT")
+
+    c, g = (render_to_exr(bpy_mod, build(bpy_mod, e, 64, 1), tmp_out / f"zoo{e}.exr") for e in ("CYCLES", "GDMLT"))
+    # the pixel at the centre of each image cell (3.6 pixels across) of each quad (16 pixels
+    # a slot), where the pixel filter sees that cell alone
+    centre = (0.8 + (np.arange(4) + 0.5) * 3.6).astype(int)
+    cell = lambda img, i: img[16 * (i // cols) + centre][:, 16 * (i % cols) + centre]  # noqa: E731
+    err = [float(np.max(np.abs(cell(c, i) - cell(g, i)) / (np.abs(cell(c, i)) + 0.5))) for i in range(len(_ZOO))]
+    bad = [(_ZOO[i][0], _ZOO[i][1], round(e, 4)) for i, e in enumerate(err) if e > 0.005]
+    assert not bad, "\n".join(map(str, bad))
+
+
+def test_texture_graphs_warn_on_what_they_cannot_evaluate_and_follow_edits(bpy_mod):
+    """A node outside the evaluator's set (a Noise Texture) is named in a warning and the
+    input keeps its unlinked value; a graph of values alone is a constant; an edit to a
+    graph (a Color Ramp stop) or to an image's pixels gives a new texture — evaluated graphs
+    are cached across exports, and a stale one would render the old material."""
+    from gdmlt_blender import export
+
+    bpy = bpy_mod
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    sys.path.insert(0, str(ROOT / "tools"))
+    from make_test_scenes import empty_material
+
+    mat, nt, out = empty_material(bpy, "Graph")
+    bsdf = nt.nodes.new("ShaderNodeBsdfPrincipled")
+    nt.links.new(bsdf.outputs[0], out.inputs["Surface"])
+    noise = nt.nodes.new("ShaderNodeTexNoise")
+    nt.links.new(noise.outputs["Color"], bsdf.inputs["Base Color"])
+    bsdf.inputs["Base Color"].default_value = (0.2, 0.4, 0.6, 1.0)
+    half = nt.nodes.new("ShaderNodeMath")
+    half.operation, half.inputs[0].default_value, half.inputs[1].default_value = "MULTIPLY", 0.5, 0.8
+    nt.links.new(half.outputs[0], bsdf.inputs["Metallic"])
+    img = bpy.data.images.new("Rough", 4, 4, float_buffer=True)
+    img.colorspace_settings.name = "Non-Color"
+    img.pixels.foreach_set(np.full(64, 0.3, np.float32))
+    tex, ramp = nt.nodes.new("ShaderNodeTexImage"), nt.nodes.new("ShaderNodeValToRGB")
+    tex.image = img
+    nt.links.new(tex.outputs["Color"], ramp.inputs["Fac"])
+    nt.links.new(ramp.outputs["Color"], bsdf.inputs["Roughness"])
+
+    def export_once():
+        warnings, textures = [], export.Textures()
+        params = export.material_params(mat, warnings, textures)
+        return params, warnings, np.array(textures.items[params["roughness_texture"]]["pixels"])
+
+    params, warnings, first = export_once()
+    assert len(warnings) == 1 and "Noise Texture" in warnings[0] and "Base Color" in warnings[0], warnings
+    assert params["base_color"] == pytest.approx((0.2, 0.4, 0.6))
+    assert params["metallic"] == pytest.approx(0.4) and "metallic_texture" not in params
+    assert np.allclose(first, 0.3)  # the default ramp (black → white) at 0.3
+    ramp.color_ramp.elements[1].color = (0.5, 0.5, 0.5, 1.0)
+    assert np.allclose(export_once()[2], 0.15)
+    img.pixels.foreach_set(np.full(64, 0.8, np.float32))
+    assert np.allclose(export_once()[2], 0.4)
+    ramp.color_ramp.elements[1].color = (1.0, 1.0, 1.0, 1.0)
+    img.pixels.foreach_set(np.full(64, 0.3, np.float32))
+    assert np.array_equal(export_once()[2], first)

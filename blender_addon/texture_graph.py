@@ -1,0 +1,584 @@
+"""Texture node graphs evaluated at export: the colour and value nodes artists put between an
+Image Texture and a shader input (Color Ramp on a roughness map, Separate Color on a packed
+AO/roughness/metallic map, Mix › Multiply of a colour map and a tint, Math, Invert, Hue/
+Saturation, Brightness/Contrast, Gamma, Map Range, Clamp, RGB to BW) are pointwise: the
+value at a shading point is a function of the images' values there. So the graph is
+evaluated once per texel of its largest image and handed to the core as one linear float
+texture, looked up with the images' own UV transform, interpolation and extension.
+
+Exact where Cycles would compute the same: at the texels and wherever the texture is seen
+at or below its resolution. Magnified, the core interpolates the graph's result where Cycles
+runs the graph on interpolated inputs (a Color Ramp step between two texels is sharp in
+Cycles and one texel wide here); 8-bit sRGB images are decoded per texel first (the core
+decodes a plain image after interpolation, as Cycles does).
+
+A graph with no image in it is a constant (a Math node on two values, a Mix of two colours):
+its value. A graph with a node outside this set, images under different UV transforms or
+extensions, or a loop is not evaluated: `evaluate` warns, naming the node, and the input
+keeps its unlinked value — as before this module.
+
+Each node's arithmetic follows Blender's documented node behaviour (the Cycles manual's
+node pages); colour into value is Rec.709 luminance, value into colour is grey.
+"""
+
+import math
+
+import numpy as np
+
+LUMA = np.array([0.2126, 0.7152, 0.0722], np.float32)
+# Cycles tabulates a Color Ramp at 256 positions over [0, 1] and interpolates that table
+RAMP_TABLE = 256
+CHUNK = 1 << 20
+
+
+class Unsupported(Exception):
+    """A node (or a combination of them) the evaluator does not render."""
+
+
+class _Colour:
+    """A colour: (N, 3) float64 (N = 1 for a constant)."""
+
+    def __init__(self, a):
+        self.a = a
+
+
+class _Value:
+    """A value: (N,) float64."""
+
+    def __init__(self, a):
+        self.a = a
+
+
+def _as_colour(v):
+    return v if isinstance(v, _Colour) else _Colour(np.repeat(v.a[:, None], 3, axis=1))
+
+
+def _as_value(v):
+    return v if isinstance(v, _Value) else _Value(v.a @ LUMA)
+
+
+_SRGB_TABLE = np.arange(256, dtype=np.float64) / 255.0
+_SRGB_TABLE = np.where(_SRGB_TABLE <= 0.04045, _SRGB_TABLE / 12.92,
+                       ((_SRGB_TABLE + 0.055) / 1.055) ** 2.4).astype(np.float32)
+
+
+def srgb_to_linear(c, exact_bytes=False):
+    """The sRGB transfer function inverted; `exact_bytes`: every value is k/255 (an 8-bit
+    image's own texels), looked up in a table."""
+    if exact_bytes:
+        return _SRGB_TABLE[(c * np.float32(255.0) + np.float32(0.5)).astype(np.uint8)]
+    c = c.astype(np.float32)
+    return np.where(c <= 0.04045, c / 12.92, ((np.maximum(c, 0.04045) + 0.055) / 1.055) ** 2.4).astype(np.float32)
+
+
+def _resample(px, w, h, gw, gh, extension, closest):
+    """The image `px` ((h·w, k), row 0 at the bottom) looked up at the texel centres of a
+    gw × gh grid over the same UV square, as the core looks it up (bilinear or closest)."""
+    if (w, h) == (gw, gh):
+        return px
+    u = (np.arange(gw) + 0.5) / gw * w - 0.5
+    v = (np.arange(gh) + 0.5) / gh * h - 0.5
+    img = px.reshape(h, w, -1)
+
+    def wrap(i, n):
+        return np.mod(i, n) if extension == "REPEAT" else np.clip(i, 0, n - 1)
+
+    if closest:
+        xi, yi = wrap(np.floor(u + 0.5).astype(int), w), wrap(np.floor(v + 0.5).astype(int), h)
+        return img[yi][:, xi].reshape(gw * gh, -1)
+    x0, y0 = np.floor(u).astype(int), np.floor(v).astype(int)
+    fx, fy = (u - x0)[None, :, None], (v - y0)[:, None, None]
+    xa, xb, ya, yb = wrap(x0, w), wrap(x0 + 1, w), wrap(y0, h), wrap(y0 + 1, h)
+    top = img[ya][:, xa] * (1 - fx) + img[ya][:, xb] * fx
+    bottom = img[yb][:, xa] * (1 - fx) + img[yb][:, xb] * fx
+    return (top * (1 - fy) + bottom * fy).reshape(gw * gh, -1)
+
+
+def _supersampling(w, h):
+    """Texels per image texel (per axis) of the grid a graph over interpolated images is
+    evaluated on: up to 1024 texels across (at most 16 per image texel, 4M texels in all), so
+    that the core's interpolation of the result departs from the graph run on interpolated
+    inputs (Cycles) only within a fraction of an image texel where the image is magnified."""
+    k = max(1, min(16, 1024 // max(w, h)))
+    while k > 1 and w * h * k * k > 1 << 22:
+        k -= 1
+    return k
+
+
+# evaluated graphs, by what they depend on: a render or viewport update that exports the
+# same material again reuses them (least recently used dropped beyond 16 or 512 MB)
+_CACHE = {}
+CACHE_BYTES = 512 << 20
+_SETTINGS = ("blend_type", "data_type", "clamp_factor", "clamp_result", "factor_mode", "use_clamp", "operation",
+             "mode", "clamp_type", "interpolation_type", "clamp", "interpolation", "extension")
+
+
+def _settings(node):
+    """A node's settings that its result depends on (besides its inputs)."""
+    out = [node.bl_idname, node.name] + [(k, getattr(node, k)) for k in _SETTINGS if hasattr(node, k)]
+    ramp = getattr(node, "color_ramp", None)
+    if ramp is not None:
+        out += [ramp.interpolation, ramp.color_mode, ramp.hue_interpolation,
+                tuple((e.position, tuple(e.color)) for e in ramp.elements)]
+    return tuple(out)
+
+
+def _input(node, identifier):
+    for s in node.inputs:
+        if s.identifier == identifier:
+            return s
+    raise Unsupported(f"node '{node.name}' has no input '{identifier}'")
+
+
+class _Graph:
+    """One evaluation: the image leaves found (first pass) and their texels on one grid."""
+
+    def __init__(self, image_pixels, uv_key, image_identity):
+        self.image_pixels = image_pixels  # node → (pixels (h·w, 4), w, h, srgb)
+        self.image_identity = image_identity  # node → what identifies its pixels
+        self.uv_key = uv_key  # node → (transform, extension, closest)
+        self.images = {}  # node name → node
+        self.grid = None  # (w, h), None until the leaves are read
+        self.texels = {}
+        self.visiting = set()
+        self.signature = []  # what the result depends on besides the pixels (the cache's key)
+
+    # --- the two passes -------------------------------------------------------------------
+
+    def collect(self, sock):
+        """Finds the image leaves under `sock` (and refuses unsupported nodes early)."""
+        self.grid = None
+        self._walk(sock, collect=True)
+
+    def run(self, sock):
+        """Loads the leaves' texels on the grid, then evaluates `sock`."""
+        if self.images:
+            keys = {name: self.uv_key(n) for name, n in self.images.items()}
+            if len({(k[0], k[1]) for k in keys.values()}) > 1:
+                raise Unsupported("its images use different UV transforms or extensions")
+            key = (tuple(self.signature), tuple(sorted(keys.items())),
+                   tuple((name, self.image_identity(n)) for name, n in sorted(self.images.items())))
+            hit = _CACHE.get(key)
+            if hit is not None:
+                self.grid = hit[0]
+                _CACHE[key] = _CACHE.pop(key)  # (most recently used last)
+                return hit[1]
+            loaded, full = {name: self.image_pixels(n) for name, n in self.images.items()}, {}
+            _, w, h, _ = max(loaded.values(), key=lambda t: t[1] * t[2])
+            k = 1 if all(key[2] for key in keys.values()) else _supersampling(w, h)
+            self.grid = (w * k, h * k)
+            for name, (px, w, h, srgb) in loaded.items():
+                _, ext, closest = keys[name]
+                same = (w, h) == self.grid
+                px = _resample(px, w, h, *self.grid, ext, closest).astype(np.float32, copy=False)
+                if srgb:  # (decoded after interpolation, as Cycles decodes 8-bit images)
+                    px = np.concatenate([srgb_to_linear(px[:, :3], exact_bytes=same), px[:, 3:]], axis=1)
+                full[name] = px
+        if not self.images:
+            return self._walk(sock, collect=False)
+        # in slices of 1M texels (a 4K map's temporaries stay at tens of MB)
+        n, parts = self.grid[0] * self.grid[1], []
+        for a in range(0, n, CHUNK):
+            self.texels = {name: px[a:a + CHUNK] for name, px in full.items()}
+            v = self._walk(sock, collect=False)
+            m = min(CHUNK, n - a)
+            parts.append(v.a if len(v.a) == m else np.broadcast_to(v.a, (m,) + v.a.shape[1:]))
+        result = type(v)(np.concatenate(parts))
+        _CACHE[key] = (self.grid, result)
+        while len(_CACHE) > 1 and (len(_CACHE) > 16 or sum(r.a.nbytes for _, r in _CACHE.values()) > CACHE_BYTES):
+            _CACHE.pop(next(iter(_CACHE)))
+        return result
+
+    # --- sockets and nodes ----------------------------------------------------------------
+
+    def _walk(self, sock, collect):
+        """The value at input socket `sock`: its link's source output, else its own value."""
+        if not sock.is_linked:
+            return self._unlinked(sock, collect)
+        link = sock.links[0]
+        if getattr(link, "is_muted", False) or not getattr(link, "is_valid", True):
+            return self._unlinked(sock, collect)
+        node, out = link.from_node, link.from_socket
+        if collect:
+            self.signature.append((sock.identifier, node.name, out.identifier))
+        if node.name in self.visiting:
+            raise Unsupported(f"its nodes form a loop through '{node.name}'")
+        self.visiting.add(node.name)
+        try:
+            v = self._node(node, out, collect)
+        finally:
+            self.visiting.discard(node.name)
+        # the destination's type decides the conversion (colour into value: luminance)
+        if collect:
+            return None
+        return _as_value(v) if sock.type == "VALUE" else _as_colour(v) if sock.type == "RGBA" else v
+
+    def _unlinked(self, sock, collect):
+        v = sock.default_value
+        if collect and sock.type in ("RGBA", "VALUE"):
+            self.signature.append((sock.identifier, tuple(v) if sock.type == "RGBA" else float(v)))
+        if sock.type == "RGBA":
+            return _Colour(np.array([tuple(v)[:3]], np.float32))
+        if sock.type == "VALUE":
+            return _Value(np.array([float(v)], np.float32))
+        raise Unsupported(f"an unlinked {sock.type.lower()} input '{sock.name}'")
+
+    def _node(self, node, out, collect):
+        t = node.type
+        if getattr(node, "mute", False):
+            raise Unsupported(f"node '{node.name}' is muted")
+        walk = (lambda ident: self._walk(_input(node, ident), collect))
+        if collect:
+            self.signature.append(_settings(node))
+        if t == "REROUTE":
+            return self._walk(node.inputs[0], collect)
+        if t == "RGB":
+            return _Colour(np.array([tuple(node.outputs[0].default_value)[:3]], np.float32))
+        if t == "VALUE":
+            return _Value(np.array([float(node.outputs[0].default_value)], np.float32))
+        if t == "TEX_IMAGE":
+            if out.name not in ("Color", "Alpha"):
+                raise Unsupported(f"output '{out.name}' of '{node.name}'")
+            if node.image is None:
+                raise Unsupported(f"Image Texture '{node.name}' has no image")
+            if collect:
+                self.images[node.name] = node
+                return None
+            px = self.texels[node.name]
+            return _Value(px[:, 3]) if out.name == "Alpha" else _Colour(px[:, :3])
+        op = _NODES.get(t)
+        if op is None:
+            raise Unsupported(f"node '{node.name}' ({t})")
+        return op(node, out, walk, collect)
+
+
+# --- the nodes' arithmetic (each: (node, output, walk, collect) → _Colour | _Value) -------------
+
+
+def _all(walk, collect, *idents):
+    vals = [walk(i) for i in idents]
+    return None if collect else vals
+
+
+def _lerp(a, b, t):
+    return a + (b - a) * t
+
+
+def _rgb_to_hsv(c):
+    r, g, b = c[:, 0], c[:, 1], c[:, 2]
+    mx, mn = c.max(axis=1), c.min(axis=1)
+    d = mx - mn
+    s = np.where(mx > 0, d / np.where(mx > 0, mx, 1), 0.0)
+    dd = np.where(d > 0, d, 1)
+    h = np.where(mx == r, (g - b) / dd, np.where(mx == g, 2 + (b - r) / dd, 4 + (r - g) / dd)) / 6.0
+    h = np.where(d > 0, np.mod(h, 1.0), 0.0)
+    return np.stack([h, s, mx], axis=1)
+
+
+def _hsv_to_rgb(hsv):
+    h, s, v = hsv[:, 0:1], hsv[:, 1:2], hsv[:, 2:3]
+    # each channel n ∈ {5, 3, 1}: v − v·s·clamp(min(k, 4 − k), 0, 1), k = (n + 6h) mod 6
+    k = np.mod(np.array([5.0, 3.0, 1.0], np.float32) + 6.0 * np.mod(h, 1.0), 6.0)
+    return v - v * s * np.clip(np.minimum(k, 4.0 - k), 0.0, 1.0)
+
+
+def _blend(mode, t, a, b):
+    """Blender's colour blend modes (Mix node, Color type): a = A, b = B, t = factor (N, 1)."""
+    if mode == "MIX":
+        return _lerp(a, b, t)
+    if mode == "ADD":
+        return a + t * b
+    if mode == "MULTIPLY":
+        return a * (1 - t + t * b)
+    if mode == "SUBTRACT":
+        return a - t * b
+    if mode == "SCREEN":
+        return 1 - (1 - t + t * (1 - b)) * (1 - a)
+    if mode == "DIVIDE":
+        return np.where(b != 0, (1 - t) * a + t * a / np.where(b != 0, b, 1), a)
+    if mode == "DIFFERENCE":
+        return _lerp(a, np.abs(a - b), t)
+    if mode == "EXCLUSION":
+        return np.maximum(_lerp(a, a + b - 2 * a * b, t), 0.0)
+    if mode == "DARKEN":
+        return _lerp(a, np.minimum(a, b), t)
+    if mode == "LIGHTEN":
+        return _lerp(a, np.maximum(a, b), t)
+    if mode == "OVERLAY":
+        return np.where(a < 0.5, a * (1 - t + 2 * t * b), 1 - (1 - t + 2 * t * (1 - b)) * (1 - a))
+    if mode == "SOFT_LIGHT":
+        screen = 1 - (1 - b) * (1 - a)
+        return (1 - t) * a + t * ((1 - a) * b * a + a * screen)
+    if mode == "LINEAR_LIGHT":
+        return a + t * (2 * b - 1)
+    if mode == "DODGE":
+        d = 1 - t * b
+        return np.where(a == 0, a, np.where(d <= 0, 1.0, np.minimum(a / np.where(d > 0, d, 1), 1.0)))
+    if mode == "BURN":
+        d = (1 - t) + t * b
+        return np.where(d <= 0, 0.0, np.clip(1 - (1 - a) / np.where(d > 0, d, 1), 0.0, 1.0))
+    if mode in ("HUE", "SATURATION", "VALUE", "COLOR"):
+        ha, hb = _rgb_to_hsv(a), _rgb_to_hsv(b)
+        new = ha.copy()
+        if mode == "VALUE":
+            new[:, 2] = hb[:, 2]
+        elif mode == "SATURATION":
+            new[:, 1] = np.where(ha[:, 1] != 0, hb[:, 1], ha[:, 1])
+        elif mode == "HUE":
+            new[:, 0] = np.where(hb[:, 1] != 0, hb[:, 0], ha[:, 0])
+        else:
+            has = hb[:, 1] != 0
+            new[:, 0] = np.where(has, hb[:, 0], ha[:, 0])
+            new[:, 1] = np.where(has, hb[:, 1], ha[:, 1])
+        return _lerp(a, _hsv_to_rgb(new), t)
+    raise Unsupported(f"blend mode {mode}")
+
+
+def _broadcast(*arrays):
+    n = max(len(x) for x in arrays)
+    return [np.broadcast_to(x, (n,) + x.shape[1:]) if len(x) != n else x for x in arrays]
+
+
+def _mix(node, out, walk, collect):
+    if node.type == "MIX_RGB":
+        idents, mode, clamp_t, clamp_out, kind = ("Fac", "Color1", "Color2"), node.blend_type, True, node.use_clamp, "RGBA"
+    else:
+        kind = node.data_type
+        if kind not in ("RGBA", "FLOAT") or getattr(node, "factor_mode", "UNIFORM") != "UNIFORM":
+            raise Unsupported(f"Mix node '{node.name}' of type {kind}")
+        suffix = "Color" if kind == "RGBA" else "Float"
+        idents = ("Factor_Float", f"A_{suffix}", f"B_{suffix}")
+        mode, clamp_t, clamp_out = node.blend_type, node.clamp_factor, kind == "RGBA" and node.clamp_result
+    vals = _all(walk, collect, *idents)
+    if collect:
+        return None
+    t, a, b = _as_value(vals[0]).a, vals[1], vals[2]
+    if clamp_t:
+        t = np.clip(t, 0.0, 1.0)
+    if kind == "FLOAT":
+        t, a, b = _broadcast(t, _as_value(a).a, _as_value(b).a)
+        return _Value(_lerp(a, b, t))
+    t, a, b = _broadcast(t[:, None], _as_colour(a).a, _as_colour(b).a)
+    r = _blend(mode, t, a, b)
+    return _Colour(np.clip(r, 0.0, 1.0) if clamp_out else r)
+
+
+def _safe(fn, ok, a, *rest):
+    """fn where `ok`, else 0 (Cycles' safe_ math functions)."""
+    with np.errstate(all="ignore"):
+        r = fn(a, *rest)
+    return np.where(ok, r, 0.0)
+
+
+def _math_op(op, a, b, c):
+    with np.errstate(all="ignore"):
+        table = {
+            "ADD": lambda: a + b,
+            "SUBTRACT": lambda: a - b,
+            "MULTIPLY": lambda: a * b,
+            "DIVIDE": lambda: _safe(lambda x, y: x / y, b != 0, a, b),
+            "MULTIPLY_ADD": lambda: a * b + c,
+            "POWER": lambda: _safe(np.power, ~((a < 0) & (b != np.floor(b))), a, b),
+            "LOGARITHM": lambda: _safe(lambda x, y: np.log(x) / np.log(y), (a > 0) & (b > 0), a, b),
+            "SQRT": lambda: _safe(np.sqrt, a > 0, a),
+            "INVERSE_SQRT": lambda: _safe(lambda x: 1 / np.sqrt(x), a > 0, a),
+            "ABSOLUTE": lambda: np.abs(a),
+            "EXPONENT": lambda: np.exp(a),
+            "MINIMUM": lambda: np.minimum(a, b),
+            "MAXIMUM": lambda: np.maximum(a, b),
+            "LESS_THAN": lambda: (a < b).astype(np.float32),
+            "GREATER_THAN": lambda: (a > b).astype(np.float32),
+            "SIGN": lambda: np.sign(a),
+            "COMPARE": lambda: (np.abs(a - b) <= np.maximum(c, 1e-5)).astype(np.float32),
+            "ROUND": lambda: np.floor(a + 0.5),
+            "FLOOR": lambda: np.floor(a),
+            "CEIL": lambda: np.ceil(a),
+            "TRUNC": lambda: np.trunc(a),
+            "FRACT": lambda: a - np.floor(a),
+            "MODULO": lambda: _safe(np.fmod, b != 0, a, b),
+            "FLOORED_MODULO": lambda: _safe(lambda x, y: x - np.floor(x / y) * y, b != 0, a, b),
+            "SNAP": lambda: _safe(lambda x, y: np.floor(x / y) * y, b != 0, a, b),
+            "SINE": lambda: np.sin(a),
+            "COSINE": lambda: np.cos(a),
+            "TANGENT": lambda: np.tan(a),
+            "ARCSINE": lambda: np.arcsin(np.clip(a, -1, 1)),
+            "ARCCOSINE": lambda: np.arccos(np.clip(a, -1, 1)),
+            "ARCTANGENT": lambda: np.arctan(a),
+            "ARCTAN2": lambda: np.arctan2(a, b),
+            "RADIANS": lambda: a * (math.pi / 180),
+            "DEGREES": lambda: a * (180 / math.pi),
+        }
+        if op not in table:
+            raise Unsupported(f"Math operation {op}")
+        return table[op]()
+
+
+def _math(node, out, walk, collect):
+    vals = _all(walk, collect, "Value", "Value_001", "Value_002")
+    if collect:
+        return None
+    a, b, c = _broadcast(*(_as_value(v).a for v in vals))
+    r = _math_op(node.operation, a, b, c)
+    return _Value(np.clip(r, 0.0, 1.0) if node.use_clamp else r)
+
+
+def _ramp(node, out, walk, collect):
+    vals = _all(walk, collect, "Fac")
+    if collect:
+        return None
+    ramp = node.color_ramp
+    table = np.array([tuple(ramp.evaluate(i / (RAMP_TABLE - 1))) for i in range(RAMP_TABLE)], np.float32)
+    f = np.clip(_as_value(vals[0]).a, 0.0, 1.0) * (RAMP_TABLE - 1)
+    i = np.clip(f.astype(int), 0, RAMP_TABLE - 1)
+    rgba = table[i]
+    if ramp.interpolation != "CONSTANT":
+        j = np.minimum(i + 1, RAMP_TABLE - 1)
+        rgba = rgba + (table[j] - rgba) * (f - i)[:, None]
+    return _Value(rgba[:, 3]) if out.name == "Alpha" else _Colour(rgba[:, :3])
+
+
+def _invert(node, out, walk, collect):
+    vals = _all(walk, collect, "Fac", "Color")
+    if collect:
+        return None
+    t, c = _broadcast(_as_value(vals[0]).a[:, None], _as_colour(vals[1]).a)
+    return _Colour(_lerp(c, 1 - c, t))
+
+
+def _gamma(node, out, walk, collect):
+    vals = _all(walk, collect, "Color", "Gamma")
+    if collect:
+        return None
+    c, g = _broadcast(_as_colour(vals[0]).a, _as_value(vals[1]).a[:, None])
+    with np.errstate(all="ignore"):
+        return _Colour(np.where(c > 0, np.power(np.maximum(c, 1e-30), g), c))
+
+
+def _bright_contrast(node, out, walk, collect):
+    vals = _all(walk, collect, "Color", "Bright", "Contrast")
+    if collect:
+        return None
+    c, br, co = _broadcast(_as_colour(vals[0]).a, _as_value(vals[1]).a[:, None], _as_value(vals[2]).a[:, None])
+    return _Colour(np.maximum((1 + co) * c + (br - co * 0.5), 0.0))
+
+
+def _hue_sat(node, out, walk, collect):
+    vals = _all(walk, collect, "Hue", "Saturation", "Value", "Fac", "Color")
+    if collect:
+        return None
+    hue, sat, val, fac = (_as_value(v).a for v in vals[:4])
+    c = _as_colour(vals[4]).a
+    hue, sat, val, fac, c = _broadcast(hue, sat, val, fac, c)
+    hsv = _rgb_to_hsv(c)
+    hsv[:, 0] = np.mod(hsv[:, 0] + hue + 0.5, 1.0)
+    hsv[:, 1] = np.clip(hsv[:, 1] * sat, 0.0, 1.0)
+    hsv[:, 2] = hsv[:, 2] * val
+    return _Colour(np.maximum(_lerp(c, _hsv_to_rgb(hsv), fac[:, None]), 0.0))
+
+
+def _separate(node, out, walk, collect):
+    if getattr(node, "mode", "RGB") != "RGB":
+        raise Unsupported(f"Separate Color '{node.name}' in {node.mode} mode")
+    vals = _all(walk, collect, "Color" if node.type == "SEPARATE_COLOR" else "Image")
+    if collect:
+        return None
+    k = {"Red": 0, "Green": 1, "Blue": 2, "R": 0, "G": 1, "B": 2}[out.name]
+    return _Value(_as_colour(vals[0]).a[:, k])
+
+
+def _combine(node, out, walk, collect):
+    if getattr(node, "mode", "RGB") != "RGB":
+        raise Unsupported(f"Combine Color '{node.name}' in {node.mode} mode")
+    idents = ("Red", "Green", "Blue") if node.type == "COMBINE_COLOR" else ("R", "G", "B")
+    vals = _all(walk, collect, *idents)
+    if collect:
+        return None
+    return _Colour(np.stack(_broadcast(*(_as_value(v).a for v in vals)), axis=1))
+
+
+def _to_bw(node, out, walk, collect):
+    vals = _all(walk, collect, "Color")
+    return None if collect else _as_value(vals[0])
+
+
+def _clamp(node, out, walk, collect):
+    vals = _all(walk, collect, "Value", "Min", "Max")
+    if collect:
+        return None
+    v, lo, hi = _broadcast(*(_as_value(x).a for x in vals))
+    if node.clamp_type == "RANGE":
+        lo, hi = np.minimum(lo, hi), np.maximum(lo, hi)
+    return _Value(np.minimum(np.maximum(v, lo), hi))
+
+
+def _map_range(node, out, walk, collect):
+    if node.data_type != "FLOAT":
+        raise Unsupported(f"Map Range '{node.name}' of type {node.data_type}")
+    vals = _all(walk, collect, "Value", "From Min", "From Max", "To Min", "To Max", "Steps")
+    if collect:
+        return None
+    v, fmin, fmax, tmin, tmax, steps = _broadcast(*(_as_value(x).a for x in vals))
+    with np.errstate(all="ignore"):
+        span = fmax - fmin
+        f = np.where(span != 0, (v - fmin) / np.where(span != 0, span, 1), 0.0)
+        kind = node.interpolation_type
+        if kind == "STEPPED":
+            f = np.where(steps > 0, np.floor(f * (steps + 1)) / np.where(steps > 0, steps, 1), 0.0)
+        elif kind in ("SMOOTHSTEP", "SMOOTHERSTEP"):
+            lo, hi = np.minimum(fmin, fmax), np.maximum(fmin, fmax)
+            s = np.clip(np.where(hi > lo, (v - lo) / np.where(hi > lo, hi - lo, 1), 0.0), 0.0, 1.0)
+            s = s * s * (3 - 2 * s) if kind == "SMOOTHSTEP" else s ** 3 * (s * (s * 6 - 15) + 10)
+            f = np.where(fmin > fmax, 1 - s, s)
+        elif kind != "LINEAR":
+            raise Unsupported(f"Map Range interpolation {kind}")
+    r = tmin + f * (tmax - tmin)
+    if node.clamp and kind in ("LINEAR", "STEPPED"):
+        r = np.clip(r, np.minimum(tmin, tmax), np.maximum(tmin, tmax))
+    return _Value(r)
+
+
+_NODES = {
+    "MIX": _mix,
+    "MIX_RGB": _mix,
+    "MATH": _math,
+    "VALTORGB": _ramp,
+    "INVERT": _invert,
+    "GAMMA": _gamma,
+    "BRIGHTCONTRAST": _bright_contrast,
+    "HUE_SAT": _hue_sat,
+    "SEPARATE_COLOR": _separate,
+    "SEPRGB": _separate,
+    "COMBINE_COLOR": _combine,
+    "COMBRGB": _combine,
+    "RGBTOBW": _to_bw,
+    "CLAMP": _clamp,
+    "MAP_RANGE": _map_range,
+}
+
+
+def evaluate(sock, image_pixels, uv_key, image_identity=None):
+    """The value of the linked input `sock`: ('constant', a tuple of 3 or a float) when no
+    image feeds it, else ('texture', rgb (h·w, 3) float32, w, h, transform, extension,
+    closest): the images' shared UV transform and extension, closest if every image is.
+    `image_pixels(node)` → (RGBA (h·w, 4), w, h, srgb: 8-bit sRGB values still encoded),
+    None for a constant input;
+    `uv_key(node)` → (transform, extension, closest); `image_identity(node)` → a hashable
+    value that changes whenever the image's pixels do (the cache's key). Raises Unsupported,
+    naming what it cannot evaluate."""
+    g = _Graph(image_pixels, uv_key, image_identity)
+    g.collect(sock)
+    if g.images and image_pixels is None:
+        raise Unsupported(f"Image Texture '{next(iter(g.images))}' (an image into a constant input)")
+    v = g.run(sock)
+    v = _as_value(v) if sock.type == "VALUE" else _as_colour(v)
+    v.a = np.nan_to_num(v.a, nan=0.0, posinf=0.0, neginf=0.0)
+    if not g.images:
+        return ("constant", float(v.a[0]) if isinstance(v, _Value) else tuple(float(x) for x in v.a[0]))
+    gw, gh = g.grid
+    rgb = _as_colour(v).a
+    if len(rgb) != gw * gh:
+        rgb = np.broadcast_to(rgb, (gw * gh, 3))
+    keys = [uv_key(n) for n in g.images.values()]
+    transform, extension, _ = keys[0]
+    closest = all(k[2] for k in keys)
+    return ("texture", np.ascontiguousarray(rgb, dtype=np.float32), gw, gh, transform, extension, closest)
