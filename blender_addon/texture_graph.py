@@ -3,19 +3,21 @@ Image Texture and a shader input (Color Ramp on a roughness map, Separate Color 
 AO/roughness/metallic map, Mix › Multiply of a colour map and a tint, Math, Invert, Hue/
 Saturation, Brightness/Contrast, Gamma, Map Range, Clamp, RGB to BW) are pointwise: the
 value at a shading point is a function of the images' values there. So the graph is
-evaluated once per texel of its largest image and handed to the core as one linear float
-texture, looked up with the images' own UV transform, interpolation and extension.
+evaluated once per point of a grid over its largest image and handed to the core as one
+linear float texture, looked up with the images' own UV transform and extension.
 
-Exact where Cycles would compute the same: at the texels and wherever the texture is seen
-at or below its resolution. Magnified, the core interpolates the graph's result where Cycles
-runs the graph on interpolated inputs (a Color Ramp step between two texels is sharp in
-Cycles and one texel wide here); 8-bit sRGB images are decoded per texel first (the core
-decodes a plain image after interpolation, as Cycles does).
+Exact at the grid's points: each image is looked up there as the core looks it up
+(bilinear or closest, 8-bit sRGB decoded after interpolation, as Cycles), and the nodes
+compute what Cycles' do. Between them the core interpolates the result where Cycles runs
+the graph on interpolated inputs, so a graph over interpolated images is evaluated on a
+grid up to 16× finer than the image (at most 1024 texels across, 4M in all): a Color Ramp
+step on a magnified 8×8 image is then sharp to 1/128 of the image, where at the image's own
+resolution it rendered 5% off Cycles. Over Closest images the grid is the image's own.
 
 A graph with no image in it is a constant (a Math node on two values, a Mix of two colours):
 its value. A graph with a node outside this set, images under different UV transforms or
-extensions, or a loop is not evaluated: `evaluate` warns, naming the node, and the input
-keeps its unlinked value — as before this module.
+extensions, or a loop is not evaluated: `evaluate` raises Unsupported naming it, the
+exporter warns, and the input keeps its unlinked value.
 
 Each node's arithmetic follows Blender's documented node behaviour (the Cycles manual's
 node pages); colour into value is Rec.709 luminance, value into colour is grey.
