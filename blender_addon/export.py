@@ -345,20 +345,53 @@ def material_params(mat, warnings, textures=None):
         c = tuple(mat.diffuse_color)[:3]
         out["base_color"] = c
         return out
-    _warn_unrendered_outputs(node_out, warnings, what)
+    _warn_unrendered_outputs(node_out, warnings, what, skip=("Displacement",))
     surface = node_out.inputs.get("Surface")
     if surface is None or not surface.is_linked:
         out["base_color"] = (0.0, 0.0, 0.0)  # Cycles renders an unconnected surface black
         return out
+    displaced = _displacement_bump(mat, node_out, textures, warnings, what)
     node = surface.links[0].from_node
     leaves = []
     _shader_leaves(node, 1.0, leaves, textures, warnings, what)
     if node.type in ("MIX_SHADER", "ADD_SHADER") or any("pass" in p for _, p in leaves):
         out.update(_combine(leaves, warnings, what))
-        return out
-    out.update(leaves[0][1])  # one shader node, opaque: its own parameters
-    out.pop("bsdf", None)
+    else:
+        out.update(leaves[0][1])  # one shader node, opaque: its own parameters
+        out.pop("bsdf", None)
+    if displaced and "bump_texture" in out:
+        warnings.append(f"{what}: its displacement and a Bump node both bump the normal; only the Bump node's "
+                        f"is rendered")
+    elif displaced:
+        out.update(displaced)
     return out
+
+
+def _displacement_bump(mat, node_out, textures, warnings, what):
+    """Material Output › Displacement fed by a Displacement node whose Height is an image or a
+    graph over images: as Cycles renders it with the material's default method, Bump Only —
+    the normal of the surface displaced by (Height − Midlevel)·Scale along it, which to first
+    order is a bump of distance Scale (object space taken as world space: the object's own
+    scale is not applied). True displacement is rendered so too, with a warning. Returns the
+    bump's material keys, or None."""
+    sock = node_out.inputs.get("Displacement")
+    if sock is None or not sock.is_linked:
+        return None
+    node = sock.links[0].from_node
+    if node.type != "DISPLACEMENT" or textures is None:
+        warnings.append(f"{what}: its Displacement output ({node.type}) is not rendered (supported: a "
+                        f"Displacement node over images, rendered as bump)")
+        return None
+    method = getattr(mat, "displacement_method", "BUMP")
+    if method != "BUMP":
+        warnings.append(f"{what}: displacement method {method} is rendered as Bump Only (the mesh is not "
+                        f"displaced)")
+    if node.inputs["Normal"].is_linked:
+        warnings.append(f"{what}: the Normal input of Displacement '{node.name}' is not read (the surface "
+                        f"normal is used)")
+    bump = {}
+    _bump_height(node, bump, textures, warnings, what, float(_input_value(node, "Scale", warnings, what, 1.0)), 1.0)
+    return bump or None
 
 
 def _node_params(node, textures, warnings, what):
@@ -428,8 +461,8 @@ def _node_params(node, textures, warnings, what):
     else:
         warnings.append(f"{what}: shader node '{node.name}' ({t}) is not supported; rendered as grey diffuse")
     _normal_map(node, out, textures, warnings, what)
-    if out.get("coat", 0.0) > 0.0 and "normal_texture" in out:
-        warnings.append(f"{what}: the coat of '{node.name}' follows its normal map (Cycles' coat keeps the "
+    if out.get("coat", 0.0) > 0.0 and ("normal_texture" in out or "bump_texture" in out):
+        warnings.append(f"{what}: the coat of '{node.name}' follows its normal or bump map (Cycles' coat keeps the "
                         f"unmapped normal unless its Coat Normal is linked)")
     if t in ("BSDF_PRINCIPLED", "BSDF_GLOSSY", "BSDF_ANISOTROPIC", "BSDF_GLASS", "BSDF_REFRACTION"):
         # Multiscatter GGX (Blender's default) compensates the energy the metal and glass lobes
@@ -444,13 +477,22 @@ def _node_params(node, textures, warnings, what):
 
 
 def _normal_map(node, out, textures, warnings, what):
-    """A Normal input fed by a Normal Map node (Tangent Space, the active UV map) whose Color
-    comes from an Image Texture: out['normal_texture'] and out['normal_strength']. Anything
-    else linked there is ignored, with a warning."""
+    """A Normal input fed by a Bump node (its Height an image, or a graph of colour and value
+    nodes over images: out['bump_texture'], bump_distance and bump_strength) and/or a Normal
+    Map node (Tangent Space, the active UV map) whose Color comes from an Image Texture
+    (out['normal_texture'] and out['normal_strength']); a Bump node's own Normal input may be
+    such a Normal Map (the core applies the normal map, then the bump around it, as Cycles).
+    Anything else linked there is ignored, with a warning."""
     sock = node.inputs.get("Normal")
     if sock is None or not sock.is_linked:
         return
     nm = sock.links[0].from_node
+    if nm.type == "BUMP" and textures is not None:
+        _bump(nm, out, textures, warnings, what)
+        sock = nm.inputs["Normal"]
+        if not sock.is_linked:
+            return
+        node, nm = nm, sock.links[0].from_node
     if nm.type == "NORMAL_MAP" and nm.space == "TANGENT" and textures is not None:
         if nm.uv_map:
             warnings.append(f"{what}: Normal Map '{nm.name}' UV map '{nm.uv_map}' is not read; the active "
@@ -462,7 +504,27 @@ def _normal_map(node, out, textures, warnings, what):
             return
     warnings.append(f"{what}: the Normal input of '{node.name}' ({nm.type}"
                     f"{' ' + nm.space if nm.type == 'NORMAL_MAP' else ''}) is not supported; the mesh normal is used "
-                    f"(supported: a tangent-space Normal Map fed by an Image Texture)")
+                    f"(supported: a Bump node over images, a tangent-space Normal Map fed by an Image Texture)")
+
+
+def _bump(node, out, textures, warnings, what):
+    """A Bump node whose Height is an image's luminance or a graph over images: the height
+    map, Distance (negated by Invert) and Strength, as Cycles bumps the normal (its Filter
+    Width, a finite-difference step of a tenth of a pixel, is the limit the core computes
+    exactly). A constant height bumps nothing."""
+    distance = float(_input_value(node, "Distance", warnings, what, 1.0))
+    _bump_height(node, out, textures, warnings, what, -distance if node.invert else distance,
+                 _unit(_input_value(node, "Strength", warnings, what, 1.0)))
+
+
+def _bump_height(node, out, textures, warnings, what, distance, strength):
+    """out's bump keys from the Height input of `node` (an image's luminance, or a graph of
+    colour and value nodes over images), unless that height is constant."""
+    tex = _linked_texture(node, "Height", textures, warnings, what)
+    if tex is None:
+        tex = _graph_texture(node, "Height", textures, warnings, what)
+    if tex is not None and tex is not False:
+        out.update(bump_texture=tex, bump_distance=distance, bump_strength=strength)
 
 
 def _emission(node, color, strength, out, textures, warnings, what, default_color, default_strength):
@@ -492,6 +554,7 @@ _UNSUPPORTED_LAYERS = (("Sheen Weight", 0.0), ("Subsurface Weight", 0.0),
 
 
 COAT_KEYS = ("coat", "coat_roughness", "coat_ior", "coat_tint")
+NORMAL_KEYS = ("normal_texture", "normal_strength", "bump_texture", "bump_distance", "bump_strength")
 
 
 def _coat(node, out, warnings, what):
@@ -592,7 +655,7 @@ class _Mixture:
     layer_iors: list = field(default_factory=list)
     textures: list = field(default_factory=list)  # (base colour texture, on a diffuse-only leaf)
     rough_textures: list = field(default_factory=list)
-    normals: list = field(default_factory=list)  # the leaves' normal maps (texture, strength)
+    normals: list = field(default_factory=list)  # the leaves' normal and bump maps (NORMAL_KEYS)
     multiscatter: list = field(default_factory=list)  # the metal and glass leaves' distributions
     constant_fresnel: list = field(default_factory=list)  # the metal leaves': Glossy (True) or Principled
     bsdf_leaves: int = 0
@@ -646,8 +709,8 @@ def _gather(leaves, warnings, what) -> _Mixture:
         if "alpha_texture" in p:
             warnings.append(f"{what}: an image's alpha inside a Mix/Add Shader is not supported; that shader is "
                             f"rendered opaque")
-        if "normal_texture" in p:
-            mix.normals.append((p["normal_texture"], p["normal_strength"]))
+        if "normal_texture" in p or "bump_texture" in p:
+            mix.normals.append(tuple(p.get(k) for k in NORMAL_KEYS))
         if w * m > 0 or w * (1 - m) * t > 0:
             mix.multiscatter.append(p.get("multiscatter", False))
         if w * m > 0:
@@ -773,7 +836,7 @@ def _combined_textures(mix, out, colour, warnings, what):
                             f"{'the Glossy' if mix.constant_fresnel[0] else 'the Principled'} Fresnel term")
     if mix.normals:
         # one shading normal per point in the core: a normal map shared by every BSDF leaf
-        out["normal_texture"], out["normal_strength"] = mix.normals[0]
+        out.update({k: v for k, v in zip(NORMAL_KEYS, mix.normals[0]) if v is not None})
         if len(set(mix.normals)) > 1 or len(mix.normals) < mix.bsdf_leaves:
             warnings.append(f"{what}: the mixed shaders have different normals; the first normal map is used for all")
 
@@ -921,9 +984,11 @@ def _world(scene, warnings, textures):
     return tuple(c * strength for c in col), None, None
 
 
-def _warn_unrendered_outputs(node_out, warnings, what):
+def _warn_unrendered_outputs(node_out, warnings, what, skip=()):
     """A warning for each linked output socket GDMLT does not render (volumes, displacement)."""
     for socket in ("Volume", "Displacement"):
+        if socket in skip:
+            continue
         s = node_out.inputs.get(socket)
         if s is not None and s.is_linked:
             warnings.append(f"{what}: its {socket} output is not rendered yet (left out)")

@@ -136,6 +136,9 @@ fn parse_material(d: &Bound<'_, PyDict>) -> PyResult<MaterialDesc> {
         alpha_texture: get_or(d, "alpha_texture", None, &ctx)?,
         normal_texture: get_or(d, "normal_texture", None, &ctx)?,
         normal_strength: get_or(d, "normal_strength", def.normal_strength, &ctx)?,
+        bump_texture: get_or(d, "bump_texture", None, &ctx)?,
+        bump_distance: get_or(d, "bump_distance", def.bump_distance, &ctx)?,
+        bump_strength: get_or(d, "bump_strength", def.bump_strength, &ctx)?,
         emission_texture: get_or(d, "emission_texture", None, &ctx)?,
         metal_roughness: get_or(d, "metal_roughness", None, &ctx)?,
         glass_roughness: get_or(d, "glass_roughness", None, &ctx)?,
@@ -815,6 +818,8 @@ fn builtin_scene<'py>(py: Python<'py>, name: &str, width: u32, height: u32) -> P
             ("specular", m.specular),
             ("transparency", m.transparency),
             ("normal_strength", m.normal_strength),
+            ("bump_distance", m.bump_distance),
+            ("bump_strength", m.bump_strength),
             ("coat", m.coat),
             ("coat_roughness", m.coat_roughness),
             ("coat_ior", m.coat_ior),
@@ -833,6 +838,7 @@ fn builtin_scene<'py>(py: Python<'py>, name: &str, width: u32, height: u32) -> P
             ("alpha_texture", m.alpha_texture),
             ("normal_texture", m.normal_texture),
             ("emission_texture", m.emission_texture),
+            ("bump_texture", m.bump_texture),
         ] {
             if let Some(t) = value {
                 md.set_item(key, t)?;

@@ -345,6 +345,79 @@ def texture_graphs(bpy):
     return scene
 
 
+def bump(bpy):
+    """Bump mapping as artists wire it: a floor card whose Principled Normal is a Bump node
+    over a height map of ridges (a bilinear image, magnified), a card on the back wall bumped
+    by a Math node of an image (Invert on) over a tangent-space normal map, a card on the
+    right wall displaced through its material output (Bump Only), lit by an area light from
+    the side, where the slopes shade differently."""
+    sys.path.insert(0, str(ROOT / "tools"))
+    from make_test_scenes import uv_card
+
+    def image_node(nt, name, pixels):
+        h, w, _ = pixels.shape
+        img = bpy.data.images.new(name, w, h, alpha=True, float_buffer=True)
+        img.colorspace_settings.name = "Non-Color"
+        img.pixels.foreach_set(np.ascontiguousarray(pixels, dtype=np.float32).ravel())
+        tex = nt.nodes.new("ShaderNodeTexImage")
+        tex.image = img
+        return tex
+
+    scene, grey = _grey_room(bpy, smooth=False)
+    u = (np.arange(32) + 0.5) / 32
+    ridges = np.ones((4, 32, 4))
+    ridges[..., :3] = (0.5 + 0.5 * np.sin(2 * np.pi * 4 * u))[None, :, None]
+    nt, out = uv_card(bpy, scene, "Floor", [(-0.95, -0.95, 0.01), (0.95, -0.95, 0.01), (0.95, 0.95, 0.01),
+                                            (-0.95, 0.95, 0.01)], "Ridged")
+    bsdf = nt.nodes.new("ShaderNodeBsdfPrincipled")
+    bsdf.inputs["Base Color"].default_value = (0.7, 0.6, 0.5, 1.0)
+    bsdf.inputs["Roughness"].default_value = 0.35
+    bump_node = nt.nodes.new("ShaderNodeBump")
+    bump_node.inputs["Distance"].default_value = 0.04
+    nt.links.new(image_node(nt, "Ridges", ridges).outputs["Color"], bump_node.inputs["Height"])
+    nt.links.new(bump_node.outputs["Normal"], bsdf.inputs["Normal"])
+    nt.links.new(bsdf.outputs[0], out.inputs["Surface"])
+    yy, xx = (np.mgrid[0:16, 0:16] + 0.5) / 16
+    dimples = np.ones((16, 16, 4))
+    dimples[..., :3] = (np.cos(2 * np.pi * 2 * xx) * np.cos(2 * np.pi * 2 * yy))[..., None]
+    tilt = np.ones((4, 4, 4))
+    tilt[..., 0], tilt[..., 1], tilt[..., 2] = 0.6, 0.5, 0.5 + 0.5 * np.sqrt(1 - 0.2 ** 2)
+    nt, out = uv_card(bpy, scene, "Card", [(-0.8, 0.9, 0.1), (0.6, 0.9, 0.1), (0.6, 0.9, 1.3), (-0.8, 0.9, 1.3)],
+                      "Dimpled")
+    bsdf = nt.nodes.new("ShaderNodeBsdfPrincipled")
+    bsdf.inputs["Base Color"].default_value = (0.3, 0.5, 0.7, 1.0)
+    bsdf.inputs["Roughness"].default_value = 0.5
+    bump_node = nt.nodes.new("ShaderNodeBump")
+    bump_node.invert = True
+    bump_node.inputs["Distance"].default_value = 0.05
+    bump_node.inputs["Strength"].default_value = 0.8
+    scale = nt.nodes.new("ShaderNodeMath")
+    scale.operation, scale.inputs[1].default_value = "MULTIPLY", 0.5
+    nt.links.new(image_node(nt, "Dimples", dimples).outputs["Color"], scale.inputs[0])
+    nt.links.new(scale.outputs[0], bump_node.inputs["Height"])
+    normal_map = nt.nodes.new("ShaderNodeNormalMap")
+    nt.links.new(image_node(nt, "Tilt", tilt).outputs["Color"], normal_map.inputs["Color"])
+    nt.links.new(normal_map.outputs["Normal"], bump_node.inputs["Normal"])
+    nt.links.new(bump_node.outputs["Normal"], bsdf.inputs["Normal"])
+    nt.links.new(bsdf.outputs[0], out.inputs["Surface"])
+    # a card on the right wall displaced by an image through its material output: Cycles'
+    # default method (Bump Only) renders that as a bump of distance Scale
+    nt, out = uv_card(bpy, scene, "Side", [(0.9, -0.6, 0.1), (0.9, 0.6, 0.1), (0.9, 0.6, 1.2), (0.9, -0.6, 1.2)],
+                      "Displaced")
+    bsdf = nt.nodes.new("ShaderNodeBsdfPrincipled")
+    bsdf.inputs["Base Color"].default_value = (0.8, 0.8, 0.8, 1.0)
+    bsdf.inputs["Roughness"].default_value = 0.6
+    displacement = nt.nodes.new("ShaderNodeDisplacement")
+    displacement.inputs["Scale"].default_value = 0.015
+    nt.links.new(image_node(nt, "Bumps", dimples).outputs["Color"], displacement.inputs["Height"])
+    nt.links.new(bsdf.outputs[0], out.inputs["Surface"])
+    nt.links.new(displacement.outputs[0], out.inputs["Displacement"])
+    _lamp(bpy, scene, "Area", "AREA", 80.0, (-0.6, -0.3, 0.6), 0.4, (0.0, math.radians(-70.0), 0.0))
+    _lamp(bpy, scene, "Lamp", "POINT", 20.0, (0.6, 0.2, 1.3), 0.05)
+    _camera_and_world(bpy, scene)
+    return scene
+
+
 def checked_in(name, keep=None):
     """One of tests/scenes/*.blend (tools/make_test_scenes.py) at this module's size and
     bounce limit; `keep` names the lights left on."""
@@ -408,6 +481,7 @@ SCENES = {
     "coat": (coat, 512, 16),
     "translucent": (translucent, 512, 16),
     "texture_graphs": (texture_graphs, 512, 16),
+    "bump": (bump, 512, 16),
     "all_lights": (checked_in("lights", {"Area", "Point", "Spot", "Sun", "World"}), 512, 16),
     "specular": (checked_in("specular"), 1024, 32),
     "textures": (checked_in("textures"), 512, 16),

@@ -37,7 +37,7 @@ impl Shading {
             materials.iter_mut().for_each(|m| m.general = true);
         }
         let has_transparency = !shortcuts || materials.iter().any(|m| m.is_transparent());
-        let has_normal_maps = materials.iter().any(|m| m.normal_texture.is_some());
+        let has_normal_maps = materials.iter().any(|m| m.normal_texture.is_some() || m.bump_texture.is_some());
         let pass_index = desc.materials.iter().map(|m| m.pass_index).collect();
         Ok(Shading { textures, materials, has_transparency, has_normal_maps, pass_index })
     }

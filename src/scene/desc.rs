@@ -83,6 +83,12 @@ pub struct MaterialDesc {
     /// Tangent space) and its strength, perturbing the shading normal.
     pub normal_texture: Option<u32>,
     pub normal_strength: f32,
+    /// A height map (its luminance, in scene units × `bump_distance`) that bumps the shading
+    /// normal as Blender's Bump node: N' = normalize(N − distance·∇h), mixed with N by
+    /// `bump_strength`; a negative distance inverts it.
+    pub bump_texture: Option<u32>,
+    pub bump_distance: f32,
+    pub bump_strength: f32,
     /// An image that multiplies `emission` per point (an Image Texture into Emission Color:
     /// `emission` is then the strength, and the image the colour).
     pub emission_texture: Option<u32>,
@@ -150,6 +156,9 @@ impl Default for MaterialDesc {
             alpha_texture: None,
             normal_texture: None,
             normal_strength: 1.0,
+            bump_texture: None,
+            bump_distance: 1.0,
+            bump_strength: 1.0,
             emission_texture: None,
             metal_color: None,
             glass_color: None,

@@ -29,6 +29,9 @@ pub struct Material {
     pub alpha_texture: Option<u32>,
     pub normal_texture: Option<u32>,
     pub normal_strength: f32,
+    pub bump_texture: Option<u32>,
+    pub bump_distance: f32,
+    pub bump_strength: f32,
     pub emission_texture: Option<u32>,
     pub metal_color: Option<Spectrum>,
     pub glass_color: Option<Spectrum>,
@@ -70,6 +73,7 @@ impl Material {
             d.alpha_texture,
             d.normal_texture,
             d.emission_texture,
+            d.bump_texture,
         ];
         for t in used.into_iter().flatten() {
             if t as usize >= textures {
@@ -86,6 +90,8 @@ impl Material {
             d.specular_ior,
             d.specular,
             d.normal_strength,
+            d.bump_distance,
+            d.bump_strength,
             d.coat,
             d.coat_roughness,
             d.coat_ior,
@@ -144,6 +150,9 @@ impl Material {
             alpha_texture: d.alpha_texture,
             normal_texture: d.normal_texture,
             normal_strength: d.normal_strength.max(0.0),
+            bump_texture: d.bump_texture,
+            bump_distance: d.bump_distance,
+            bump_strength: d.bump_strength.clamp(0.0, 1.0),
             emission_texture: d.emission_texture,
             metal_color: d.metal_color.map(|c| Vec3::from_array(c).clamp(Vec3::ZERO, Vec3::ONE)),
             glass_color: d.glass_color.map(|c| Vec3::from_array(c).clamp(Vec3::ZERO, Vec3::ONE)),

@@ -372,12 +372,21 @@ impl Scene {
     }
 
     /// The shading normal `ns` of triangle `t` perturbed by its material's tangent-space
-    /// normal map at `uv`, as Cycles' Normal Map node: n' = T·c.x + B·c.y + N·c.z with
-    /// c = 2·rgb − 1, the tangent T = ∂p/∂u of the triangle made orthogonal to N, B = ±N × T
-    /// (the sign of the UV mapping's handedness), then N + strength·(n' − N), normalized.
+    /// normal map and then its bump map at `uv`, in the frame of the triangle's UV mapping
+    /// (∂p/∂u, ∂p/∂v; none without UVs or with degenerate ones).
+    ///
+    /// Normal map, as Cycles' Normal Map node: n' = T·c.x + B·c.y + N·c.z with c = 2·rgb − 1,
+    /// the tangent T = ∂p/∂u made orthogonal to N, B = ±N × T (the sign of the UV mapping's
+    /// handedness), then N + strength·(n' − N), normalized.
+    ///
+    /// Bump, as Cycles' Bump node in the limit of its small filter width: the surface
+    /// gradient of the height h perpendicular to N, ∇h = (h_u·R_u + h_v·R_v)/det with
+    /// R_u = ∂p/∂v × N, R_v = N × ∂p/∂u, det = ∂p/∂u · R_u (the basis dual to the tangents,
+    /// so that ∇h·∂p/∂u = h_u), then N' = normalize(N − distance·∇h), mixed with N by the
+    /// strength.
     fn normal_mapped(&self, t: usize, ns: Vec3, uv: Vec2) -> Vec3 {
         let m = &self.materials[self.tri_material[t] as usize];
-        let (Some(tex), Some(uvs)) = (m.normal_texture, self.uvs[t]) else { return ns };
+        let Some(uvs) = self.uvs[t] else { return ns };
         let p = &self.positions[t];
         let (e1, e2) = (p[1] - p[0], p[2] - p[0]);
         let (d1, d2) = (uvs[1] - uvs[0], uvs[2] - uvs[0]);
@@ -387,15 +396,28 @@ impl Scene {
         }
         let dpdu = (e1 * d2.y - e2 * d1.y) / det;
         let dpdv = (e2 * d1.x - e1 * d2.x) / det;
-        let tangent = (dpdu - ns * ns.dot(dpdu)).normalize_or_zero();
-        if tangent == Vec3::ZERO {
-            return ns;
+        let mut n = ns;
+        if let Some(tex) = m.normal_texture {
+            let tangent = (dpdu - ns * ns.dot(dpdu)).normalize_or_zero();
+            if tangent != Vec3::ZERO {
+                let sign = if ns.cross(dpdu).dot(dpdv) < 0.0 { -1.0 } else { 1.0 };
+                let bitangent = ns.cross(tangent) * sign;
+                let c = self.textures[tex as usize].eval(uv) * 2.0 - Vec3::ONE;
+                let mapped = (tangent * c.x + bitangent * c.y + ns * c.z).normalize_or(ns);
+                n = (ns + (mapped - ns) * m.normal_strength).normalize_or(ns);
+            }
         }
-        let sign = if ns.cross(dpdu).dot(dpdv) < 0.0 { -1.0 } else { 1.0 };
-        let bitangent = ns.cross(tangent) * sign;
-        let c = self.textures[tex as usize].eval(uv) * 2.0 - Vec3::ONE;
-        let mapped = (tangent * c.x + bitangent * c.y + ns * c.z).normalize_or(ns);
-        (ns + (mapped - ns) * m.normal_strength).normalize_or(ns)
+        if let Some(tex) = m.bump_texture {
+            let (ru, rv) = (dpdv.cross(n), n.cross(dpdu));
+            let det = dpdu.dot(ru);
+            if det.abs() > 1e-30 {
+                let h = self.textures[tex as usize].luminance_gradient(uv);
+                let grad = (ru * h.x + rv * h.y) / det;
+                let bumped = (n - grad * m.bump_distance).normalize_or(n);
+                n = (bumped * m.bump_strength + n * (1.0 - m.bump_strength)).normalize_or(n);
+            }
+        }
+        n
     }
 
     /// The BSDF of `material` at texture coordinates `uv` (textures replace the base colour
@@ -759,5 +781,62 @@ mod tests {
         // strength 0.5: halfway between N and the mapped normal, normalized
         assert!(close(mapped_normal(tilt_u, plain, 0.5), Vec3::new(0.3, 0.0, 0.9).normalize()));
         assert!(close(mapped_normal(tilt_u, plain, 0.0), Vec3::Z));
+    }
+
+    /// The shading normal where a ray from above hits a 2 m quad at z = 0 (u = (x + 1)/2 for
+    /// the plain UVs) bumped by a 2×1 height map of 0 and 1 (Extend: h = 2u − 0.5 between
+    /// the texel centres, so ∂h/∂x = 1 under the plain UVs).
+    fn bumped_normal(uv: [[f32; 2]; 4], distance: f32, strength: f32) -> Vec3 {
+        let quad = MeshDesc {
+            name: "Quad".into(),
+            positions: vec![[-1.0, -1.0, 0.0], [1.0, -1.0, 0.0], [1.0, 1.0, 0.0], [-1.0, 1.0, 0.0]],
+            indices: vec![[0, 1, 2], [0, 2, 3]],
+            corner_uvs: [0, 1, 2, 0, 2, 3].iter().map(|&k| uv[k]).collect(),
+            material_ids: vec![0, 0],
+            ..Default::default()
+        };
+        let texture = TextureDesc {
+            name: "h".into(),
+            width: 2,
+            height: 1,
+            pixels: vec![[0.0; 3], [1.0; 3]],
+            extension: crate::scene::desc::TextureExtension::Extend,
+            ..Default::default()
+        };
+        let material = MaterialDesc {
+            bump_texture: Some(0),
+            bump_distance: distance,
+            bump_strength: strength,
+            ..Default::default()
+        };
+        let desc = SceneDesc {
+            meshes: vec![quad],
+            materials: vec![material],
+            textures: vec![texture],
+            camera: camera_looking_along_y([0.0, -3.0, 0.0], 35.0, 4, 4),
+            ..Default::default()
+        };
+        let scene = Scene::build(&desc).unwrap();
+        let (o, d) = (Vec3::new(0.2, 0.1, 2.0), Vec3::new(0.0, 0.0, -1.0));
+        let hit = scene.intersect(o, d, 0.0, f32::INFINITY).unwrap();
+        scene.interaction(&hit, d).frame.n
+    }
+
+    /// A bump map tilts the normal against the height's surface gradient, N' = N − d·∇h
+    /// normalized, along whichever surface direction the UVs put u; a negative distance
+    /// (Invert) tilts the other way, the strength mixes with the unbumped normal.
+    #[test]
+    fn bump_maps_tilt_against_the_height_gradient() {
+        let plain = [[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]];
+        let rotated = [[0.0, 1.0], [0.0, 0.0], [1.0, 0.0], [1.0, 1.0]]; // u along +y
+        let close = |a: Vec3, b: Vec3| (a - b).length() < 1e-4;
+        let n = bumped_normal(plain, 0.5, 1.0);
+        assert!(close(n, Vec3::new(-0.5, 0.0, 1.0).normalize()), "{n}");
+        assert!(close(bumped_normal(plain, -0.5, 1.0), Vec3::new(0.5, 0.0, 1.0).normalize()));
+        let n = bumped_normal(rotated, 0.5, 1.0);
+        assert!(close(n, Vec3::new(0.0, -0.5, 1.0).normalize()), "{n}");
+        let half = (Vec3::new(-0.5, 0.0, 1.0).normalize() * 0.5 + Vec3::Z * 0.5).normalize();
+        assert!(close(bumped_normal(plain, 0.5, 0.5), half));
+        assert!(close(bumped_normal(plain, 0.5, 0.0), Vec3::Z));
     }
 }

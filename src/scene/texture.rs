@@ -31,6 +31,16 @@ pub fn srgb_to_linear(c: f32) -> f32 {
     }
 }
 
+/// The derivative of `srgb_to_linear` at `c`.
+#[inline]
+fn srgb_slope(c: f32) -> f32 {
+    if c <= 0.04045 {
+        1.0 / 12.92
+    } else {
+        2.4 / 1.055 * ((c + 0.055) / 1.055).powf(1.4)
+    }
+}
+
 impl Texture {
     pub fn from_desc(d: &TextureDesc) -> Result<Texture, SceneError> {
         let bad = |what: String| SceneError::Texture { texture: d.name.clone(), what };
@@ -121,6 +131,37 @@ impl Texture {
         } else {
             c
         }
+    }
+
+    /// The gradient (∂/∂u, ∂/∂v) of the luminance of `eval` at `uv` — of the bilinear
+    /// interpolation within the texel cell `uv` falls in, through the sRGB decoding and the
+    /// texture's coordinate transform; zero for closest lookup (piecewise constant).
+    pub fn luminance_gradient(&self, uv: Vec2) -> Vec2 {
+        let (m, at) = match &self.transform {
+            Some(m) => (*m, Vec2::new(m[0] * uv.x + m[1] * uv.y + m[2], m[3] * uv.x + m[4] * uv.y + m[5])),
+            None => ([1.0, 0.0, 0.0, 0.0, 1.0, 0.0], uv),
+        };
+        let (x, y) = (at.x as f64 * self.width as f64, at.y as f64 * self.height as f64);
+        if self.closest || !(x.is_finite() && y.is_finite()) {
+            return Vec2::ZERO;
+        }
+        let (fx, fy) = (x - 0.5, y - 0.5);
+        let (x0, y0) = (fx.floor(), fy.floor());
+        let (tx, ty) = ((fx - x0) as f32, (fy - y0) as f32);
+        let (x0, y0) = (x0 as i64, y0 as i64);
+        let t = |x, y| self.texel(x, y).unwrap_or(Spectrum::ZERO);
+        let (c00, c10, c01, c11) = (t(x0, y0), t(x0 + 1, y0), t(x0, y0 + 1), t(x0 + 1, y0 + 1));
+        let value = (c00 * (1.0 - tx) + c10 * tx) * (1.0 - ty) + (c01 * (1.0 - tx) + c11 * tx) * ty;
+        // ∂/∂x and ∂/∂y of the stored values (x, y in texels), then of the decoded ones
+        let mut dx = ((c10 - c00) * (1.0 - ty) + (c11 - c01) * ty) * self.width as f32;
+        let mut dy = ((c01 - c00) * (1.0 - tx) + (c11 - c10) * tx) * self.height as f32;
+        if self.srgb {
+            let slope = Spectrum::from_array(value.to_array().map(srgb_slope));
+            (dx, dy) = (dx * slope, dy * slope);
+        }
+        let (gx, gy) = (crate::math::luminance(dx), crate::math::luminance(dy));
+        // through the transform: at = M·uv + t
+        Vec2::new(gx * m[0] + gy * m[3], gx * m[1] + gy * m[4])
     }
 
     /// Stored values interpolated at `uv` (Cycles' kernel_tex_image_interp).
@@ -252,5 +293,66 @@ mod tests {
         assert!((mid - 0.21404).abs() < 1e-4, "{mid}");
         assert!((t.eval(Vec2::new(0.75, 0.5)).x - 1.0).abs() < 1e-6);
         assert!((srgb_to_linear(0.04045) - 0.04045 / 12.92).abs() < 1e-7);
+    }
+
+    /// `luminance_gradient` is the derivative of the luminance of `eval`: central finite
+    /// differences at random points (inside a texel cell: both sides in the same bilinear
+    /// patch), for linear and sRGB images, Repeat and Extend, with and without a turned and
+    /// scaled coordinate transform; closest lookup has none.
+    #[test]
+    fn luminance_gradient_is_the_derivative_of_the_lookup() {
+        use rand_core::Rng;
+        let mut rng = rand_pcg::Pcg32::new(7, 11);
+        let mut uniform = move || (rng.next_u32() >> 8) as f32 / (1u32 << 24) as f32;
+        let pixels: Vec<[f32; 3]> = (0..5 * 3).map(|_| [uniform(), uniform(), uniform()]).collect();
+        let mut checked = 0;
+        for (srgb, ext, transform) in [
+            (false, TextureExtension::Repeat, None),
+            (true, TextureExtension::Extend, None),
+            (false, TextureExtension::Repeat, Some([1.6, -1.2, 0.3, 0.9, 1.2, -0.1])),
+            (true, TextureExtension::Repeat, Some([0.5, 0.8, 0.0, -0.8, 0.5, 0.2])),
+        ] {
+            let t = Texture::from_desc(&TextureDesc {
+                name: "g".into(),
+                width: 5,
+                height: 3,
+                pixels: pixels.clone(),
+                closest: false,
+                extension: ext,
+                srgb,
+                transform,
+            })
+            .unwrap();
+            let lum = |p: Vec2| crate::math::luminance(t.eval(p)) as f64;
+            for _ in 0..200 {
+                let p = Vec2::new(uniform() * 1.4 - 0.2, uniform() * 1.4 - 0.2);
+                let g = t.luminance_gradient(p);
+                let e = 1e-3f32;
+                let (dx, dy) = (Vec2::new(e, 0.0), Vec2::new(0.0, e));
+                let fd = |d: Vec2| ((lum(p + d) - lum(p - d)) / (2.0 * e as f64)) as f32;
+                // one-sided differences that disagree: a cell edge between the samples
+                let one = |d: Vec2| ((lum(p + d) - lum(p)) / e as f64) as f32;
+                let other = |d: Vec2| ((lum(p) - lum(p - d)) / e as f64) as f32;
+                if (one(dx) - other(dx)).abs() > 0.05 * (1.0 + fd(dx).abs())
+                    || (one(dy) - other(dy)).abs() > 0.05 * (1.0 + fd(dy).abs())
+                {
+                    continue;
+                }
+                checked += 1;
+                let want = Vec2::new(fd(dx), fd(dy));
+                assert!((g - want).length() < 0.02 * (1.0 + want.length()), "{p}: {g} vs {want} ({srgb}, {ext:?})");
+            }
+        }
+        assert!(checked > 500, "{checked}");
+        let closest = Texture::from_desc(&TextureDesc {
+            name: "c".into(),
+            width: 5,
+            height: 3,
+            pixels,
+            closest: true,
+            ..Default::default()
+        })
+        .unwrap();
+        assert_eq!(closest.luminance_gradient(Vec2::new(0.33, 0.61)), Vec2::ZERO);
     }
 }

@@ -1595,3 +1595,59 @@ def test_texture_graphs_warn_on_what_they_cannot_evaluate_and_follow_edits(bpy_m
     ramp.color_ramp.elements[1].color = (1.0, 1.0, 1.0, 1.0)
     img.pixels.foreach_set(np.full(64, 0.3, np.float32))
     assert np.array_equal(export_once()[2], first)
+
+
+def test_bump_and_displacement_reach_the_core(bpy_mod):
+    """A Bump node over an image (Invert, Distance, Strength) and, where its Normal input is
+    a Normal Map, both maps; a Displacement node into the material output (Cycles' default
+    Bump Only) as a bump of distance Scale, without the 'not rendered' warning it had; true
+    displacement is named and rendered so too."""
+    from gdmlt_blender import export
+
+    bpy = bpy_mod
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    sys.path.insert(0, str(ROOT / "tools"))
+    from make_test_scenes import empty_material
+
+    img = bpy.data.images.new("Height", 4, 4, float_buffer=True)
+    img.pixels.foreach_set(np.linspace(0, 1, 64, dtype=np.float32))
+    mat, nt, out = empty_material(bpy, "Bumped")
+    bsdf = nt.nodes.new("ShaderNodeBsdfPrincipled")
+    nt.links.new(bsdf.outputs[0], out.inputs["Surface"])
+    bump = nt.nodes.new("ShaderNodeBump")
+    bump.invert = True
+    bump.inputs["Distance"].default_value, bump.inputs["Strength"].default_value = 0.2, 0.7
+    tex = nt.nodes.new("ShaderNodeTexImage")
+    tex.image = img
+    nt.links.new(tex.outputs["Color"], bump.inputs["Height"])
+    nt.links.new(bump.outputs["Normal"], bsdf.inputs["Normal"])
+    warnings = []
+    p = export.material_params(mat, warnings, export.Textures())
+    assert not warnings, warnings
+    assert "bump_texture" in p and "normal_texture" not in p
+    assert p["bump_distance"] == pytest.approx(-0.2) and p["bump_strength"] == pytest.approx(0.7)
+    normal_map = nt.nodes.new("ShaderNodeNormalMap")
+    tex2 = nt.nodes.new("ShaderNodeTexImage")
+    tex2.image = img
+    nt.links.new(tex2.outputs["Color"], normal_map.inputs["Color"])
+    nt.links.new(normal_map.outputs["Normal"], bump.inputs["Normal"])
+    p = export.material_params(mat, warnings, export.Textures())
+    assert not warnings and "bump_texture" in p and "normal_texture" in p, warnings
+
+    mat, nt, out = empty_material(bpy, "Displaced")
+    bsdf = nt.nodes.new("ShaderNodeBsdfDiffuse")
+    nt.links.new(bsdf.outputs[0], out.inputs["Surface"])
+    disp = nt.nodes.new("ShaderNodeDisplacement")
+    disp.inputs["Scale"].default_value = 0.05
+    tex = nt.nodes.new("ShaderNodeTexImage")
+    tex.image = img
+    nt.links.new(tex.outputs["Color"], disp.inputs["Height"])
+    nt.links.new(disp.outputs[0], out.inputs["Displacement"])
+    assert mat.displacement_method == "BUMP"  # (Blender's default, as Cycles renders it)
+    warnings = []
+    p = export.material_params(mat, warnings, export.Textures())
+    assert not warnings, warnings
+    assert "bump_texture" in p and p["bump_distance"] == pytest.approx(0.05) and p["bump_strength"] == 1.0
+    mat.displacement_method = "DISPLACEMENT"
+    p = export.material_params(mat, warnings, export.Textures())
+    assert "bump_texture" in p and len(warnings) == 1 and "DISPLACEMENT" in warnings[0], warnings
