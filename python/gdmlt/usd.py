@@ -172,7 +172,7 @@ class _Reader:
     def _preview_surface(self, shader, out, what):
         p = lambda name, default, key=None: self._param(shader, name, default, what, out, key)  # noqa: E731
         out["base_color"] = p("diffuseColor", (0.18, 0.18, 0.18), "base_color_texture")
-        out["metallic"] = p("metallic", 0.0)
+        out["metallic"] = p("metallic", 0.0, "metallic_texture")
         out["multiscatter"] = True  # as Blender's default (Multiscatter GGX), which writes this shader
         out["roughness"] = p("roughness", 0.5, "roughness_texture")
         out["ior"] = p("ior", 1.5)
@@ -212,7 +212,7 @@ class _Reader:
             weight = p(surface, "base_weight", 1.0)
             color = p(surface, "base_color", (0.8, 0.8, 0.8), "base_color_texture")
             out["base_color"] = tuple(c * weight for c in color)
-            out["metallic"] = p(surface, "base_metalness", 0.0)
+            out["metallic"] = p(surface, "base_metalness", 0.0, "metallic_texture")
             out["diffuse_roughness"] = min(max(float(p(surface, "base_diffuse_roughness", 0.0)), 0.0), 1.0)
             coat = min(max(float(p(surface, "coat_weight", 0.0)), 0.0), 1.0)
             if coat > 0.0:  # (Blender writes its Principled coat here: weight, roughness, IOR, tint)

@@ -251,3 +251,11 @@ def test_uv_texture_of_a_hand_written_stage(tmp_path):
     for cols, colour in ((slice(1, 6), (200, 60, 30)), (slice(10, 15), (30, 60, 200))):
         got = img[5:11, cols].mean(axis=(0, 1))
         assert np.allclose(got, decode(np.array(colour)) / math.pi * e, rtol=0.03), (got, colour)
+    # a metallic map (here the image's red channel) is read as one, not warned and dropped
+    stage = Usd.Stage.Open(str(path))
+    shader = UsdShade.Shader(stage.GetPrimAtPath("/World/Grey/Surface"))
+    tex = UsdShade.Shader(stage.GetPrimAtPath("/World/Grey/Tex"))
+    shader.CreateInput("metallic", Sdf.ValueTypeNames.Float).ConnectToSource(tex.ConnectableAPI(), "r")
+    stage.GetRootLayer().Save()
+    desc, warnings = usd.load(path, width=16, height=16)
+    assert warnings == [] and "metallic_texture" in [m for m in desc["materials"] if m["name"] == "Grey"][0]
