@@ -462,7 +462,8 @@ def _node_params(node, textures, warnings, what):
         warnings.append(f"{what}: shader node '{node.name}' ({t}) is not supported; rendered as grey diffuse")
     _normal_map(node, out, textures, warnings, what)
     if out.get("coat", 0.0) > 0.0 and ("normal_texture" in out or "bump_texture" in out):
-        warnings.append(f"{what}: the coat of '{node.name}' follows its normal or bump map (Cycles' coat keeps the "
+        kind = "normal map" if "normal_texture" in out else "bump map"
+        warnings.append(f"{what}: the coat of '{node.name}' follows its {kind} (Cycles' coat keeps the "
                         f"unmapped normal unless its Coat Normal is linked)")
     if t in ("BSDF_PRINCIPLED", "BSDF_GLOSSY", "BSDF_ANISOTROPIC", "BSDF_GLASS", "BSDF_REFRACTION"):
         # Multiscatter GGX (Blender's default) compensates the energy the metal and glass lobes

@@ -363,15 +363,19 @@ def bump(bpy):
         tex.image = img
         return tex
 
+    def principled(nt, colour, roughness):
+        bsdf = nt.nodes.new("ShaderNodeBsdfPrincipled")
+        bsdf.inputs["Base Color"].default_value = (*colour, 1.0)
+        bsdf.inputs["Roughness"].default_value = roughness
+        return bsdf
+
     scene, grey = _grey_room(bpy, smooth=False)
     u = (np.arange(32) + 0.5) / 32
     ridges = np.ones((4, 32, 4))
     ridges[..., :3] = (0.5 + 0.5 * np.sin(2 * np.pi * 4 * u))[None, :, None]
     nt, out = uv_card(bpy, scene, "Floor", [(-0.95, -0.95, 0.01), (0.95, -0.95, 0.01), (0.95, 0.95, 0.01),
                                             (-0.95, 0.95, 0.01)], "Ridged")
-    bsdf = nt.nodes.new("ShaderNodeBsdfPrincipled")
-    bsdf.inputs["Base Color"].default_value = (0.7, 0.6, 0.5, 1.0)
-    bsdf.inputs["Roughness"].default_value = 0.35
+    bsdf = principled(nt, (0.7, 0.6, 0.5), 0.35)
     bump_node = nt.nodes.new("ShaderNodeBump")
     bump_node.inputs["Distance"].default_value = 0.04
     nt.links.new(image_node(nt, "Ridges", ridges).outputs["Color"], bump_node.inputs["Height"])
@@ -384,9 +388,7 @@ def bump(bpy):
     tilt[..., 0], tilt[..., 1], tilt[..., 2] = 0.6, 0.5, 0.5 + 0.5 * np.sqrt(1 - 0.2 ** 2)
     nt, out = uv_card(bpy, scene, "Card", [(-0.8, 0.9, 0.1), (0.6, 0.9, 0.1), (0.6, 0.9, 1.3), (-0.8, 0.9, 1.3)],
                       "Dimpled")
-    bsdf = nt.nodes.new("ShaderNodeBsdfPrincipled")
-    bsdf.inputs["Base Color"].default_value = (0.3, 0.5, 0.7, 1.0)
-    bsdf.inputs["Roughness"].default_value = 0.5
+    bsdf = principled(nt, (0.3, 0.5, 0.7), 0.5)
     bump_node = nt.nodes.new("ShaderNodeBump")
     bump_node.invert = True
     bump_node.inputs["Distance"].default_value = 0.05
@@ -404,9 +406,7 @@ def bump(bpy):
     # default method (Bump Only) renders that as a bump of distance Scale
     nt, out = uv_card(bpy, scene, "Side", [(0.9, -0.6, 0.1), (0.9, 0.6, 0.1), (0.9, 0.6, 1.2), (0.9, -0.6, 1.2)],
                       "Displaced")
-    bsdf = nt.nodes.new("ShaderNodeBsdfPrincipled")
-    bsdf.inputs["Base Color"].default_value = (0.8, 0.8, 0.8, 1.0)
-    bsdf.inputs["Roughness"].default_value = 0.6
+    bsdf = principled(nt, (0.8, 0.8, 0.8), 0.6)
     displacement = nt.nodes.new("ShaderNodeDisplacement")
     displacement.inputs["Scale"].default_value = 0.015
     nt.links.new(image_node(nt, "Bumps", dimples).outputs["Color"], displacement.inputs["Height"])

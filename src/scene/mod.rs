@@ -709,9 +709,9 @@ mod tests {
         assert!(planar > 100, "{planar} samples of the spread light");
     }
 
-    /// A unit quad at z = 0 (facing +z) with a constant normal-map texture `rgb` and UVs
-    /// `uv` at its corners; returns the shading normal where a ray from above hits it.
-    fn mapped_normal(rgb: [f32; 3], uv: [[f32; 2]; 4], strength: f32) -> Vec3 {
+    /// The shading normal where a ray from above hits a 2 m quad at z = 0 (facing +z) with
+    /// UVs `uv` at its corners, of `material` with the one texture `texture`.
+    fn quad_normal(uv: [[f32; 2]; 4], texture: TextureDesc, material: MaterialDesc) -> Vec3 {
         let quad = MeshDesc {
             name: "Quad".into(),
             positions: vec![[-1.0, -1.0, 0.0], [1.0, -1.0, 0.0], [1.0, 1.0, 0.0], [-1.0, 1.0, 0.0]],
@@ -720,8 +720,6 @@ mod tests {
             material_ids: vec![0, 0],
             ..Default::default()
         };
-        let texture = TextureDesc { name: "n".into(), width: 1, height: 1, pixels: vec![rgb], ..Default::default() };
-        let material = MaterialDesc { normal_texture: Some(0), normal_strength: strength, ..Default::default() };
         let desc = SceneDesc {
             meshes: vec![quad],
             materials: vec![material],
@@ -733,6 +731,13 @@ mod tests {
         let (o, d) = (Vec3::new(0.2, 0.1, 2.0), Vec3::new(0.0, 0.0, -1.0));
         let hit = scene.intersect(o, d, 0.0, f32::INFINITY).unwrap();
         scene.interaction(&hit, d).frame.n
+    }
+
+    /// `quad_normal` under a constant normal-map texture `rgb`.
+    fn mapped_normal(rgb: [f32; 3], uv: [[f32; 2]; 4], strength: f32) -> Vec3 {
+        let texture = TextureDesc { name: "n".into(), width: 1, height: 1, pixels: vec![rgb], ..Default::default() };
+        let material = MaterialDesc { normal_texture: Some(0), normal_strength: strength, ..Default::default() };
+        quad_normal(uv, texture, material)
     }
 
     /// Barycentric coordinates invert the triangle's parametrisation (what the shift uses to
@@ -783,18 +788,9 @@ mod tests {
         assert!(close(mapped_normal(tilt_u, plain, 0.0), Vec3::Z));
     }
 
-    /// The shading normal where a ray from above hits a 2 m quad at z = 0 (u = (x + 1)/2 for
-    /// the plain UVs) bumped by a 2×1 height map of 0 and 1 (Extend: h = 2u − 0.5 between
-    /// the texel centres, so ∂h/∂x = 1 under the plain UVs).
+    /// `quad_normal` (u = (x + 1)/2 under the plain UVs) bumped by a 2×1 height map of 0 and
+    /// 1 (Extend: h = 2u − 0.5 between the texel centres, so ∂h/∂x = 1 under the plain UVs).
     fn bumped_normal(uv: [[f32; 2]; 4], distance: f32, strength: f32) -> Vec3 {
-        let quad = MeshDesc {
-            name: "Quad".into(),
-            positions: vec![[-1.0, -1.0, 0.0], [1.0, -1.0, 0.0], [1.0, 1.0, 0.0], [-1.0, 1.0, 0.0]],
-            indices: vec![[0, 1, 2], [0, 2, 3]],
-            corner_uvs: [0, 1, 2, 0, 2, 3].iter().map(|&k| uv[k]).collect(),
-            material_ids: vec![0, 0],
-            ..Default::default()
-        };
         let texture = TextureDesc {
             name: "h".into(),
             width: 2,
@@ -809,17 +805,7 @@ mod tests {
             bump_strength: strength,
             ..Default::default()
         };
-        let desc = SceneDesc {
-            meshes: vec![quad],
-            materials: vec![material],
-            textures: vec![texture],
-            camera: camera_looking_along_y([0.0, -3.0, 0.0], 35.0, 4, 4),
-            ..Default::default()
-        };
-        let scene = Scene::build(&desc).unwrap();
-        let (o, d) = (Vec3::new(0.2, 0.1, 2.0), Vec3::new(0.0, 0.0, -1.0));
-        let hit = scene.intersect(o, d, 0.0, f32::INFINITY).unwrap();
-        scene.interaction(&hit, d).frame.n
+        quad_normal(uv, texture, material)
     }
 
     /// A bump map tilts the normal against the height's surface gradient, N' = N − d·∇h
