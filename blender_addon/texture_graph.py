@@ -1,5 +1,5 @@
 """Texture node graphs evaluated at export: the colour and value nodes artists put between an
-Image Texture and a shader input (Color Ramp on a roughness map, Separate Color on a packed
+Image Texture and a shader input (Color Ramp or RGB Curves on a roughness map, Separate Color on a packed
 AO/roughness/metallic map, Mix › Multiply of a colour map and a tint, Math, Invert, Hue/
 Saturation, Brightness/Contrast, Gamma, Map Range, Clamp, RGB to BW) are pointwise: the
 value at a shading point is a function of the images' values there. So the graph is
@@ -122,6 +122,10 @@ def _settings(node):
     if ramp is not None:
         out += [ramp.interpolation, ramp.color_mode, ramp.hue_interpolation,
                 tuple((e.position, tuple(e.color)) for e in ramp.elements)]
+    mapping = getattr(node, "mapping", None)
+    if mapping is not None and hasattr(mapping, "curves"):  # (RGB Curves: every point of every curve)
+        out += [mapping.extend, tuple(tuple((tuple(q.location), q.handle_type) for q in c.points)
+                                      for c in mapping.curves)]
     return tuple(out)
 
 
@@ -447,6 +451,30 @@ def _invert(node, out, walk, collect):
     return _Colour(_lerp(c, 1 - c, t))
 
 
+def _curves(node, out, walk, collect):
+    """RGB Curves: each channel through the combined curve, then its own (R(C(r)), …), mixed
+    with the input by the factor; the curves tabulated at 1024 points over the inputs' range
+    (Blender's own evaluation at each)."""
+    vals = _all(walk, collect, "Fac", "Color")
+    if collect:
+        return None
+    mapping = node.mapping
+    if tuple(mapping.black_level) != (0.0, 0.0, 0.0) or tuple(mapping.white_level) != (1.0, 1.0, 1.0):
+        raise Unsupported(f"RGB Curves '{node.name}' with black or white levels")
+    mapping.initialize()
+    t, c = _broadcast(_as_value(vals[0]).a[:, None], _as_colour(vals[1]).a)
+    lo, hi = min(0.0, float(c.min())), max(1.0, float(c.max()))
+    xs = np.linspace(lo, hi, 1024)
+    combined = np.array([mapping.evaluate(mapping.curves[3], float(x)) for x in xs])
+    lo2, hi2 = min(lo, float(combined.min())), max(hi, float(combined.max()))
+    xs2 = np.linspace(lo2, hi2, 1024)
+    out_c = np.empty_like(c)
+    for k in range(3):
+        own = np.array([mapping.evaluate(mapping.curves[k], float(x)) for x in xs2])
+        out_c[:, k] = np.interp(np.interp(c[:, k], xs, combined), xs2, own)
+    return _Colour(_lerp(c, out_c, t))
+
+
 def _gamma(node, out, walk, collect):
     vals = _all(walk, collect, "Color", "Gamma")
     if collect:
@@ -545,6 +573,7 @@ _NODES = {
     "MATH": _math,
     "VALTORGB": _ramp,
     "INVERT": _invert,
+    "CURVE_RGB": _curves,
     "GAMMA": _gamma,
     "BRIGHTCONTRAST": _bright_contrast,
     "HUE_SAT": _hue_sat,

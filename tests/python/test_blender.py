@@ -1469,6 +1469,7 @@ _ZOO = ([("ShaderNodeMix", {"data_type": "RGBA", "blend_type": mode}, {"A_Color"
         + [("ShaderNodeValToRGB", {"interpolation": i}, {"Fac": "A"})
            for i in ("LINEAR", "CONSTANT", "EASE", "B_SPLINE", "CARDINAL")]
         + [("ShaderNodeInvert", {}, {"Fac": "B", "Color": "A"}),
+           ("ShaderNodeRGBCurve", {}, {"Color": "A"}),
            ("ShaderNodeGamma", {}, {"Color": "A", "Gamma": "B"}),
            ("ShaderNodeBrightContrast", {}, {"Color": "A", "Bright": "B", "Contrast": "B"}),
            ("ShaderNodeHueSaturation", {}, {"Hue": "B", "Saturation": "B", "Fac": "B", "Color": "A"}),
@@ -1514,6 +1515,10 @@ def test_texture_graph_nodes_agree_with_cycles(bpy_mod, tmp_out):
                 ramp = node.color_ramp
                 ramp.elements[0].color, ramp.elements[1].color = (0.9, 0.2, 0.1, 1.0), (0.1, 0.3, 0.9, 1.0)
                 ramp.elements.new(0.4).color = (0.2, 0.9, 0.3, 1.0)
+            if kind == "ShaderNodeRGBCurve":  # a lifted combined curve, a dipped red one
+                node.mapping.curves[3].points.new(0.4, 0.6)
+                node.mapping.curves[0].points.new(0.5, 0.3)
+                node.mapping.update()
             for ident, image in feeds.items():
                 tex = nt.nodes.new("ShaderNodeTexImage")
                 tex.image, tex.interpolation = images[image], "Closest"
