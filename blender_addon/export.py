@@ -107,16 +107,13 @@ class Textures:
         key = (img.name, node.interpolation, ext, alpha, transform)
         if key in self.index:
             return self.index[key]
-        px = _image_pixels(img)
-        if px is None:
+        read = self.rgba(img)
+        if read is None:
             warnings.append(f"{what}: image '{img.name}' has no pixels (missing file '{img.filepath}'?); "
                             f"its input uses the socket value")
             return None
-        w, h = img.size
-        rgb = np.repeat(px[:, :1], 3, axis=1) if img.channels < 3 else px[:, :3]
-        if alpha:
-            a = px[:, 3:4] if img.channels == 4 else np.ones((len(px), 1), np.float32)
-            rgb = np.repeat(a, 3, axis=1)
+        px, w, h, _ = read
+        rgb = np.repeat(px[:, 3:4], 3, axis=1) if alpha else px[:, :3]
         cs = img.colorspace_settings.name
         # byte images hold sRGB-encoded values, decoded after interpolation as Cycles does;
         # float images are linear (and alpha always is)
@@ -138,6 +135,29 @@ class Textures:
             self.items[-1]["transform"] = transform
         return self.index[key]
 
+    def rgba(self, img, keep=False):
+        """An image's pixels as RGBA ((w·h, 4) float32, row 0 at the bottom; 8-bit sRGB values
+        still encoded; grey images repeated, alpha 1 where there is none), its size and whether
+        it is 8-bit sRGB; None when it has no pixels (a missing file). With `keep` (node graphs,
+        which may read an image several times) they stay for the rest of the export."""
+        if img.name in self.pixels:
+            return self.pixels[img.name]
+        w, h = img.size
+        if w == 0 or h == 0 or not img.has_data and not _load(img):
+            return None
+        w, h = img.size
+        buf = np.empty(w * h * img.channels, np.float32)
+        img.pixels.foreach_get(buf)
+        px = buf.reshape(-1, img.channels)
+        rgba = np.ones((len(px), 4), np.float32)
+        rgba[:, :3] = px[:, :3] if img.channels >= 3 else px[:, :1]
+        if img.channels == 4:
+            rgba[:, 3] = px[:, 3]
+        read = (rgba, w, h, img.colorspace_settings.name == "sRGB" and not img.is_float)
+        if keep:
+            self.pixels[img.name] = read
+        return read
+
     def add_graph(self, sock, warnings, what):
         """The linked input `sock` through a graph of colour and value nodes over image
         textures (texture_graph.py): ('texture', index) of the evaluated texture,
@@ -156,8 +176,10 @@ class Textures:
         def image_identity(node):
             """The file and its time stamp for an image read from disk and not edited since;
             else a hash of its pixels."""
+            import bpy
+
             img = node.image
-            path = bpy_path_abs(img.filepath) if img.source == "FILE" and img.packed_file is None else ""
+            path = bpy.path.abspath(img.filepath) if img.source == "FILE" and img.packed_file is None else ""
             if path and not img.is_dirty and os.path.isfile(path):
                 return (img.name, path, os.path.getmtime(path), tuple(img.size), img.colorspace_settings.name)
             px = image_pixels(node)[0]
@@ -165,20 +187,11 @@ class Textures:
                     img.colorspace_settings.name)
 
         def image_pixels(node):
-            img = node.image
-            if img.name in self.pixels:
-                return self.pixels[img.name]
-            px = _image_pixels(img)
-            if px is None:
-                raise texture_graph.Unsupported(f"image '{img.name}' has no pixels (missing file "
-                                                f"'{img.filepath}'?)")
-            rgba = np.ones((len(px), 4), np.float32)
-            rgba[:, :3] = np.repeat(px[:, :1], 3, axis=1) if px.shape[1] < 3 else px[:, :3]
-            if px.shape[1] == 4:
-                rgba[:, 3] = px[:, 3]
-            self.pixels[img.name] = (rgba, img.size[0], img.size[1],
-                                     img.colorspace_settings.name == "sRGB" and not img.is_float)
-            return self.pixels[img.name]
+            read = self.rgba(node.image, keep=True)
+            if read is None:
+                raise texture_graph.Unsupported(f"image '{node.image.name}' has no pixels (missing file "
+                                                f"'{node.image.filepath}'?)")
+            return read
 
         node = sock.node
         try:
@@ -198,24 +211,6 @@ class Textures:
         if transform is not None:
             self.items[-1]["transform"] = transform
         return ("texture", len(self.items) - 1)
-
-
-def bpy_path_abs(path):
-    import bpy
-
-    return bpy.path.abspath(path)
-
-
-def _image_pixels(img):
-    """A Blender image's pixels as stored ((w·h, channels) float32, row 0 at the bottom;
-    8-bit sRGB values still encoded), or None when it has none (a missing file)."""
-    w, h = img.size
-    if w == 0 or h == 0 or not img.has_data and not _load(img):
-        return None
-    w, h = img.size
-    buf = np.empty(w * h * img.channels, np.float32)
-    img.pixels.foreach_get(buf)
-    return buf.reshape(-1, img.channels)
 
 
 def _mapping_on(link, is_source):
@@ -294,11 +289,14 @@ def _linked_texture(node, name, textures, warnings, what, output="Color"):
     return textures.add(src, warnings, what, alpha=output == "Alpha")
 
 
-def _graph_texture(node, name, textures, warnings, what):
-    """Input `name` of `node` linked through colour and value nodes over image textures
-    (texture_graph.py): the evaluated texture's index; None when it is not linked that way
-    (unlinked, a plain image, a constant graph: `_input_value` reads those); False when the
+def _input_texture(node, name, textures, warnings, what, output="Color"):
+    """Input `name` of `node` as a texture: an Image Texture's `output` linked straight in, or
+    colour and value nodes over images (texture_graph.py) — its index; None when it is not
+    linked that way (unlinked, a constant graph: `_input_value` reads those); False when the
     graph cannot be evaluated (warned: the input keeps its unlinked value)."""
+    tex = _linked_texture(node, name, textures, warnings, what, output)
+    if tex is not None:
+        return tex
     sock = node.inputs.get(name)
     if sock is None or not sock.is_linked or textures is None:
         return None
@@ -312,16 +310,16 @@ def _color_or_texture(node, name, out, key, textures, warnings, what, default):
     """Sets out[key] from an unlinked colour or value input (or a constant graph), or
     out[key + '_texture'] from an image or a graph of nodes over images; a value texture
     (`key` other than base_color) also sets out[key] to its mean, which mixes of shaders use."""
-    tex = _linked_texture(node, name, textures, warnings, what)
-    if tex is None:
-        tex = _graph_texture(node, name, textures, warnings, what)
+    tex = _input_texture(node, name, textures, warnings, what)
     if tex is False:
         v = node.inputs[name].default_value
     elif tex is not None:
         out[key + "_texture"] = tex
         if key != "base_color":
+            from .texture_graph import LUMA
+
             px = np.asarray(textures.items[tex]["pixels"]).reshape(-1, 3)[::7]  # (a sample is enough)
-            out[key] = float(np.clip(px @ np.array([0.2126, 0.7152, 0.0722], np.float32), 0.0, 1.0).mean())
+            out[key] = float(np.clip(px @ LUMA, 0.0, 1.0).mean())
         return
     else:
         v = _input_value(node, name, warnings, what, default)  # (warns if linked to something else)
@@ -418,9 +416,8 @@ def _node_params(node, textures, warnings, what):
         _specular_tint(node, out, warnings, what)
         _emission(node, "Emission Color", "Emission Strength", out, textures, warnings, what, (0, 0, 0, 1), 0.0)
         _coat(node, out, warnings, what)
-        alpha_tex = _linked_texture(node, "Alpha", textures, warnings, what, output="Alpha")
-        if alpha_tex is None:  # (through nodes: a Math on the image's alpha, a Color Ramp)
-            alpha_tex = _graph_texture(node, "Alpha", textures, warnings, what)
+        # (the image's alpha channel, or nodes over images: a Math on the alpha, a Color Ramp)
+        alpha_tex = _input_texture(node, "Alpha", textures, warnings, what, output="Alpha")
         if alpha_tex is False:
             out["alpha"] = _unit(node.inputs["Alpha"].default_value)
         elif alpha_tex is not None:  # coverage from the image's alpha channel, per shading point
@@ -521,9 +518,7 @@ def _bump(node, out, textures, warnings, what):
 def _bump_height(node, out, textures, warnings, what, distance, strength):
     """out's bump keys from the Height input of `node` (an image's luminance, or a graph of
     colour and value nodes over images), unless that height is constant."""
-    tex = _linked_texture(node, "Height", textures, warnings, what)
-    if tex is None:
-        tex = _graph_texture(node, "Height", textures, warnings, what)
+    tex = _input_texture(node, "Height", textures, warnings, what)
     if tex is not None and tex is not False:
         out.update(bump_texture=tex, bump_distance=distance, bump_strength=strength)
 
@@ -532,9 +527,7 @@ def _emission(node, color, strength, out, textures, warnings, what, default_colo
     """Emission colour × strength; with an Image Texture in the colour, the image per point
     (out['emission_texture']) times the strength."""
     s = _input_value(node, strength, warnings, what, default_strength)
-    tex = _linked_texture(node, color, textures, warnings, what)
-    if tex is None:
-        tex = _graph_texture(node, color, textures, warnings, what)
+    tex = _input_texture(node, color, textures, warnings, what)
     if tex is False:
         out["emission"] = tuple(c * s for c in node.inputs[color].default_value[:3])
     elif tex is not None:

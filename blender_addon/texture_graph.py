@@ -38,14 +38,14 @@ class Unsupported(Exception):
 
 
 class _Colour:
-    """A colour: (N, 3) float64 (N = 1 for a constant)."""
+    """A colour: (N, 3) float32 (N = 1 for a constant)."""
 
     def __init__(self, a):
         self.a = a
 
 
 class _Value:
-    """A value: (N,) float64."""
+    """A value: (N,) float32."""
 
     def __init__(self, a):
         self.a = a
@@ -153,36 +153,34 @@ class _Graph:
 
     def collect(self, sock):
         """Finds the image leaves under `sock` (and refuses unsupported nodes early)."""
-        self.grid = None
         self._walk(sock, collect=True)
 
     def run(self, sock):
-        """Loads the leaves' texels on the grid, then evaluates `sock`."""
-        if self.images:
-            keys = {name: self.uv_key(n) for name, n in self.images.items()}
-            if len({(k[0], k[1]) for k in keys.values()}) > 1:
-                raise Unsupported("its images use different UV transforms or extensions")
-            key = (tuple(self.signature), tuple(sorted(keys.items())),
-                   tuple((name, self.image_identity(n)) for name, n in sorted(self.images.items())))
-            hit = _CACHE.get(key)
-            if hit is not None:
-                self.grid = hit[0]
-                _CACHE[key] = _CACHE.pop(key)  # (most recently used last)
-                return hit[1]
-            loaded, full = {name: self.image_pixels(n) for name, n in self.images.items()}, {}
-            _, w, h, _ = max(loaded.values(), key=lambda t: t[1] * t[2])
-            k = 1 if all(key[2] for key in keys.values()) else _supersampling(w, h)
-            self.grid = (w * k, h * k)
-            for name, (px, w, h, srgb) in loaded.items():
-                _, ext, closest = keys[name]
-                same = (w, h) == self.grid
-                px = _resample(px, w, h, *self.grid, ext, closest).astype(np.float32, copy=False)
-                if srgb:  # (decoded after interpolation, as Cycles decodes 8-bit images)
-                    px = np.concatenate([srgb_to_linear(px[:, :3], exact_bytes=same), px[:, 3:]], axis=1)
-                full[name] = px
+        """Loads the leaves' texels on the grid (or takes the cached result), then evaluates
+        `sock` in slices of 1M texels (a 4K map's temporaries stay at tens of MB)."""
         if not self.images:
             return self._walk(sock, collect=False)
-        # in slices of 1M texels (a 4K map's temporaries stay at tens of MB)
+        keys = {name: self.uv_key(n) for name, n in self.images.items()}
+        if len({(k[0], k[1]) for k in keys.values()}) > 1:
+            raise Unsupported("its images use different UV transforms or extensions")
+        key = (tuple(self.signature), tuple(sorted(keys.items())),
+               tuple((name, self.image_identity(n)) for name, n in sorted(self.images.items())))
+        hit = _CACHE.get(key)
+        if hit is not None:
+            self.grid = hit[0]
+            _CACHE[key] = _CACHE.pop(key)  # (most recently used last)
+            return hit[1]
+        loaded, full = {name: self.image_pixels(n) for name, n in self.images.items()}, {}
+        _, w, h, _ = max(loaded.values(), key=lambda t: t[1] * t[2])
+        k = 1 if all(uv[2] for uv in keys.values()) else _supersampling(w, h)
+        self.grid = (w * k, h * k)
+        for name, (px, w, h, srgb) in loaded.items():
+            _, ext, closest = keys[name]
+            same = (w, h) == self.grid
+            px = _resample(px, w, h, *self.grid, ext, closest).astype(np.float32, copy=False)
+            if srgb:  # (decoded after interpolation, as Cycles decodes 8-bit images)
+                px = np.concatenate([srgb_to_linear(px[:, :3], exact_bytes=same), px[:, 3:]], axis=1)
+            full[name] = px
         n, parts = self.grid[0] * self.grid[1], []
         for a in range(0, n, CHUNK):
             self.texels = {name: px[a:a + CHUNK] for name, px in full.items()}

@@ -15,7 +15,8 @@ pub(super) struct Shading {
     /// Some material lets light through (pass-through lobe): shadow rays cross such surfaces.
     pub has_transparency: bool,
     /// Some material has a normal map.
-    pub has_normal_maps: bool,
+    /// Some material has a normal or bump map (the shading normal is perturbed per point).
+    pub has_perturbed_normals: bool,
     /// Each material's Pass Index (the IndexMA pass).
     pub pass_index: Vec<u32>,
 }
@@ -37,9 +38,9 @@ impl Shading {
             materials.iter_mut().for_each(|m| m.general = true);
         }
         let has_transparency = !shortcuts || materials.iter().any(|m| m.is_transparent());
-        let has_normal_maps = materials.iter().any(|m| m.normal_texture.is_some() || m.bump_texture.is_some());
+        let has_perturbed_normals = materials.iter().any(|m| m.normal_texture.is_some() || m.bump_texture.is_some());
         let pass_index = desc.materials.iter().map(|m| m.pass_index).collect();
-        Ok(Shading { textures, materials, has_transparency, has_normal_maps, pass_index })
+        Ok(Shading { textures, materials, has_transparency, has_perturbed_normals, pass_index })
     }
 }
 

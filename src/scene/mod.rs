@@ -96,7 +96,7 @@ pub struct Scene {
     has_transparency: bool,
     /// Some material has a normal map (decided once: without one, hits never look up
     /// their material to shade).
-    has_normal_maps: bool,
+    has_perturbed_normals: bool,
     pub bounds_center: Vec3,
     pub bounds_radius: f32,
     pub report: SceneReport,
@@ -138,7 +138,7 @@ impl Scene {
             materials: Vec::new(),
             textures: Vec::new(),
             has_transparency: false,
-            has_normal_maps: false,
+            has_perturbed_normals: false,
             lights: Vec::new(),
             selector: lighting.selector,
             tri_light: Vec::new(),
@@ -191,7 +191,7 @@ impl Scene {
     fn set_shading(&mut self, shading: Shading) {
         (self.materials, self.textures) = (shading.materials, shading.textures);
         self.material_pass_index = shading.pass_index;
-        (self.has_transparency, self.has_normal_maps) = (shading.has_transparency, shading.has_normal_maps);
+        (self.has_transparency, self.has_perturbed_normals) = (shading.has_transparency, shading.has_perturbed_normals);
     }
 
     /// The Pass Indices (object, material) of a triangle: Blender's IndexOB and IndexMA.
@@ -317,7 +317,7 @@ impl Scene {
             None => ng,
         };
         let uv = self.uvs[t].map_or(Vec2::ZERO, |u| u[0] * b0 + u[1] * b1 + u[2] * b2);
-        if self.has_normal_maps {
+        if self.has_perturbed_normals {
             ns = self.normal_mapped(t, ns, uv);
         }
         let front = ng.dot(d) <= 0.0;

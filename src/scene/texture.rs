@@ -119,13 +119,21 @@ impl Texture {
         Some(self.pixels[(y * w + x) as usize])
     }
 
+    /// The texture's coordinate transform: its matrix M and translation t as
+    /// [m00, m01, t0, m10, m11, t1] (identity without one).
+    fn affine(&self) -> [f32; 6] {
+        self.transform.unwrap_or([1.0, 0.0, 0.0, 0.0, 1.0, 0.0])
+    }
+
+    /// `uv` mapped by the texture's transform.
+    fn mapped(&self, uv: Vec2) -> Vec2 {
+        let m = self.affine();
+        Vec2::new(m[0] * uv.x + m[1] * uv.y + m[2], m[3] * uv.x + m[4] * uv.y + m[5])
+    }
+
     /// Linear colour at texture coordinates `uv` (mapped by the texture's transform first).
     pub fn eval(&self, uv: Vec2) -> Spectrum {
-        let uv = match &self.transform {
-            Some(m) => Vec2::new(m[0] * uv.x + m[1] * uv.y + m[2], m[3] * uv.x + m[4] * uv.y + m[5]),
-            None => uv,
-        };
-        let c = self.interpolate(uv);
+        let c = self.interpolate(self.mapped(uv));
         if self.srgb {
             Spectrum::new(srgb_to_linear(c.x), srgb_to_linear(c.y), srgb_to_linear(c.z))
         } else {
@@ -137,50 +145,49 @@ impl Texture {
     /// interpolation within the texel cell `uv` falls in, through the sRGB decoding and the
     /// texture's coordinate transform; zero for closest lookup (piecewise constant).
     pub fn luminance_gradient(&self, uv: Vec2) -> Vec2 {
-        let (m, at) = match &self.transform {
-            Some(m) => (*m, Vec2::new(m[0] * uv.x + m[1] * uv.y + m[2], m[3] * uv.x + m[4] * uv.y + m[5])),
-            None => ([1.0, 0.0, 0.0, 0.0, 1.0, 0.0], uv),
-        };
-        let (x, y) = (at.x as f64 * self.width as f64, at.y as f64 * self.height as f64);
-        if self.closest || !(x.is_finite() && y.is_finite()) {
+        if self.closest {
             return Vec2::ZERO;
         }
-        let (fx, fy) = (x - 0.5, y - 0.5);
-        let (x0, y0) = (fx.floor(), fy.floor());
-        let (tx, ty) = ((fx - x0) as f32, (fy - y0) as f32);
-        let (x0, y0) = (x0 as i64, y0 as i64);
-        let t = |x, y| self.texel(x, y).unwrap_or(Spectrum::ZERO);
-        let (c00, c10, c01, c11) = (t(x0, y0), t(x0 + 1, y0), t(x0, y0 + 1), t(x0 + 1, y0 + 1));
-        let value = (c00 * (1.0 - tx) + c10 * tx) * (1.0 - ty) + (c01 * (1.0 - tx) + c11 * tx) * ty;
+        let Some(([c00, c10, c01, c11], tx, ty)) = self.cell(self.mapped(uv)) else { return Vec2::ZERO };
         // ∂/∂x and ∂/∂y of the stored values (x, y in texels), then of the decoded ones
         let mut dx = ((c10 - c00) * (1.0 - ty) + (c11 - c01) * ty) * self.width as f32;
         let mut dy = ((c01 - c00) * (1.0 - tx) + (c11 - c10) * tx) * self.height as f32;
         if self.srgb {
+            let value = (c00 * (1.0 - tx) + c10 * tx) * (1.0 - ty) + (c01 * (1.0 - tx) + c11 * tx) * ty;
             let slope = Spectrum::from_array(value.to_array().map(srgb_slope));
             (dx, dy) = (dx * slope, dy * slope);
         }
         let (gx, gy) = (crate::math::luminance(dx), crate::math::luminance(dy));
-        // through the transform: at = M·uv + t
+        // through the transform: mapped = M·uv + t
+        let m = self.affine();
         Vec2::new(gx * m[0] + gy * m[3], gx * m[1] + gy * m[4])
+    }
+
+    /// The bilinear cell around (mapped) `uv`: its four stored texels (x0y0, x1y0, x0y1,
+    /// x1y1) and the fractions (tx, ty) across it; None at non-finite coordinates.
+    fn cell(&self, uv: Vec2) -> Option<([Spectrum; 4], f32, f32)> {
+        let (x, y) = (uv.x as f64 * self.width as f64 - 0.5, uv.y as f64 * self.height as f64 - 0.5);
+        if !(x.is_finite() && y.is_finite()) {
+            return None;
+        }
+        let (x0, y0) = (x.floor(), y.floor());
+        let (tx, ty) = ((x - x0) as f32, (y - y0) as f32);
+        let (x0, y0) = (x0 as i64, y0 as i64);
+        let t = |x, y| self.texel(x, y).unwrap_or(Spectrum::ZERO);
+        Some(([t(x0, y0), t(x0 + 1, y0), t(x0, y0 + 1), t(x0 + 1, y0 + 1)], tx, ty))
     }
 
     /// Stored values interpolated at `uv` (Cycles' kernel_tex_image_interp).
     fn interpolate(&self, uv: Vec2) -> Spectrum {
-        let x = uv.x as f64 * self.width as f64;
-        let y = uv.y as f64 * self.height as f64;
-        if !(x.is_finite() && y.is_finite()) {
-            return Spectrum::ZERO;
-        }
         if self.closest {
+            let (x, y) = (uv.x as f64 * self.width as f64, uv.y as f64 * self.height as f64);
+            if !(x.is_finite() && y.is_finite()) {
+                return Spectrum::ZERO;
+            }
             return self.texel(x.floor() as i64, y.floor() as i64).unwrap_or(Spectrum::ZERO);
         }
-        let (fx, fy) = (x - 0.5, y - 0.5);
-        let (x0, y0) = (fx.floor(), fy.floor());
-        let (tx, ty) = ((fx - x0) as f32, (fy - y0) as f32);
-        let (x0, y0) = (x0 as i64, y0 as i64);
-        let t = |x, y| self.texel(x, y).unwrap_or(Spectrum::ZERO);
-        (t(x0, y0) * (1.0 - tx) + t(x0 + 1, y0) * tx) * (1.0 - ty)
-            + (t(x0, y0 + 1) * (1.0 - tx) + t(x0 + 1, y0 + 1) * tx) * ty
+        let Some(([c00, c10, c01, c11], tx, ty)) = self.cell(uv) else { return Spectrum::ZERO };
+        (c00 * (1.0 - tx) + c10 * tx) * (1.0 - ty) + (c01 * (1.0 - tx) + c11 * tx) * ty
     }
 }
 
