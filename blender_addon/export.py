@@ -16,6 +16,8 @@ import numpy as np
 from gdmlt import scenedict  # the scene dict's one builder (the add-on registers only once gdmlt imports)
 from gdmlt.scenedict import DEFAULT_MATERIAL
 
+from .node_view import NodeView
+
 GEOMETRY_TYPES = {"MESH", "CURVE", "SURFACE", "META", "FONT", "CURVES", "POINTCLOUD", "VOLUME"}
 # Object types GDMLT cannot render yet: left out of the scene with a warning naming the object.
 NOT_RENDERED = {"CURVES": "hair curves", "POINTCLOUD": "point clouds", "VOLUME": "volumes"}
@@ -326,6 +328,13 @@ def _color_or_texture(node, name, out, key, textures, warnings, what, default):
     out[key] = tuple(v)[:3] if key == "base_color" else float(v)
 
 
+def _output_node(tree):
+    """The tree's Cycles output node as a view of the flattened tree (node groups inlined:
+    node_view.py), or None."""
+    node_out = tree.get_output_node("CYCLES") if tree is not None else None
+    return None if node_out is None else NodeView(node_out)
+
+
 def material_params(mat, warnings, textures=None):
     """Principled-like parameters of a Blender material (nodes followed from the Cycles output).
     `textures`: a Textures registry; image textures linked into Base Color / Color and
@@ -337,8 +346,7 @@ def material_params(mat, warnings, textures=None):
     out = dict(DEFAULT_MATERIAL, name=mat.name)
     if mat.pass_index:
         out["pass_index"] = mat.pass_index  # the IndexMA pass
-    tree = mat.node_tree
-    node_out = tree.get_output_node("CYCLES") if tree is not None else None
+    node_out = _output_node(mat.node_tree)
     if node_out is None:
         c = tuple(mat.diffuse_color)[:3]
         out["base_color"] = c
@@ -953,8 +961,7 @@ def _world(scene, warnings, textures):
     black = ((0.0, 0.0, 0.0), None, None)
     if world is None:
         return black
-    tree = world.node_tree
-    node_out = tree.get_output_node("CYCLES") if tree is not None else None
+    node_out = _output_node(world.node_tree)
     if node_out is None:
         return tuple(world.color[:3]), None, None
     what = f"world '{world.name}'"

@@ -1481,20 +1481,22 @@ _ZOO = ([("ShaderNodeMix", {"data_type": "RGBA", "blend_type": mode}, {"A_Color"
            for i in ("LINEAR", "STEPPED", "SMOOTHSTEP", "SMOOTHERSTEP")])
 
 
-def test_texture_graph_nodes_agree_with_cycles(bpy_mod, tmp_out):
-    """Each colour and value node (and each blend mode and math operation) the exporter
-    evaluates into a texture, against Cycles running the node itself: a quad per node, its
-    Emission Color the node applied to two 4×4 images (Closest: the lookups are exact), seen
-    through an orthographic camera — noise-free but for the pixel filter's jitter."""
+def _emissive_quads_against_cycles(bpy, tmp_out, tag, quads, cols=8):
+    """Renders a row-major grid of unit quads, each `quads[i](bpy, tree, output, images)`
+    wiring its material's surface (an emission of some graph over images A, B and C: 4×4,
+    Non-Color, random, C = A + 1 so that what subtracts B stays positive), through an
+    orthographic camera with Cycles and GDMLT `pt`: noise-free but for the pixel filter's
+    jitter. Returns, per quad, the largest relative difference over the pixels at the centre
+    of each image cell (3.6 pixels across in a 16-pixel slot), where the filter sees that
+    cell alone."""
     sys.path.insert(0, str(ROOT / "tools"))
     from make_test_scenes import uv_card
 
-    cols = 8
-    rows = (len(_ZOO) + cols - 1) // cols
+    rows = (len(quads) + cols - 1) // cols
     rng = np.random.default_rng(7)
     pix = {"A": rng.uniform(0.05, 0.95, (4, 4, 4)), "B": rng.uniform(0.05, 0.95, (4, 4, 4))}
     pix["A"][..., 3] = pix["B"][..., 3] = 1.0
-    pix["C"] = pix["A"] + 1.0  # (above B: what subtracts B stays positive, as light must)
+    pix["C"] = pix["A"] + 1.0
 
     def build(bpy, engine, spp, seed):
         bpy.ops.wm.read_factory_settings(use_empty=True)
@@ -1504,33 +1506,11 @@ def test_texture_graph_nodes_agree_with_cycles(bpy_mod, tmp_out):
             images[k] = bpy.data.images.new(k, 4, 4, alpha=True, float_buffer=True)
             images[k].colorspace_settings.name = "Non-Color"
             images[k].pixels.foreach_set(px.astype(np.float32).ravel())
-        for i, (kind, settings, feeds) in enumerate(_ZOO):
+        for i, wire in enumerate(quads):
             x, y = i % cols, -(i // cols)
             nt, out = uv_card(bpy, scene, f"Q{i}", [(x, y, 0), (x + 0.9, y, 0), (x + 0.9, y + 0.9, 0), (x, y + 0.9, 0)],
-                              f"Zoo{i}")
-            node = nt.nodes.new(kind)
-            for key, value in settings.items():
-                setattr(node.color_ramp if kind == "ShaderNodeValToRGB" else node, key, value)
-            if kind == "ShaderNodeValToRGB":  # three stops
-                ramp = node.color_ramp
-                ramp.elements[0].color, ramp.elements[1].color = (0.9, 0.2, 0.1, 1.0), (0.1, 0.3, 0.9, 1.0)
-                ramp.elements.new(0.4).color = (0.2, 0.9, 0.3, 1.0)
-            if kind == "ShaderNodeRGBCurve":  # a lifted combined curve, a dipped red one
-                node.mapping.curves[3].points.new(0.4, 0.6)
-                node.mapping.curves[0].points.new(0.5, 0.3)
-                node.mapping.update()
-            for ident, image in feeds.items():
-                tex = nt.nodes.new("ShaderNodeTexImage")
-                tex.image, tex.interpolation = images[image], "Closest"
-                sock = next(s for s in node.inputs if s.identifier == ident)
-                src = tex.outputs["Color"]
-                nt.links.new(src, sock)
-            emit = nt.nodes.new("ShaderNodeEmission")
-            result = [s for s in node.outputs if s.enabled][0]
-            if kind == "ShaderNodeSeparateColor":
-                result = node.outputs["Green"]
-            nt.links.new(result, emit.inputs["Color"])
-            nt.links.new(emit.outputs[0], out.inputs["Surface"])
+                              f"{tag}{i}")
+            wire(bpy, nt, out, images)
         cam = bpy.data.cameras.new("Camera")
         cam.type, cam.ortho_scale, cam.sensor_fit = "ORTHO", float(cols), "HORIZONTAL"
         ob = bpy.data.objects.new("Camera", cam)
@@ -1544,14 +1524,290 @@ def test_texture_graph_nodes_agree_with_cycles(bpy_mod, tmp_out):
         r.resolution_x, r.resolution_y, r.resolution_percentage = 16 * cols, 16 * rows, 100
         return for_engine(scene, engine, spp, seed, method="PT")
 
-    c, g = (render_to_exr(bpy_mod, build(bpy_mod, e, 64, 1), tmp_out / f"zoo{e}.exr") for e in ("CYCLES", "GDMLT"))
-    # the pixel at the centre of each image cell (3.6 pixels across) of each quad (16 pixels
-    # a slot), where the pixel filter sees that cell alone
+    c, g = (render_to_exr(bpy, build(bpy, e, 64, 1), tmp_out / f"{tag}{e}.exr") for e in ("CYCLES", "GDMLT"))
     centre = (0.8 + (np.arange(4) + 0.5) * 3.6).astype(int)
     cell = lambda img, i: img[16 * (i // cols) + centre][:, 16 * (i % cols) + centre]  # noqa: E731
-    err = [float(np.max(np.abs(cell(c, i) - cell(g, i)) / (np.abs(cell(c, i)) + 0.5))) for i in range(len(_ZOO))]
+    return [float(np.max(np.abs(cell(c, i) - cell(g, i)) / (np.abs(cell(c, i)) + 0.5))) for i in range(len(quads))]
+
+
+def _image_texture(nt, image):
+    tex = nt.nodes.new("ShaderNodeTexImage")
+    tex.image, tex.interpolation = image, "Closest"
+    return tex
+
+
+def _zoo_quad(kind, settings, feeds):
+    """A quad of the node zoo: its node applied to images, into an Emission."""
+    def wire(bpy, nt, out, images):
+        node = nt.nodes.new(kind)
+        for key, value in settings.items():
+            setattr(node.color_ramp if kind == "ShaderNodeValToRGB" else node, key, value)
+        if kind == "ShaderNodeValToRGB":  # three stops
+            ramp = node.color_ramp
+            ramp.elements[0].color, ramp.elements[1].color = (0.9, 0.2, 0.1, 1.0), (0.1, 0.3, 0.9, 1.0)
+            ramp.elements.new(0.4).color = (0.2, 0.9, 0.3, 1.0)
+        if kind == "ShaderNodeRGBCurve":  # a lifted combined curve, a dipped red one
+            node.mapping.curves[3].points.new(0.4, 0.6)
+            node.mapping.curves[0].points.new(0.5, 0.3)
+            node.mapping.update()
+        for ident, image in feeds.items():
+            sock = next(s for s in node.inputs if s.identifier == ident)
+            nt.links.new(_image_texture(nt, images[image]).outputs["Color"], sock)
+        emit = nt.nodes.new("ShaderNodeEmission")
+        result = [s for s in node.outputs if s.enabled][0]
+        if kind == "ShaderNodeSeparateColor":
+            result = node.outputs["Green"]
+        nt.links.new(result, emit.inputs["Color"])
+        nt.links.new(emit.outputs[0], out.inputs["Surface"])
+    return wire
+
+
+def test_texture_graph_nodes_agree_with_cycles(bpy_mod, tmp_out):
+    """Each colour and value node (and each blend mode and math operation) the exporter
+    evaluates into a texture, against Cycles running the node itself: a quad per node, its
+    Emission Color the node applied to two 4×4 images (Closest: the lookups are exact)."""
+    err = _emissive_quads_against_cycles(bpy_mod, tmp_out, "Zoo", [_zoo_quad(*z) for z in _ZOO])
     bad = [(_ZOO[i][0], _ZOO[i][1], round(e, 4)) for i, e in enumerate(err) if e > 0.005]
     assert not bad, "\n".join(map(str, bad))
+
+
+def _node_group(bpy, name, inputs, outputs, inside):
+    """The shader node group `name` (made once per file): interface sockets `inputs` and
+    `outputs` ((name, socket type[, default]) each), its nodes wired by
+    `inside(tree, group_input, group_output)`."""
+    g = bpy.data.node_groups.get(name)
+    if g is not None:
+        return g
+    g = bpy.data.node_groups.new(name, "ShaderNodeTree")
+    gi, go = g.nodes.new("NodeGroupInput"), g.nodes.new("NodeGroupOutput")
+    for side, socks in (("INPUT", inputs), ("OUTPUT", outputs)):
+        for name_, kind, *default in socks:
+            item = g.interface.new_socket(name_, in_out=side, socket_type=kind)
+            if default:
+                item.default_value = default[0]
+    inside(g, gi, go)
+    return g
+
+
+def _socket(sockets, identifier):
+    return next(s for s in sockets if s.identifier == identifier)
+
+
+def _grouped_quads():
+    """Quads whose emission passes through node groups as artists build them: a tint group
+    over an image (its factor a group input), a shader group (an Emission inside, fed by a
+    nested inversion group through a reroute), a colour into a value group socket and a value
+    out of a group into a colour socket (the conversions at group borders), a group input
+    left unlinked (the Group node's value), a muted node and a muted link, and one group used
+    twice with different inputs."""
+    def tint(bpy):
+        def inside(g, gi, go):
+            mix = g.nodes.new("ShaderNodeMix")
+            mix.data_type, mix.blend_type = "RGBA", "MULTIPLY"
+            _socket(mix.inputs, "B_Color").default_value = (0.9, 0.4, 0.2, 1.0)
+            g.links.new(gi.outputs["Amount"], _socket(mix.inputs, "Factor_Float"))
+            g.links.new(gi.outputs["Image"], _socket(mix.inputs, "A_Color"))
+            reroute = g.nodes.new("NodeReroute")
+            g.links.new(_socket(mix.outputs, "Result_Color"), reroute.inputs[0])
+            g.links.new(reroute.outputs[0], go.inputs["Color"])
+        return _node_group(bpy, "Tint", [("Image", "NodeSocketColor"), ("Amount", "NodeSocketFloat", 0.5)],
+                           [("Color", "NodeSocketColor")], inside)
+
+    def flip(bpy):
+        def inside(g, gi, go):
+            inv = g.nodes.new("ShaderNodeInvert")
+            g.links.new(gi.outputs["Color"], inv.inputs["Color"])
+            g.links.new(inv.outputs["Color"], go.inputs["Color"])
+        return _node_group(bpy, "Flip", [("Color", "NodeSocketColor")], [("Color", "NodeSocketColor")], inside)
+
+    def glow(bpy):
+        def inside(g, gi, go):
+            inner = g.nodes.new("ShaderNodeGroup")
+            inner.node_tree = flip(bpy)
+            emit = g.nodes.new("ShaderNodeEmission")
+            reroute = g.nodes.new("NodeReroute")
+            g.links.new(gi.outputs["Color"], inner.inputs["Color"])
+            g.links.new(inner.outputs["Color"], reroute.inputs[0])
+            g.links.new(reroute.outputs[0], emit.inputs["Color"])
+            g.links.new(gi.outputs["Strength"], emit.inputs["Strength"])
+            g.links.new(emit.outputs[0], go.inputs["Emission"])
+        return _node_group(bpy, "Glow", [("Color", "NodeSocketColor"), ("Strength", "NodeSocketFloat", 1.0)],
+                           [("Emission", "NodeSocketShader")], inside)
+
+    def luma(bpy):
+        def inside(g, gi, go):
+            m = g.nodes.new("ShaderNodeMath")
+            m.operation, m.inputs[1].default_value = "MULTIPLY", 1.5
+            g.links.new(gi.outputs["Grey"], m.inputs[0])
+            g.links.new(m.outputs[0], go.inputs["Value"])
+        return _node_group(bpy, "Luma", [("Grey", "NodeSocketFloat")], [("Value", "NodeSocketFloat")], inside)
+
+    def group(bpy, nt, make, **values):
+        n = nt.nodes.new("ShaderNodeGroup")
+        n.node_tree = make(bpy)
+        for k, v in values.items():
+            n.inputs[k].default_value = v
+        return n
+
+    def emit_from(nt, out, sock):
+        emit = nt.nodes.new("ShaderNodeEmission")
+        nt.links.new(sock, emit.inputs["Color"])
+        nt.links.new(emit.outputs[0], out.inputs["Surface"])
+        return emit
+
+    def tinted(amount):
+        def wire(bpy, nt, out, images):
+            t = group(bpy, nt, tint, Amount=amount)
+            nt.links.new(_image_texture(nt, images["A"]).outputs["Color"], t.inputs["Image"])
+            emit_from(nt, out, t.outputs["Color"])
+        wire.__name__ = f"tinted({amount})"
+        return wire
+
+    def shader_group(bpy, nt, out, images):
+        gl = group(bpy, nt, glow, Strength=1.5)
+        nt.links.new(_image_texture(nt, images["B"]).outputs["Color"], gl.inputs["Color"])
+        nt.links.new(gl.outputs["Emission"], out.inputs["Surface"])
+
+    def conversions(bpy, nt, out, images):  # colour into the float socket, the float out into colour
+        lu = group(bpy, nt, luma)
+        nt.links.new(_image_texture(nt, images["B"]).outputs["Color"], lu.inputs["Grey"])
+        emit_from(nt, out, lu.outputs["Value"])
+
+    def unlinked_image(bpy, nt, out, images):  # the Group node's colour; its factor from an image
+        t = group(bpy, nt, tint, Image=(0.3, 0.6, 0.9, 1.0))
+        nt.links.new(_image_texture(nt, images["B"]).outputs["Color"], t.inputs["Amount"])
+        emit_from(nt, out, t.outputs["Color"])
+
+    def muted(bpy, nt, out, images):  # a muted Invert passes its colour; a muted link leaves Strength 1
+        inv = nt.nodes.new("ShaderNodeInvert")
+        inv.mute = True
+        nt.links.new(_image_texture(nt, images["A"]).outputs["Color"], inv.inputs["Color"])
+        emit = emit_from(nt, out, inv.outputs["Color"])
+        value = nt.nodes.new("ShaderNodeValue")
+        value.outputs[0].default_value = 5.0
+        nt.links.new(value.outputs[0], emit.inputs["Strength"]).is_muted = True
+
+    return [tinted(0.7), shader_group, conversions, unlinked_image, muted, tinted(0.2)]
+
+
+def test_node_groups_agree_with_cycles(bpy_mod, tmp_out):
+    """Materials built of node groups (grouped graphs, a grouped shader, nested groups,
+    reroutes, conversions at the groups' borders, unlinked group inputs, muted nodes and
+    links) render as Cycles renders them — before, every Group node was 'not supported': a
+    grey diffuse surface or the input's unlinked value."""
+    quads = _grouped_quads()
+    err = _emissive_quads_against_cycles(bpy_mod, tmp_out, "Grouped", quads)
+    bad = [(quads[i].__name__, round(e, 4)) for i, e in enumerate(err) if e > 0.005]
+    assert not bad, bad
+
+
+def test_grouped_materials_and_worlds_export_as_their_flat_trees(bpy_mod):
+    """A Principled BSDF inside a group (its Base Color from an image through a Color Ramp
+    outside, Roughness a group input left at the Group node's value, a Normal Map inside),
+    the group used twice under one Mix Shader, and a world whose Background sits in a group:
+    the exported parameters, textures and warnings (the mix's own) equal those of the same
+    nodes without groups (before: 'not supported', grey diffuse and a black world)."""
+    from gdmlt_blender import export
+
+    bpy = bpy_mod
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    sys.path.insert(0, str(ROOT / "tools"))
+    from make_test_scenes import empty_material
+
+    img = bpy.data.images.new("Wood", 4, 4, float_buffer=True)
+    img.colorspace_settings.name = "Non-Color"
+    img.pixels.foreach_set(np.random.default_rng(3).uniform(0.1, 0.9, 64).astype(np.float32))
+
+    def principled(nt, colour_src, rough_src, rough, normal_src):
+        b = nt.nodes.new("ShaderNodeBsdfPrincipled")
+        nt.links.new(colour_src, b.inputs["Base Color"])
+        if rough_src is not None:
+            nt.links.new(rough_src, b.inputs["Roughness"])
+        b.inputs["Roughness"].default_value = rough
+        nm = nt.nodes.new("ShaderNodeNormalMap")
+        nt.links.new(normal_src, nm.inputs["Color"])
+        nt.links.new(nm.outputs["Normal"], b.inputs["Normal"])
+        return b
+
+    def ramp(nt):
+        tex = nt.nodes.new("ShaderNodeTexImage")
+        tex.image = img
+        r = nt.nodes.new("ShaderNodeValToRGB")
+        r.color_ramp.elements[1].color = (0.8, 0.5, 0.2, 1.0)
+        nt.links.new(tex.outputs["Color"], r.inputs["Fac"])
+        return r.outputs["Color"], tex.outputs["Color"]
+
+    def mixed(nt, out, a, b=None):
+        if b is None:
+            nt.links.new(a.outputs[0], out.inputs["Surface"])
+            return
+        m = nt.nodes.new("ShaderNodeMixShader")
+        m.inputs["Fac"].default_value = 0.3
+        nt.links.new(a.outputs[0], m.inputs[1])
+        nt.links.new(b.outputs[0], m.inputs[2])
+        nt.links.new(m.outputs[0], out.inputs["Surface"])
+
+    def inside(g, gi, go):
+        b = principled(g, gi.outputs["Color"], gi.outputs["Roughness"], 0.5, gi.outputs["Normal"])
+        g.links.new(b.outputs[0], go.inputs["BSDF"])
+
+    group = _node_group(bpy, "Lacquer", [("Color", "NodeSocketColor"), ("Roughness", "NodeSocketFloat", 0.5),
+                                         ("Normal", "NodeSocketColor")], [("BSDF", "NodeSocketShader")], inside)
+
+    def material(name, grouped, roughness):
+        mat, nt, out = empty_material(bpy, name)
+        colour, normal = ramp(nt)
+        shaders = []
+        for rough in roughness:
+            if not grouped:
+                shaders.append(principled(nt, colour, None, rough, normal))
+                continue
+            n = nt.nodes.new("ShaderNodeGroup")
+            n.node_tree = group
+            n.inputs["Roughness"].default_value = rough
+            nt.links.new(colour, n.inputs["Color"])
+            nt.links.new(normal, n.inputs["Normal"])
+            shaders.append(n)
+        mixed(nt, out, *shaders)
+        return mat
+
+    def exported(mat):
+        warnings, textures = [], export.Textures()
+        p = export.material_params(mat, warnings, textures)
+        texels = {k: np.asarray(textures.items[v]["pixels"]) for k, v in p.items() if k.endswith("_texture")}
+        return {k: v for k, v in p.items() if k != "name" and not k.endswith("_texture")}, texels, warnings
+
+    for roughness, maps in (((0.35,), {"base_color_texture", "normal_texture"}), ((0.35, 0.8), {"normal_texture"})):
+        flat, grouped = material("Flat", False, roughness), material("Grouped", True, roughness)
+        (want, want_texels, w1), (got, got_texels, w2) = exported(flat), exported(grouped)
+        assert w2 == [w.replace(f"'{flat.name}'", f"'{grouped.name}'") for w in w1], (w1, w2)
+        assert not any("GROUP" in w for w in w2), w2
+        assert got.keys() == want.keys() and all(np.allclose(got[k], want[k]) for k in want), (got, want)
+        assert want_texels.keys() == got_texels.keys() == maps
+        for k in want_texels:
+            assert np.array_equal(want_texels[k], got_texels[k]), k
+
+    world = bpy.data.worlds.new("Sky")
+    bpy.context.scene.world = world
+    world.use_nodes = True
+    wt = world.node_tree
+    wt.nodes.clear()
+    wout = wt.nodes.new("ShaderNodeOutputWorld")
+
+    def sky_inside(g, gi, go):
+        bg = g.nodes.new("ShaderNodeBackground")
+        g.links.new(gi.outputs["Color"], bg.inputs["Color"])
+        bg.inputs["Strength"].default_value = 2.0
+        g.links.new(bg.outputs[0], go.inputs["Background"])
+
+    sky = wt.nodes.new("ShaderNodeGroup")
+    sky.node_tree = _node_group(bpy, "Sky", [("Color", "NodeSocketColor")], [("Background", "NodeSocketShader")],
+                                sky_inside)
+    sky.inputs["Color"].default_value = (0.2, 0.3, 0.5, 1.0)
+    wt.links.new(sky.outputs[0], wout.inputs["Surface"])
+    warnings = []
+    colour, tex, _ = export._world(bpy.context.scene, warnings, export.Textures())
+    assert not warnings and tex is None and colour == pytest.approx((0.4, 0.6, 1.0)), (warnings, colour)
 
 
 def test_texture_graphs_warn_on_what_they_cannot_evaluate_and_follow_edits(bpy_mod):
