@@ -60,7 +60,11 @@ def _input_value(node, name, warnings, what, default=None):
     constant (converted as Cycles converts sockets: a colour into a value socket is its
     luminance, Rec.709 weights; a value into a colour socket is grey); linked to anything else
     (a texture, etc.), its unlinked value, with a warning."""
-    sock = node.inputs.get(name)
+    return _socket_value(node.inputs.get(name), warnings, what, default)
+
+
+def _socket_value(sock, warnings, what, default=None):
+    """`_input_value` of an input socket."""
     if sock is None:
         return default
     v = getattr(sock, "default_value", default)
@@ -70,8 +74,8 @@ def _input_value(node, name, warnings, what, default=None):
         try:
             kind, c = texture_graph.evaluate(sock, None, None)  # (constant: no image under it)
         except texture_graph.Unsupported as e:
-            warnings.append(f"{what}: input '{name}' of node '{node.name}' is linked through {e}, which GDMLT "
-                            f"does not evaluate here; its unlinked value is used")
+            warnings.append(f"{what}: input '{sock.name}' of node '{sock.node.name}' is linked through {e}, which "
+                            f"GDMLT does not evaluate here; its unlinked value is used")
         else:
             try:
                 n = len(v)
@@ -278,10 +282,9 @@ def _load(img):
     return img.has_data and img.size[0] > 0
 
 
-def _linked_texture(node, name, textures, warnings, what, output="Color"):
-    """If input `name` of `node` is fed by an Image Texture's `output` (Color, or Alpha: then
+def _linked_texture(sock, textures, warnings, what, output="Color"):
+    """If input socket `sock` is fed by an Image Texture's `output` (Color, or Alpha: then
     the texture of its alpha channel), its texture index."""
-    sock = node.inputs.get(name)
     if sock is None or not sock.is_linked or textures is None:
         return None
     link = sock.links[0]
@@ -296,10 +299,14 @@ def _input_texture(node, name, textures, warnings, what, output="Color"):
     colour and value nodes over images (texture_graph.py) — its index; None when it is not
     linked that way (unlinked, a constant graph: `_input_value` reads those); False when the
     graph cannot be evaluated (warned: the input keeps its unlinked value)."""
-    tex = _linked_texture(node, name, textures, warnings, what, output)
+    return _socket_texture(node.inputs.get(name), textures, warnings, what, output)
+
+
+def _socket_texture(sock, textures, warnings, what, output="Color"):
+    """`_input_texture` of an input socket."""
+    tex = _linked_texture(sock, textures, warnings, what, output)
     if tex is not None:
         return tex
-    sock = node.inputs.get(name)
     if sock is None or not sock.is_linked or textures is None:
         return None
     r = textures.add_graph(sock, warnings, what)
@@ -311,7 +318,11 @@ def _input_texture(node, name, textures, warnings, what, output="Color"):
 def _color_or_texture(node, name, out, key, textures, warnings, what, default):
     """Sets out[key] from an unlinked colour or value input (or a constant graph), or
     out[key + '_texture'] from an image or a graph of nodes over images; a value texture
-    (`key` other than base_color) also sets out[key] to its mean, which mixes of shaders use."""
+    (`key` other than base_color) also sets out[key] to its mean, which mixes of shaders use.
+    A base colour from a colour attribute (alone, or multiplied with an image) sets
+    out['vertex_color'] and the attribute's name as out['vertex_color_layer']."""
+    if key == "base_color" and _vertex_colour(node.inputs[name], out, textures, warnings, what):
+        return
     tex = _input_texture(node, name, textures, warnings, what)
     if tex is False:
         v = node.inputs[name].default_value
@@ -333,6 +344,54 @@ def _output_node(tree):
     node_view.py), or None."""
     node_out = tree.get_output_node("CYCLES") if tree is not None else None
     return None if node_out is None else NodeView(node_out)
+
+
+def _colour_attribute(sock):
+    """The name of the colour attribute feeding input socket `sock` ('' = the mesh's
+    default one: a Color Attribute node without a name), or None."""
+    if not sock.is_linked:
+        return None
+    link = sock.links[0]
+    n, out = link.from_node, link.from_socket
+    if n.type == "VERTEX_COLOR" and out.name == "Color":
+        return n.layer_name
+    if n.type == "ATTRIBUTE" and n.attribute_type == "GEOMETRY" and out.name == "Color" and n.attribute_name:
+        return n.attribute_name
+    return None
+
+
+def _vertex_colour(sock, out, textures, warnings, what):
+    """A base colour `sock` fed by a colour attribute, alone or as one factor of a Mix ›
+    Multiply at factor 1 (the other an image, a graph over images or a constant): sets out's
+    vertex colour keys and the other factor as the base colour (white when alone); False
+    when `sock` is fed otherwise."""
+    layer = _colour_attribute(sock)
+    if layer is not None:
+        out["base_color"], out["vertex_color"], out["vertex_color_layer"] = (1.0, 1.0, 1.0), True, layer
+        return True
+    if not sock.is_linked or textures is None:
+        return False
+    mix = sock.links[0].from_node
+    if not (mix.type == "MIX" and mix.data_type == "RGBA" and mix.blend_type == "MULTIPLY"
+            and sock.links[0].from_socket.identifier == "Result_Color"):
+        return False
+    ins = {s.identifier: s for s in mix.inputs}
+    fac = ins["Factor_Float"]
+    if fac.is_linked or abs(fac.default_value - 1.0) > 1e-6:
+        return False
+    a, b = ins["A_Color"], ins["B_Color"]
+    layer, other = next(((_colour_attribute(s), o) for s, o in ((a, b), (b, a)) if _colour_attribute(s) is not None),
+                        (None, None))
+    if layer is None:
+        return False
+    out["vertex_color"], out["vertex_color_layer"] = True, layer
+    tex = _socket_texture(other, textures, warnings, what)
+    if tex is not None and tex is not False:
+        out["base_color_texture"], out["base_color"] = tex, (1.0, 1.0, 1.0)
+    else:
+        v = other.default_value if tex is False else _socket_value(other, warnings, what, (0.8, 0.8, 0.8, 1.0))
+        out["base_color"] = tuple(v)[:3]
+    return True
 
 
 def material_params(mat, warnings, textures=None):
@@ -361,6 +420,9 @@ def material_params(mat, warnings, textures=None):
     leaves = []
     _shader_leaves(node, 1.0, leaves, textures, warnings, what)
     if node.type in ("MIX_SHADER", "ADD_SHADER") or any("pass" in p for _, p in leaves):
+        if any(p.get("vertex_color") for _, p in leaves):
+            warnings.append(f"{what}: a colour attribute inside a Mix/Add Shader is not rendered (its factor "
+                            f"is taken as white)")
         out.update(_combine(leaves, warnings, what))
     else:
         out.update(leaves[0][1])  # one shader node, opaque: its own parameters
@@ -503,7 +565,7 @@ def _normal_map(node, out, textures, warnings, what):
         if nm.uv_map:
             warnings.append(f"{what}: Normal Map '{nm.name}' UV map '{nm.uv_map}' is not read; the active "
                             f"render UV map is used")
-        tex = _linked_texture(nm, "Color", textures, warnings, what)
+        tex = _linked_texture(nm.inputs["Color"], textures, warnings, what)
         if tex is not None:
             out["normal_texture"] = tex
             out["normal_strength"] = max(float(_input_value(nm, "Strength", warnings, what, 1.0)), 0.0)
@@ -847,8 +909,10 @@ def _matrix(m):
     return np.array([list(row) for row in m], dtype=np.float64)
 
 
-def _mesh_local_arrays(ob):
-    """Triangulated mesh of an evaluated object, in object space, or None if it has no faces."""
+def _mesh_local_arrays(ob, colour_layer=None):
+    """Triangulated mesh of an evaluated object, in object space, or None if it has no faces:
+    (positions, triangles, corner normals, material slots, corner UVs or None, corner colours
+    or None). `colour_layer`: the colour attribute to read ('' = the default one), or None."""
     try:
         me = ob.to_mesh()
     except RuntimeError:
@@ -877,9 +941,32 @@ def _mesh_local_arrays(ob):
             uv = np.empty(len(me.loops) * 2, np.float32)
             uv_layer.uv.foreach_get("vector", uv)
             uvs = np.ascontiguousarray(uv.reshape(-1, 2)[tl])
-        return co.reshape(-1, 3), tv.reshape(-1, 3), normals, mi, uvs
+        colours = None
+        if colour_layer is not None:
+            attrs = me.color_attributes
+            name = colour_layer or getattr(me.attributes, "default_color_name", "") or ""
+            attr = attrs.get(name) if name else None
+            if attr is None and not colour_layer and len(attrs):
+                attr = attrs[min(max(attrs.render_color_index, 0), len(attrs) - 1)]
+            if attr is not None:
+                rgba = np.empty(len(attr.data) * 4, np.float32)
+                attr.data.foreach_get("color", rgba)  # (scene linear, byte colours too)
+                rgba = rgba.reshape(-1, 4)
+                colours = np.ascontiguousarray(rgba[tv if attr.domain == "POINT" else tl, :3])
+        return co.reshape(-1, 3), tv.reshape(-1, 3), normals, mi, uvs, colours
     finally:
         ob.to_mesh_clear()
+
+
+def _colour_layer(ob, layers, warnings):
+    """The colour attribute the materials of `ob` read (`layers`: per slot, a name, '' for the
+    default attribute, or None): one per mesh; where its materials ask for different ones,
+    the first, with a warning."""
+    wanted = list(dict.fromkeys(x for x in layers if x is not None))
+    if len(wanted) > 1:
+        warnings.append(f"object '{ob.name}': its materials read different colour attributes "
+                        f"({', '.join(repr(x) for x in wanted)}); all of them get {wanted[0]!r}")
+    return wanted[0] if wanted else None
 
 
 def _light(ob, matrix, warnings):
@@ -1065,6 +1152,7 @@ def export_scene(depsgraph, test_break=lambda: False, need_camera=True):
     materials = [dict(DEFAULT_MATERIAL)]
     textures = Textures()
     mat_index = {}
+    colour_layers = {}  # material index → the colour attribute it reads
     meshes, lights = [], []
     cache = {}
     for k, inst in enumerate(depsgraph.object_instances):
@@ -1083,15 +1171,6 @@ def export_scene(depsgraph, test_break=lambda: False, need_camera=True):
             warnings.append(f"object '{ob.name}': {NOT_RENDERED[ob.type]} are not rendered yet; it is left out")
             continue
         _visibility_warnings(ob, "object", warnings)
-        key = (ob.name, ob.data.name if ob.data is not None else "") if inst.is_instance else None
-        arrays = cache.get(key) if key else None
-        if arrays is None:
-            arrays = _mesh_local_arrays(ob)
-            if key:
-                cache[key] = arrays
-        if arrays is None:
-            continue
-        co, tris, normals, mat_local, uvs = arrays
         slot_to_global = []
         for slot in ob.material_slots:
             mat = slot.material
@@ -1100,8 +1179,24 @@ def export_scene(depsgraph, test_break=lambda: False, need_camera=True):
                 continue
             if mat.name not in mat_index:
                 mat_index[mat.name] = len(materials)
-                materials.append(material_params(mat, warnings, textures))
+                params = material_params(mat, warnings, textures)
+                colour_layers[len(materials)] = params.pop("vertex_color_layer", None)
+                materials.append(params)
             slot_to_global.append(mat_index[mat.name])
+        layer = _colour_layer(ob, [colour_layers.get(i) for i in slot_to_global], warnings)
+        key = (ob.name, ob.data.name if ob.data is not None else "", layer) if inst.is_instance else None
+        arrays = cache.get(key) if key else None
+        if arrays is None:
+            arrays = _mesh_local_arrays(ob, layer)
+            if key:
+                cache[key] = arrays
+        if arrays is None:
+            continue
+        co, tris, normals, mat_local, uvs, colours = arrays
+        if layer is not None and colours is None:
+            warnings.append(f"object '{ob.name}': its material reads the colour attribute "
+                            f"{repr(layer) if layer else '(the default one)'}, which its mesh does not have: black, "
+                            f"as in Cycles")
         table = np.array(slot_to_global or [0], dtype=np.uint32)
         mat_ids = table[np.clip(mat_local, 0, len(table) - 1)]
         m = _matrix(inst.matrix_world)
@@ -1115,9 +1210,11 @@ def export_scene(depsgraph, test_break=lambda: False, need_camera=True):
             # the geometric normal of negatively scaled objects
             tris, nrm = tris[:, ::-1], nrm.reshape(-1, 3, 3)[:, ::-1].reshape(-1, 3)
             uvs = None if uvs is None else uvs.reshape(-1, 3, 2)[:, ::-1].reshape(-1, 2)
+            colours = None if colours is None else colours.reshape(-1, 3, 3)[:, ::-1].reshape(-1, 3)
         name = ob.name if not inst.is_instance else f"{inst.parent.name if inst.parent else ''}/{ob.name}"
         meshes.append(scenedict.mesh(name, np.ascontiguousarray(pos), np.ascontiguousarray(tris, dtype=np.uint32),
-                                     np.ascontiguousarray(nrm), mat_ids, uvs, ob.pass_index))
+                                     np.ascontiguousarray(nrm), mat_ids, uvs, ob.pass_index,
+                                     None if colours is None else np.ascontiguousarray(colours)))
     world, world_texture, world_rotation = _world(scene, warnings, textures)
     if scene.render.use_motion_blur:
         warnings.append("motion blur is not rendered yet: the frame is rendered at its shutter's start")

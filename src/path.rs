@@ -120,8 +120,9 @@ pub struct Vertex {
     pub material: u32,
     pub prim: u32,
     pub front: bool,
-    /// Texture coordinates.
+    /// Texture coordinates and vertex colour.
     pub uv: Vec2,
+    pub color: Spectrum,
     /// Unit direction towards the previous vertex (world).
     pub wo: Vec3,
     /// Path throughput arriving at this vertex (product of f·cos/pdf and 1/RR so far).
@@ -154,6 +155,7 @@ impl Vertex {
             prim: si.prim,
             front: si.front,
             uv: si.uv,
+            color: si.color,
             wo,
             throughput,
             pdf_in,

@@ -114,8 +114,12 @@ fn parse_mesh(d: &Bound<'_, PyDict>) -> PyResult<MeshDesc> {
         }
         _ => vec![],
     };
+    let corner_colors = match item(d, "colors")? {
+        Some(c) if !c.is_none() => vec3s(floats(&c, 3, &format!("{ctx}: colors"))?),
+        _ => vec![],
+    };
     let pass_index = get_or(d, "pass_index", 0, &ctx)?;
-    Ok(MeshDesc { name, positions, indices, corner_normals, material_ids, corner_uvs, pass_index })
+    Ok(MeshDesc { name, positions, indices, corner_normals, material_ids, corner_uvs, corner_colors, pass_index })
 }
 
 fn parse_material(d: &Bound<'_, PyDict>) -> PyResult<MaterialDesc> {
@@ -139,6 +143,7 @@ fn parse_material(d: &Bound<'_, PyDict>) -> PyResult<MaterialDesc> {
         bump_texture: get_or(d, "bump_texture", None, &ctx)?,
         bump_distance: get_or(d, "bump_distance", def.bump_distance, &ctx)?,
         bump_strength: get_or(d, "bump_strength", def.bump_strength, &ctx)?,
+        vertex_color: get_or(d, "vertex_color", false, &ctx)?,
         emission_texture: get_or(d, "emission_texture", None, &ctx)?,
         metal_roughness: get_or(d, "metal_roughness", None, &ctx)?,
         glass_roughness: get_or(d, "glass_roughness", None, &ctx)?,
@@ -791,6 +796,10 @@ fn builtin_scene<'py>(py: Python<'py>, name: &str, width: u32, height: u32) -> P
         if !m.corner_uvs.is_empty() {
             let uv: Vec<f32> = m.corner_uvs.iter().flatten().copied().collect();
             md.set_item("uvs", PyArray1::from_vec(py, uv).reshape([m.corner_uvs.len(), 2])?)?;
+        }
+        if !m.corner_colors.is_empty() {
+            let c: Vec<f32> = m.corner_colors.iter().flatten().copied().collect();
+            md.set_item("colors", PyArray1::from_vec(py, c).reshape([m.corner_colors.len(), 3])?)?;
         }
         meshes.append(md)?;
     }

@@ -418,6 +418,92 @@ def bump(bpy):
     return scene
 
 
+def vertex_colours(bpy):
+    """Colour attributes as artists paint them: a floor of 8 × 8 faces whose Diffuse colour
+    is the mesh's default colour attribute (byte colours per face corner: a patchwork), a
+    smooth ball whose Principled BSDF, inside a node group, takes Mix › Multiply of a named
+    per-point float attribute and an orange, and a card on the back wall multiplying an
+    image by its corner colours — lit by an area and a point light."""
+    sys.path.insert(0, str(ROOT / "tools"))
+    from make_test_scenes import uv_card
+
+    def paint(ob, name, kind, domain, seed):
+        me = ob.data
+        a = me.color_attributes.new(name, kind, domain)
+        n = len(me.loops) if domain == "CORNER" else len(me.vertices)
+        rgba = np.ones((n, 4))
+        rgba[:, :3] = np.random.default_rng(seed).uniform(0.05, 0.95, (n, 3))
+        a.data.foreach_set("color", rgba.astype(np.float32).ravel())
+
+    def socket(sockets, identifier):
+        return next(s for s in sockets if s.identifier == identifier)
+
+    def multiply(nt, colour_src, other_src=None, other=None):
+        mix = nt.nodes.new("ShaderNodeMix")
+        mix.data_type, mix.blend_type = "RGBA", "MULTIPLY"
+        socket(mix.inputs, "Factor_Float").default_value = 1.0
+        nt.links.new(colour_src, socket(mix.inputs, "A_Color"))
+        if other_src is not None:
+            nt.links.new(other_src, socket(mix.inputs, "B_Color"))
+        else:
+            socket(mix.inputs, "B_Color").default_value = other
+        return socket(mix.outputs, "Result_Color")
+
+    scene, grey = _grey_room(bpy, smooth=False)
+    n = 8
+    verts = [(-0.95 + 1.9 * i / n, -0.95 + 1.9 * j / n, 0.01) for j in range(n + 1) for i in range(n + 1)]
+    faces = [(j * (n + 1) + i, j * (n + 1) + i + 1, (j + 1) * (n + 1) + i + 1, (j + 1) * (n + 1) + i)
+             for j in range(n) for i in range(n)]
+    floor = _mesh(bpy, scene, "Floor", verts, faces, bpy.data.materials.new("Painted floor"), False)
+    paint(floor, "Col", "BYTE_COLOR", "CORNER", 1)
+    mat = floor.data.materials[0]
+    mat.use_nodes = True
+    nt = mat.node_tree
+    nt.nodes.clear()
+    out, diffuse = nt.nodes.new("ShaderNodeOutputMaterial"), nt.nodes.new("ShaderNodeBsdfDiffuse")
+    nt.links.new(nt.nodes.new("ShaderNodeVertexColor").outputs["Color"], diffuse.inputs["Color"])
+    nt.links.new(diffuse.outputs[0], out.inputs["Surface"])
+
+    group = bpy.data.node_groups.new("Painted plastic", "ShaderNodeTree")
+    gi, go = group.nodes.new("NodeGroupInput"), group.nodes.new("NodeGroupOutput")
+    group.interface.new_socket("Paint", in_out="INPUT", socket_type="NodeSocketColor")
+    group.interface.new_socket("BSDF", in_out="OUTPUT", socket_type="NodeSocketShader")
+    bsdf = group.nodes.new("ShaderNodeBsdfPrincipled")
+    bsdf.inputs["Roughness"].default_value = 0.4
+    group.links.new(multiply(group, gi.outputs["Paint"], other=(1.0, 0.6, 0.3, 1.0)), bsdf.inputs["Base Color"])
+    group.links.new(bsdf.outputs[0], go.inputs["BSDF"])
+    ball = _uv_sphere(bpy, scene, "Ball", (0.35, 0.3, 0.35), 0.33, 24, 12, bpy.data.materials.new("Painted ball"),
+                      True)
+    paint(ball, "Paint", "FLOAT_COLOR", "POINT", 2)
+    mat = ball.data.materials[0]
+    mat.use_nodes = True
+    nt = mat.node_tree
+    nt.nodes.clear()
+    out, g = nt.nodes.new("ShaderNodeOutputMaterial"), nt.nodes.new("ShaderNodeGroup")
+    g.node_tree = group
+    attribute = nt.nodes.new("ShaderNodeAttribute")
+    attribute.attribute_name = "Paint"
+    nt.links.new(attribute.outputs["Color"], g.inputs["Paint"])
+    nt.links.new(g.outputs[0], out.inputs["Surface"])
+
+    nt, out = uv_card(bpy, scene, "Card", [(-0.8, 0.9, 0.1), (0.2, 0.9, 0.1), (0.2, 0.9, 1.1), (-0.8, 0.9, 1.1)],
+                      "Painted card")
+    paint(bpy.data.objects["Card"], "Col", "BYTE_COLOR", "CORNER", 3)
+    img = bpy.data.images.new("Stripes", 8, 1, float_buffer=True)
+    img.colorspace_settings.name = "Non-Color"
+    img.pixels.foreach_set(np.repeat(np.arange(8) % 2 * 0.6 + 0.3, 4).astype(np.float32))
+    tex = nt.nodes.new("ShaderNodeTexImage")
+    tex.image, tex.interpolation = img, "Closest"
+    diffuse = nt.nodes.new("ShaderNodeBsdfDiffuse")
+    nt.links.new(multiply(nt, nt.nodes.new("ShaderNodeVertexColor").outputs["Color"], tex.outputs["Color"]),
+                 diffuse.inputs["Color"])
+    nt.links.new(diffuse.outputs[0], out.inputs["Surface"])
+    _lamp(bpy, scene, "Area", "AREA", 80.0, (-0.6, -0.3, 1.2), 0.5, (math.radians(-20.0), 0.0, 0.0))
+    _lamp(bpy, scene, "Lamp", "POINT", 20.0, (0.6, -0.4, 1.2), 0.05)
+    _camera_and_world(bpy, scene)
+    return scene
+
+
 def checked_in(name, keep=None):
     """One of tests/scenes/*.blend (tools/make_test_scenes.py) at this module's size and
     bounce limit; `keep` names the lights left on."""
@@ -482,6 +568,7 @@ SCENES = {
     "translucent": (translucent, 512, 16),
     "texture_graphs": (texture_graphs, 512, 16),
     "bump": (bump, 512, 16),
+    "vertex_colours": (vertex_colours, 512, 16),
     "all_lights": (checked_in("lights", {"Area", "Point", "Spot", "Sun", "World"}), 512, 16),
     "specular": (checked_in("specular"), 1024, 32),
     "textures": (checked_in("textures"), 512, 16),

@@ -57,12 +57,13 @@ def sun_light(name, direction, irradiance, angle, visible_camera=False) -> dict:
             "angle": float(angle), "visible_camera": bool(visible_camera)}
 
 
-def mesh(name, positions, indices, normals=None, material_ids=None, uvs=None, pass_index=0) -> dict:
+def mesh(name, positions, indices, normals=None, material_ids=None, uvs=None, pass_index=0, colors=None) -> dict:
     """A triangle mesh in world space: positions (N×3 float32), indices (T×3 uint32), per-corner
-    normals (3T×3) and UVs (3T×2), per-triangle material ids (uint32); `pass_index` is its
-    object's Pass Index."""
+    normals (3T×3), UVs (3T×2) and colours (3T×3, linear RGB: what a material with
+    `vertex_color` multiplies its base colour by), per-triangle material ids (uint32);
+    `pass_index` is its object's Pass Index."""
     out = {"name": name, "positions": positions, "indices": indices}
-    for key, value in (("normals", normals), ("material_ids", material_ids), ("uvs", uvs)):
+    for key, value in (("normals", normals), ("material_ids", material_ids), ("uvs", uvs), ("colors", colors)):
         if value is not None:
             out[key] = value
     if pass_index:

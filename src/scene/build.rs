@@ -53,6 +53,9 @@ pub(super) struct Triangles {
     pub normals: Vec<Option<[Vec3; 3]>>,
     /// Corner texture coordinates; `None` without a UV map.
     pub uvs: Vec<Option<[Vec2; 3]>>,
+    /// Corner colours; empty when no mesh has them, else one entry per triangle (black for
+    /// the triangles of meshes without them).
+    pub colors: Vec<[Vec3; 3]>,
     /// The Pass Index of each triangle's object; empty when every object's is 0.
     pub pass_index: Vec<u32>,
 }
@@ -69,11 +72,16 @@ impl Triangles {
             material: Vec::new(),
             normals: Vec::new(),
             uvs: Vec::new(),
+            colors: Vec::new(),
             pass_index: Vec::new(),
         };
+        let colors = meshes.iter().any(|m| !m.corner_colors.is_empty());
         let pass_indices = meshes.iter().any(|m| m.pass_index != 0);
         for m in meshes {
             t.add_mesh(m, num_materials, report)?;
+            if colors && m.corner_colors.is_empty() {
+                t.colors.resize(t.positions.len(), [Vec3::ZERO; 3]); // (black, as a missing attribute)
+            }
             if pass_indices {
                 t.pass_index.resize(t.positions.len(), m.pass_index);
             }
@@ -111,6 +119,16 @@ impl Triangles {
         }
         if m.corner_uvs.iter().flatten().any(|x| !x.is_finite()) {
             return Err(bad("has a NaN or Inf texture coordinate".into()));
+        }
+        if !m.corner_colors.is_empty() && m.corner_colors.len() != 3 * m.indices.len() {
+            return Err(bad(format!(
+                "{} corner colours for {} triangles (need 3 per triangle)",
+                m.corner_colors.len(),
+                m.indices.len()
+            )));
+        }
+        if m.corner_colors.iter().flatten().any(|x| !x.is_finite()) {
+            return Err(bad("has a NaN or Inf corner colour".into()));
         }
         if !m.material_ids.is_empty() && m.material_ids.len() != m.indices.len() {
             return Err(bad(format!("{} material ids for {} triangles", m.material_ids.len(), m.indices.len())));
@@ -153,6 +171,9 @@ impl Triangles {
             self.normals.push(n);
             self.uvs
                 .push((!m.corner_uvs.is_empty()).then(|| [0, 1, 2].map(|k| Vec2::from_array(m.corner_uvs[3 * t + k]))));
+            if !m.corner_colors.is_empty() {
+                self.colors.push([0, 1, 2].map(|k| Vec3::from_array(m.corner_colors[3 * t + k])));
+            }
             self.material.push(mat);
         }
         Ok(())

@@ -17,6 +17,7 @@ fn quad(name: &str, p: [[f32; 3]; 4], mat: u32) -> MeshDesc {
         corner_normals: vec![],
         material_ids: vec![mat, mat],
         corner_uvs: vec![],
+        corner_colors: vec![],
         pass_index: 0,
     }
 }
@@ -351,6 +352,7 @@ fn flat_mesh(name: &str, positions: Vec<[f32; 3]>, indices: Vec<[u32; 3]>, mat: 
         corner_normals: vec![],
         material_ids: vec![mat; n],
         corner_uvs: vec![],
+        corner_colors: vec![],
         pass_index: 0,
     }
 }

@@ -17,6 +17,9 @@ pub struct MeshDesc {
     /// Optional per-corner texture coordinates (3 per triangle, in triangle order; Blender's
     /// active render UV map); empty = all (0, 0).
     pub corner_uvs: Vec<[f32; 2]>,
+    /// Optional per-corner colours (3 per triangle, in triangle order; linear RGB: the
+    /// colour attribute its materials read); empty = none, which reads as black.
+    pub corner_colors: Vec<[f32; 3]>,
     /// The object's Pass Index (Blender's IndexOB pass).
     pub pass_index: u32,
 }
@@ -89,6 +92,11 @@ pub struct MaterialDesc {
     pub bump_texture: Option<u32>,
     pub bump_distance: f32,
     pub bump_strength: f32,
+    /// The base colour (constant or texture) is multiplied by the mesh's corner colours,
+    /// interpolated across each triangle (Blender's Color Attribute node into Base Color,
+    /// alone or through Mix › Multiply with an image); a mesh without them reads black, as
+    /// Cycles reads a missing attribute.
+    pub vertex_color: bool,
     /// An image that multiplies `emission` per point (an Image Texture into Emission Color:
     /// `emission` is then the strength, and the image the colour).
     pub emission_texture: Option<u32>,
@@ -159,6 +167,7 @@ impl Default for MaterialDesc {
             bump_texture: None,
             bump_distance: 1.0,
             bump_strength: 1.0,
+            vertex_color: false,
             emission_texture: None,
             metal_color: None,
             glass_color: None,

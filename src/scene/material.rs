@@ -30,6 +30,8 @@ pub struct Material {
     pub normal_texture: Option<u32>,
     pub normal_strength: f32,
     pub bump_texture: Option<u32>,
+    /// The base colour is multiplied by the vertex colour (`MaterialDesc::vertex_color`).
+    pub vertex_color: bool,
     pub bump_distance: f32,
     pub bump_strength: f32,
     pub emission_texture: Option<u32>,
@@ -151,6 +153,7 @@ impl Material {
             normal_texture: d.normal_texture,
             normal_strength: d.normal_strength.max(0.0),
             bump_texture: d.bump_texture,
+            vertex_color: d.vertex_color,
             bump_distance: d.bump_distance,
             bump_strength: d.bump_strength.clamp(0.0, 1.0),
             emission_texture: d.emission_texture,

@@ -41,6 +41,8 @@ pub struct SurfaceInteraction {
     pub front: bool,
     /// Texture coordinates (zero when the mesh has none).
     pub uv: Vec2,
+    /// The mesh's interpolated corner colour (black when it has none).
+    pub color: Spectrum,
 }
 
 impl SurfaceInteraction {
@@ -71,6 +73,8 @@ pub struct Scene {
     normals: Vec<Option<[Vec3; 3]>>,
     /// Per-triangle corner texture coordinates; `None` without a UV map.
     uvs: Vec<Option<[Vec2; 3]>>,
+    /// Per-triangle corner colours; empty when no mesh has them.
+    colors: Vec<[Vec3; 3]>,
     geo_normals: Vec<Vec3>,
     areas: Vec<f32>,
     tri_material: Vec<u32>,
@@ -132,6 +136,7 @@ impl Scene {
             positions: tris.positions,
             normals: tris.normals,
             uvs: tris.uvs,
+            colors: tris.colors,
             tri_material: tris.material,
             tri_pass_index: tris.pass_index,
             material_pass_index: Vec::new(),
@@ -170,6 +175,7 @@ impl Scene {
             material: std::mem::take(&mut self.tri_material),
             normals: Vec::new(),
             uvs: Vec::new(),
+            colors: Vec::new(),
             pass_index: Vec::new(),
         };
         let lighting = match tris.material.iter().max() {
@@ -317,6 +323,7 @@ impl Scene {
             None => ng,
         };
         let uv = self.uvs[t].map_or(Vec2::ZERO, |u| u[0] * b0 + u[1] * b1 + u[2] * b2);
+        let color = self.colors.get(t).map_or(Spectrum::ZERO, |c| c[0] * b0 + c[1] * b1 + c[2] * b2);
         if self.has_perturbed_normals {
             ns = self.normal_mapped(t, ns, uv);
         }
@@ -336,6 +343,7 @@ impl Scene {
             t: hit.t,
             front,
             uv,
+            color,
         }
     }
 
@@ -420,19 +428,25 @@ impl Scene {
         n
     }
 
-    /// The BSDF of `material` at texture coordinates `uv` (textures replace the base colour
-    /// and the roughness where the material links them).
+    /// The BSDF of `material` at texture coordinates `uv` and vertex colour `color` (textures
+    /// replace the base colour and the roughness where the material links them; the vertex
+    /// colour multiplies the base colour where the material reads it).
     #[inline]
-    pub fn bsdf(&self, material: u32, front: bool, uv: Vec2) -> Bsdf {
+    pub fn bsdf(&self, material: u32, front: bool, uv: Vec2, color: Spectrum) -> Bsdf {
         let m = &self.materials[material as usize];
         if m.base_color_texture.is_none()
             && m.roughness_texture.is_none()
             && m.metallic_texture.is_none()
             && m.alpha_texture.is_none()
+            && !m.vertex_color
         {
             return m.bsdf(front);
         }
-        let base = m.base_color_texture.map_or(m.base_color, |t| self.textures[t as usize].eval(uv).min(Spectrum::ONE));
+        let mut base = m.base_color_texture.map_or(m.base_color, |t| self.textures[t as usize].eval(uv));
+        if m.vertex_color {
+            base *= color;
+        }
+        let base = base.clamp(Spectrum::ZERO, Spectrum::ONE);
         let grey = |t: Option<u32>, constant: f32| {
             t.map_or(constant, |t| crate::math::luminance(self.textures[t as usize].eval(uv)).clamp(0.0, 1.0))
         };
@@ -451,7 +465,7 @@ impl Scene {
     /// The BSDF at a surface point.
     #[inline]
     pub fn bsdf_at(&self, si: &SurfaceInteraction) -> Bsdf {
-        self.bsdf(si.material, si.front, si.uv)
+        self.bsdf(si.material, si.front, si.uv, si.color)
     }
 
     #[inline]
@@ -738,6 +752,51 @@ mod tests {
         let texture = TextureDesc { name: "n".into(), width: 1, height: 1, pixels: vec![rgb], ..Default::default() };
         let material = MaterialDesc { normal_texture: Some(0), normal_strength: strength, ..Default::default() };
         quad_normal(uv, texture, material)
+    }
+
+    /// Corner colours are interpolated barycentrically and multiply the base colour (constant
+    /// or texture) of a material that reads them; a mesh without them reads black, and a
+    /// material that does not read them ignores them.
+    #[test]
+    fn vertex_colours_interpolate_and_tint_the_base_colour() {
+        let corners = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [0.5, 0.5, 0.5]];
+        let quad = |x: f32, coloured: bool, mat: u32| MeshDesc {
+            name: format!("Quad{x}"),
+            positions: vec![[x - 1.0, -1.0, 0.0], [x + 1.0, -1.0, 0.0], [x + 1.0, 1.0, 0.0], [x - 1.0, 1.0, 0.0]],
+            indices: vec![[0, 1, 2], [0, 2, 3]],
+            corner_colors: if coloured { [0, 1, 2, 0, 2, 3].iter().map(|&k| corners[k]).collect() } else { vec![] },
+            material_ids: vec![mat, mat],
+            ..Default::default()
+        };
+        let tinted = MaterialDesc { base_color: [0.5, 0.8, 1.0], vertex_color: true, ..Default::default() };
+        let plain = MaterialDesc { base_color: [0.5, 0.8, 1.0], ..Default::default() };
+        let textured = MaterialDesc { base_color_texture: Some(0), vertex_color: true, ..Default::default() };
+        let grey = TextureDesc { name: "g".into(), width: 1, height: 1, pixels: vec![[0.5; 3]], ..Default::default() };
+        let desc = SceneDesc {
+            meshes: vec![quad(0.0, true, 0), quad(3.0, true, 1), quad(6.0, false, 0), quad(9.0, true, 2)],
+            materials: vec![tinted, plain, textured],
+            textures: vec![grey],
+            camera: camera_looking_along_y([0.0, -3.0, 0.0], 35.0, 4, 4),
+            ..Default::default()
+        };
+        let scene = Scene::build(&desc).unwrap();
+        let at = |x: f32| {
+            let d = Vec3::new(0.0, 0.0, -1.0);
+            let hit = scene.intersect(Vec3::new(x + 0.2, -0.5, 1.0), d, 0.0, f32::INFINITY).unwrap();
+            let si = scene.interaction(&hit, d);
+            (si.color, scene.bsdf_at(&si).albedo())
+        };
+        // (0.2, −0.5) in the first triangle: barycentrics (0.4, 0.35, 0.25)
+        let want = Vec3::new(0.4, 0.35, 0.25);
+        let close = |a: Vec3, b: Vec3| (a - b).abs().max_element() < 1e-5;
+        let (c, albedo) = at(0.0);
+        assert!(close(c, want) && close(albedo, want * Vec3::new(0.5, 0.8, 1.0)), "{c} {albedo}");
+        let (c, albedo) = at(3.0);
+        assert!(close(c, want) && close(albedo, Vec3::new(0.5, 0.8, 1.0)), "{c} {albedo}");
+        let (c, albedo) = at(6.0);
+        assert!(close(c, Vec3::ZERO) && close(albedo, Vec3::ZERO), "{c} {albedo}");
+        let (_, albedo) = at(9.0);
+        assert!(close(albedo, want * 0.5), "{albedo}");
     }
 
     /// Barycentric coordinates invert the triangle's parametrisation (what the shift uses to

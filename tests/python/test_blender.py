@@ -1481,11 +1481,12 @@ _ZOO = ([("ShaderNodeMix", {"data_type": "RGBA", "blend_type": mode}, {"A_Color"
            for i in ("LINEAR", "STEPPED", "SMOOTHSTEP", "SMOOTHERSTEP")])
 
 
-def _emissive_quads_against_cycles(bpy, tmp_out, tag, quads, cols=8):
-    """Renders a row-major grid of unit quads, each `quads[i](bpy, tree, output, images)`
+def _emissive_quads_against_cycles(bpy, tmp_out, tag, quads, cols=8, world=0.0, spp=64):
+    """Renders a row-major grid of unit quads, each `quads[i](bpy, tree, output, images, ob)`
     wiring its material's surface (an emission of some graph over images A, B and C: 4×4,
-    Non-Color, random, C = A + 1 so that what subtracts B stays positive), through an
-    orthographic camera with Cycles and GDMLT `pt`: noise-free but for the pixel filter's
+    Non-Color, random, C = A + 1 so that what subtracts B stays positive; or a diffuse
+    surface under a world of one colour `world`), through an orthographic camera with Cycles
+    and GDMLT `pt`: noise-free (the diffuse quads nearly so) but for the pixel filter's
     jitter. Returns, per quad, the largest relative difference over the pixels at the centre
     of each image cell (3.6 pixels across in a 16-pixel slot), where the filter sees that
     cell alone."""
@@ -1510,7 +1511,7 @@ def _emissive_quads_against_cycles(bpy, tmp_out, tag, quads, cols=8):
             x, y = i % cols, -(i // cols)
             nt, out = uv_card(bpy, scene, f"Q{i}", [(x, y, 0), (x + 0.9, y, 0), (x + 0.9, y + 0.9, 0), (x, y + 0.9, 0)],
                               f"{tag}{i}")
-            wire(bpy, nt, out, images)
+            wire(bpy, nt, out, images, bpy.data.objects[f"Q{i}"])
         cam = bpy.data.cameras.new("Camera")
         cam.type, cam.ortho_scale, cam.sensor_fit = "ORTHO", float(cols), "HORIZONTAL"
         ob = bpy.data.objects.new("Camera", cam)
@@ -1519,12 +1520,16 @@ def _emissive_quads_against_cycles(bpy, tmp_out, tag, quads, cols=8):
         scene.camera = ob
         world = bpy.data.worlds.new("World")
         scene.world = world
-        world.color = (0.0, 0.0, 0.0)
+        world.color = (world_colour, world_colour, world_colour)
+        bg = world.node_tree.nodes.get("Background") if world.node_tree is not None else None
+        if bg is not None:
+            bg.inputs["Color"].default_value = (world_colour, world_colour, world_colour, 1.0)
         r = scene.render
         r.resolution_x, r.resolution_y, r.resolution_percentage = 16 * cols, 16 * rows, 100
         return for_engine(scene, engine, spp, seed, method="PT")
 
-    c, g = (render_to_exr(bpy, build(bpy, e, 64, 1), tmp_out / f"{tag}{e}.exr") for e in ("CYCLES", "GDMLT"))
+    world_colour = world
+    c, g = (render_to_exr(bpy, build(bpy, e, spp, 1), tmp_out / f"{tag}{e}.exr") for e in ("CYCLES", "GDMLT"))
     centre = (0.8 + (np.arange(4) + 0.5) * 3.6).astype(int)
     cell = lambda img, i: img[16 * (i // cols) + centre][:, 16 * (i % cols) + centre]  # noqa: E731
     return [float(np.max(np.abs(cell(c, i) - cell(g, i)) / (np.abs(cell(c, i)) + 0.5))) for i in range(len(quads))]
@@ -1538,7 +1543,7 @@ def _image_texture(nt, image):
 
 def _zoo_quad(kind, settings, feeds):
     """A quad of the node zoo: its node applied to images, into an Emission."""
-    def wire(bpy, nt, out, images):
+    def wire(bpy, nt, out, images, ob):
         node = nt.nodes.new(kind)
         for key, value in settings.items():
             setattr(node.color_ramp if kind == "ShaderNodeValToRGB" else node, key, value)
@@ -1656,29 +1661,29 @@ def _grouped_quads():
         return emit
 
     def tinted(amount):
-        def wire(bpy, nt, out, images):
+        def wire(bpy, nt, out, images, ob):
             t = group(bpy, nt, tint, Amount=amount)
             nt.links.new(_image_texture(nt, images["A"]).outputs["Color"], t.inputs["Image"])
             emit_from(nt, out, t.outputs["Color"])
         wire.__name__ = f"tinted({amount})"
         return wire
 
-    def shader_group(bpy, nt, out, images):
+    def shader_group(bpy, nt, out, images, ob):
         gl = group(bpy, nt, glow, Strength=1.5)
         nt.links.new(_image_texture(nt, images["B"]).outputs["Color"], gl.inputs["Color"])
         nt.links.new(gl.outputs["Emission"], out.inputs["Surface"])
 
-    def conversions(bpy, nt, out, images):  # colour into the float socket, the float out into colour
+    def conversions(bpy, nt, out, images, ob):  # colour into the float socket, the float out into colour
         lu = group(bpy, nt, luma)
         nt.links.new(_image_texture(nt, images["B"]).outputs["Color"], lu.inputs["Grey"])
         emit_from(nt, out, lu.outputs["Value"])
 
-    def unlinked_image(bpy, nt, out, images):  # the Group node's colour; its factor from an image
+    def unlinked_image(bpy, nt, out, images, ob):  # the Group node's colour; its factor from an image
         t = group(bpy, nt, tint, Image=(0.3, 0.6, 0.9, 1.0))
         nt.links.new(_image_texture(nt, images["B"]).outputs["Color"], t.inputs["Amount"])
         emit_from(nt, out, t.outputs["Color"])
 
-    def muted(bpy, nt, out, images):  # a muted Invert passes its colour; a muted link leaves Strength 1
+    def muted(bpy, nt, out, images, ob):  # a muted Invert passes its colour; a muted link leaves Strength 1
         inv = nt.nodes.new("ShaderNodeInvert")
         inv.mute = True
         nt.links.new(_image_texture(nt, images["A"]).outputs["Color"], inv.inputs["Color"])
@@ -1697,6 +1702,79 @@ def test_node_groups_agree_with_cycles(bpy_mod, tmp_out):
     grey diffuse surface or the input's unlinked value."""
     quads = _grouped_quads()
     err = _emissive_quads_against_cycles(bpy_mod, tmp_out, "Grouped", quads)
+    bad = [(quads[i].__name__, round(e, 4)) for i, e in enumerate(err) if e > 0.005]
+    assert not bad, bad
+
+
+def _coloured_quads():
+    """Diffuse quads whose colour comes from colour attributes: the mesh's default one (byte
+    colours per corner), a named one per point (float colours) beside a default it is not,
+    through an Attribute node, multiplied with an image and with a constant (Mix › Multiply,
+    either order), and a mesh without the attribute (Cycles reads it as black)."""
+    def attribute(ob, name, kind, domain):
+        rng = np.random.default_rng(list((ob.name + name).encode()))  # (the same in each renderer's scene)
+        me = ob.data
+        a = me.color_attributes.new(name, kind, domain)
+        n = len(me.loops) if domain == "CORNER" else len(me.vertices)
+        rgba = np.concatenate([rng.uniform(0.1, 1.0, (n, 3)), np.ones((n, 1))], axis=1)
+        a.data.foreach_set("color", rgba.astype(np.float32).ravel())
+        return a
+
+    def diffuse(nt, out, source):
+        d = nt.nodes.new("ShaderNodeBsdfDiffuse")
+        nt.links.new(source, d.inputs["Color"])
+        nt.links.new(d.outputs[0], out.inputs["Surface"])
+
+    def default_corner(bpy, nt, out, images, ob):
+        attribute(ob, "Col", "BYTE_COLOR", "CORNER")
+        diffuse(nt, out, nt.nodes.new("ShaderNodeVertexColor").outputs["Color"])
+
+    def named_point(bpy, nt, out, images, ob):
+        attribute(ob, "Col", "BYTE_COLOR", "CORNER")
+        attribute(ob, "Paint", "FLOAT_COLOR", "POINT")
+        vc = nt.nodes.new("ShaderNodeVertexColor")
+        vc.layer_name = "Paint"
+        diffuse(nt, out, vc.outputs["Color"])
+
+    def attribute_node(bpy, nt, out, images, ob):
+        attribute(ob, "Paint", "FLOAT_COLOR", "CORNER")
+        a = nt.nodes.new("ShaderNodeAttribute")
+        a.attribute_name = "Paint"
+        diffuse(nt, out, a.outputs["Color"])
+
+    def multiplied(image_first, constant):
+        def wire(bpy, nt, out, images, ob):
+            attribute(ob, "Col", "BYTE_COLOR", "CORNER")
+            mix = nt.nodes.new("ShaderNodeMix")
+            mix.data_type, mix.blend_type = "RGBA", "MULTIPLY"
+            _socket(mix.inputs, "Factor_Float").default_value = 1.0
+            colour = nt.nodes.new("ShaderNodeVertexColor").outputs["Color"]
+            slots = [_socket(mix.inputs, "A_Color"), _socket(mix.inputs, "B_Color")]
+            if image_first:
+                slots.reverse()
+            nt.links.new(colour, slots[0])
+            if constant:
+                slots[1].default_value = (0.9, 0.5, 0.3, 1.0)
+            else:
+                nt.links.new(_image_texture(nt, images["A"]).outputs["Color"], slots[1])
+            diffuse(nt, out, _socket(mix.outputs, "Result_Color"))
+        wire.__name__ = f"multiplied(image_first={image_first}, constant={constant})"
+        return wire
+
+    def missing(bpy, nt, out, images, ob):
+        diffuse(nt, out, nt.nodes.new("ShaderNodeVertexColor").outputs["Color"])
+
+    return [default_corner, named_point, attribute_node, multiplied(False, False), multiplied(True, False),
+            multiplied(False, True), missing]
+
+
+def test_colour_attributes_agree_with_cycles(bpy_mod, tmp_out):
+    """Colour attributes (Blender's vertex colours) as the base colour, alone or multiplied
+    with an image or a colour, render as Cycles renders them (diffuse quads under a white
+    world: radiance = albedo) — before, each was 'not evaluated' and rendered the socket's
+    own colour."""
+    quads = _coloured_quads()
+    err = _emissive_quads_against_cycles(bpy_mod, tmp_out, "Coloured", quads, world=1.0)
     bad = [(quads[i].__name__, round(e, 4)) for i, e in enumerate(err) if e > 0.005]
     assert not bad, bad
 

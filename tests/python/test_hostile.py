@@ -345,3 +345,22 @@ def test_reconstruct_takes_an_irls_schedule_and_refuses_a_bad_one():
     for bad in ((10, 6, 0.0), (10, 6, float("nan")), (10, 10 ** 6, 0.5)):
         with pytest.raises(ValueError, match="irls"):
             gdmlt.reconstruct(p, dx, dy, d, 0.2, "l1", irls=bad)
+
+
+def test_bad_corner_colours_are_refused_naming_the_mesh():
+    """Corner colours (vertex colours) of the wrong count or with a NaN are a message naming
+    the mesh, not a panic or NaN pixels."""
+    import numpy as np
+
+    d = gdmlt.builtin_scene("cornell", 8, 8)
+    mesh = d["meshes"][0]
+    corners = 3 * len(np.asarray(mesh["indices"]).reshape(-1, 3))
+    mesh["colors"] = np.full((corners - 1, 3), 0.5, np.float32)
+    with pytest.raises(ValueError, match=f"{mesh['name']}.*corner colours for"):
+        gdmlt.Scene(d)
+    mesh["colors"] = np.full((corners, 3), 0.5, np.float32)
+    mesh["colors"][4, 1] = np.nan
+    with pytest.raises(ValueError, match=f"{mesh['name']}.*NaN or Inf corner colour"):
+        gdmlt.Scene(d)
+    mesh["colors"][4, 1] = 0.25
+    assert not [w for w in gdmlt.Scene(d).warnings if "unknown key" in w]
