@@ -339,11 +339,30 @@ def _color_or_texture(node, name, out, key, textures, warnings, what, default):
     out[key] = tuple(v)[:3] if key == "base_color" else float(v)
 
 
-def _output_node(tree):
+def _output_node(tree, warnings=None, what=""):
     """The tree's Cycles output node as a view of the flattened tree (node groups inlined:
-    node_view.py), or None."""
+    node_view.py), or None. Links Blender marks invalid (a loop, or sockets that do not
+    connect) carry nothing, as in Cycles: each is named in a warning."""
     node_out = tree.get_output_node("CYCLES") if tree is not None else None
-    return None if node_out is None else NodeView(node_out)
+    if node_out is None:
+        return None
+    if warnings is not None:
+        _warn_invalid_links(tree, warnings, what, set())
+    return NodeView(node_out)
+
+
+def _warn_invalid_links(tree, warnings, what, seen):
+    """A warning for every invalid link of `tree` and of the node groups it uses."""
+    if tree.name in seen:
+        return
+    seen.add(tree.name)
+    for link in tree.links:
+        if not getattr(link, "is_valid", True):
+            warnings.append(f"{what}: the link from '{link.from_node.name}' to '{link.to_node.name}' is invalid "
+                            f"(a loop, or sockets that do not connect) and is left out, as Cycles leaves it")
+    for node in tree.nodes:
+        if node.type == "GROUP" and node.node_tree is not None:
+            _warn_invalid_links(node.node_tree, warnings, what, seen)
 
 
 def _colour_attribute(sock):
@@ -405,7 +424,7 @@ def material_params(mat, warnings, textures=None):
     out = dict(DEFAULT_MATERIAL, name=mat.name)
     if mat.pass_index:
         out["pass_index"] = mat.pass_index  # the IndexMA pass
-    node_out = _output_node(mat.node_tree)
+    node_out = _output_node(mat.node_tree, warnings, what)
     if node_out is None:
         c = tuple(mat.diffuse_color)[:3]
         out["base_color"] = c
@@ -1048,10 +1067,10 @@ def _world(scene, warnings, textures):
     black = ((0.0, 0.0, 0.0), None, None)
     if world is None:
         return black
-    node_out = _output_node(world.node_tree)
+    what = f"world '{world.name}'"
+    node_out = _output_node(world.node_tree, warnings, what)
     if node_out is None:
         return tuple(world.color[:3]), None, None
-    what = f"world '{world.name}'"
     _warn_unrendered_outputs(node_out, warnings, what)
     surface = node_out.inputs.get("Surface")
     if surface is None or not surface.is_linked:

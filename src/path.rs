@@ -123,6 +123,8 @@ pub struct Vertex {
     /// Texture coordinates and vertex colour.
     pub uv: Vec2,
     pub color: Spectrum,
+    /// The unmapped shading normal in `frame` (`SurfaceInteraction::unmapped`).
+    pub unmapped: Vec3,
     /// Unit direction towards the previous vertex (world).
     pub wo: Vec3,
     /// Path throughput arriving at this vertex (product of f·cos/pdf and 1/RR so far).
@@ -156,6 +158,7 @@ impl Vertex {
             front: si.front,
             uv: si.uv,
             color: si.color,
+            unmapped: si.unmapped,
             wo,
             throughput,
             pdf_in,

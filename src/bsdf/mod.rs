@@ -6,6 +6,7 @@
 pub mod albedo;
 #[allow(dead_code)] // its entries are computed by build.rs; the crate uses its integrals and tests the rest
 mod albedo_tables;
+mod bump_shadowing;
 mod coat;
 mod conductor;
 mod dielectric;
@@ -115,6 +116,22 @@ pub enum Guide {
 }
 
 impl Bsdf {
+    /// This BSDF on a normal- or bump-mapped surface whose own normal is `unmapped` in the
+    /// shading frame: its diffuse lobe is bump-shadowed (`lambert.rs`).
+    #[inline]
+    pub fn bumped(mut self, unmapped: Vec3) -> Bsdf {
+        match &mut self {
+            Bsdf::Lambert(l) => l.unmapped = unmapped,
+            Bsdf::Layered(l) => l.base.unmapped = unmapped,
+            Bsdf::Principled { diffuse, translucent, .. } => {
+                diffuse.base.unmapped = unmapped;
+                translucent.unmapped = unmapped;
+            }
+            Bsdf::Conductor(_) | Bsdf::Dielectric(_) => {}
+        }
+        self
+    }
+
     /// The expected throughput of the pass-through lobe, τ·tint (zero without one): what a
     /// ray going straight through carries on, on average.
     #[inline]
@@ -694,7 +711,7 @@ mod tests {
             pass: 1.0 - wd - wt,
             pass_tint: Spectrum::ONE,
             coat,
-            translucent: Translucent { weight: wt, albedo: Spectrum::ONE },
+            translucent: Translucent { weight: wt, albedo: Spectrum::ONE, ..Translucent::NONE },
         };
         let wo = Vec3::new(0.6, 0.0, 0.8);
         let white = mixed(0.0, 1.0, Coat::NONE);

@@ -2,6 +2,7 @@
 //! on the side away from the viewer, f = albedo/π, sampled cosine-weighted there. As a lobe of
 //! the Principled mixture its `weight` is its share of the BSDF (0: none).
 
+use super::bump_shadowing::diffuse_bump_shadowing;
 use crate::math::{cosine_hemisphere_pdf, square_to_cosine_hemisphere, Spectrum};
 use glam::{Vec2, Vec3};
 use std::f32::consts::FRAC_1_PI;
@@ -10,11 +11,13 @@ use std::f32::consts::FRAC_1_PI;
 pub struct Translucent {
     pub weight: f32,
     pub albedo: Spectrum,
+    /// The unmapped normal in the shading frame (`bump_shadowing.rs`; +Z: none).
+    pub unmapped: Vec3,
 }
 
 impl Translucent {
     /// No diffuse transmission.
-    pub const NONE: Translucent = Translucent { weight: 0.0, albedo: Spectrum::ZERO };
+    pub const NONE: Translucent = Translucent { weight: 0.0, albedo: Spectrum::ZERO, unmapped: Vec3::Z };
 
     #[inline]
     pub fn is_some(&self) -> bool {
@@ -27,7 +30,7 @@ impl Translucent {
         if !self.is_some() || wi.z >= 0.0 {
             return Spectrum::ZERO;
         }
-        self.albedo * (self.weight * FRAC_1_PI * -wi.z)
+        self.albedo * (self.weight * FRAC_1_PI * -wi.z * diffuse_bump_shadowing(self.unmapped, wi))
     }
 
     /// The lobe's own density of `wi` (the caller weighs it by the lobe's probability).

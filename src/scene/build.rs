@@ -6,7 +6,7 @@
 use super::environment::Environment;
 use super::{light_select, Light, LightShape, Material, MaterialDesc, MeshDesc, SceneDesc, SceneReport, Texture};
 use crate::error::SceneError;
-use glam::{Vec2, Vec3};
+use glam::{Vec2, Vec3, Vec4};
 
 /// Textures and materials, and what they ask of the renderer.
 pub(super) struct Shading {
@@ -56,14 +56,20 @@ pub(super) struct Triangles {
     /// Corner colours; empty when no mesh has them, else one entry per triangle (black for
     /// the triangles of meshes without them).
     pub colors: Vec<[Vec3; 3]>,
+    /// MikkTSpace corner tangents (xyz, bitangent sign) of the meshes with UVs and a
+    /// normal-mapped material; empty when there are none, else one entry per triangle (zero
+    /// for the other meshes' triangles: their own UV frame is used).
+    pub tangents: Vec<[Vec4; 3]>,
     /// The Pass Index of each triangle's object; empty when every object's is 0.
     pub pass_index: Vec<u32>,
 }
 
 impl Triangles {
+    /// `normal_mapped[m]`: material m has a normal map (its meshes get MikkTSpace tangents).
     pub fn from_meshes(
         meshes: &[MeshDesc],
         num_materials: usize,
+        normal_mapped: &[bool],
         report: &mut SceneReport,
     ) -> Result<Triangles, SceneError> {
         let mut t = Triangles {
@@ -73,12 +79,22 @@ impl Triangles {
             normals: Vec::new(),
             uvs: Vec::new(),
             colors: Vec::new(),
+            tangents: Vec::new(),
             pass_index: Vec::new(),
         };
         let colors = meshes.iter().any(|m| !m.corner_colors.is_empty());
+        let wants_tangents = |m: &MeshDesc| {
+            !m.corner_uvs.is_empty()
+                && (m.material_ids.is_empty() && normal_mapped.first() == Some(&true)
+                    || m.material_ids.iter().any(|&i| normal_mapped.get(i as usize) == Some(&true)))
+        };
+        let tangents = meshes.iter().any(wants_tangents);
         let pass_indices = meshes.iter().any(|m| m.pass_index != 0);
         for m in meshes {
-            t.add_mesh(m, num_materials, report)?;
+            t.add_mesh(m, num_materials, tangents && wants_tangents(m), report)?;
+            if tangents {
+                t.tangents.resize(t.positions.len(), [Vec4::ZERO; 3]);
+            }
             if colors && m.corner_colors.is_empty() {
                 t.colors.resize(t.positions.len(), [Vec3::ZERO; 3]); // (black, as a missing attribute)
             }
@@ -95,7 +111,13 @@ impl Triangles {
         Ok(t)
     }
 
-    fn add_mesh(&mut self, m: &MeshDesc, num_materials: usize, report: &mut SceneReport) -> Result<(), SceneError> {
+    fn add_mesh(
+        &mut self,
+        m: &MeshDesc,
+        num_materials: usize,
+        with_tangents: bool,
+        report: &mut SceneReport,
+    ) -> Result<(), SceneError> {
         let bad = |what: String| SceneError::Mesh { mesh: m.name.clone(), what };
         if m.indices.is_empty() || m.positions.is_empty() {
             return Err(bad("is empty (no triangles)".into()));
@@ -134,10 +156,13 @@ impl Triangles {
             return Err(bad(format!("{} material ids for {} triangles", m.material_ids.len(), m.indices.len())));
         }
         let nv = m.positions.len() as u32;
+        let outside = m.indices.iter().enumerate().find_map(|(t, tri)| tri.iter().find(|&&i| i >= nv).map(|&i| (t, i)));
+        if let Some((t, i)) = outside {
+            return Err(bad(format!("triangle {t} uses vertex {i} but the mesh has {nv} vertices")));
+        }
+        // (of every triangle, degenerate ones too: MikkTSpace lends those their neighbours')
+        let tangents = if with_tangents { super::tangent::corner_tangents(m) } else { Vec::new() };
         for (t, tri) in m.indices.iter().enumerate() {
-            if let Some(&i) = tri.iter().find(|&&i| i >= nv) {
-                return Err(bad(format!("triangle {t} uses vertex {i} but the mesh has {nv} vertices")));
-            }
             let mat = m.material_ids.get(t).copied().unwrap_or(0);
             if mat as usize >= num_materials {
                 return Err(bad(format!("triangle {t} uses material {mat} but there are {num_materials}")));
@@ -171,6 +196,9 @@ impl Triangles {
             self.normals.push(n);
             self.uvs
                 .push((!m.corner_uvs.is_empty()).then(|| [0, 1, 2].map(|k| Vec2::from_array(m.corner_uvs[3 * t + k]))));
+            if !tangents.is_empty() {
+                self.tangents.push([0, 1, 2].map(|k| Vec4::from_array(tangents[3 * t + k])));
+            }
             if !m.corner_colors.is_empty() {
                 self.colors.push([0, 1, 2].map(|k| Vec3::from_array(m.corner_colors[3 * t + k])));
             }

@@ -206,12 +206,15 @@ impl Material {
         let (m, t, tl) = (metallic, self.transmission, self.translucency);
         let rest = (1.0 - tau) * (1.0 - tl);
         let w = [(1.0 - m) * (1.0 - t) * rest, m * rest, (1.0 - m) * t * rest];
-        let translucent =
-            Translucent { weight: (1.0 - tau) * tl, albedo: self.translucent_color.unwrap_or(base_color) };
+        let translucent = Translucent {
+            weight: (1.0 - tau) * tl,
+            albedo: self.translucent_color.unwrap_or(base_color),
+            ..Translucent::NONE
+        };
         // the specular layer has the same IOR seen from either side (Cycles inverts it on
         // back faces; opaque surfaces are rarely seen from behind)
         let diffuse = Layered {
-            base: Lambert { albedo: base_color, roughness: self.diffuse_roughness },
+            base: Lambert::rough(base_color, self.diffuse_roughness),
             eta: self.specular_ior,
             roughness,
             coverage: self.specular,

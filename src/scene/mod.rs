@@ -10,6 +10,7 @@ pub mod light;
 pub mod light_select;
 pub mod light_tree;
 pub mod material;
+mod tangent;
 pub mod texture;
 
 pub use camera::{Camera, CameraRay};
@@ -24,7 +25,7 @@ use crate::error::SceneError;
 use crate::math::{ray_epsilon, square_to_triangle, Frame, Spectrum};
 use build::{Lighting, Shading, Triangles};
 use environment::Environment;
-use glam::{Vec2, Vec3};
+use glam::{Vec2, Vec3, Vec4};
 
 /// A surface point found by a ray.
 #[derive(Clone, Copy, Debug)]
@@ -43,6 +44,9 @@ pub struct SurfaceInteraction {
     pub uv: Vec2,
     /// The mesh's interpolated corner colour (black when it has none).
     pub color: Spectrum,
+    /// The shading normal before normal and bump mapping, in the shading frame (+Z where the
+    /// material maps none): what bump-shadows its diffuse lobe.
+    pub unmapped: Vec3,
 }
 
 impl SurfaceInteraction {
@@ -75,6 +79,9 @@ pub struct Scene {
     uvs: Vec<Option<[Vec2; 3]>>,
     /// Per-triangle corner colours; empty when no mesh has them.
     colors: Vec<[Vec3; 3]>,
+    /// Per-triangle MikkTSpace corner tangents (xyz, bitangent sign) for normal maps; empty
+    /// when no normal-mapped mesh has UVs, zero on the triangles of other meshes.
+    tangents: Vec<[Vec4; 3]>,
     geo_normals: Vec<Vec3>,
     areas: Vec<f32>,
     tri_material: Vec<u32>,
@@ -114,7 +121,8 @@ impl Scene {
         let camera = Camera::new(&desc.camera)?;
         let mut report = SceneReport::default();
         let shading = Shading::new(desc)?;
-        let tris = Triangles::from_meshes(&desc.meshes, shading.materials.len(), &mut report)?;
+        let normal_mapped: Vec<bool> = shading.materials.iter().map(|m| m.normal_texture.is_some()).collect();
+        let tris = Triangles::from_meshes(&desc.meshes, shading.materials.len(), &normal_mapped, &mut report)?;
         // Bounds (geometry, lights and camera) for sun power estimates and epsilons.
         let mut lo = Vec3::splat(f32::INFINITY);
         let mut hi = Vec3::splat(f32::NEG_INFINITY);
@@ -137,6 +145,7 @@ impl Scene {
             normals: tris.normals,
             uvs: tris.uvs,
             colors: tris.colors,
+            tangents: tris.tangents,
             tri_material: tris.material,
             tri_pass_index: tris.pass_index,
             material_pass_index: Vec::new(),
@@ -176,6 +185,7 @@ impl Scene {
             normals: Vec::new(),
             uvs: Vec::new(),
             colors: Vec::new(),
+            tangents: Vec::new(),
             pass_index: Vec::new(),
         };
         let lighting = match tris.material.iter().max() {
@@ -324,8 +334,9 @@ impl Scene {
         };
         let uv = self.uvs[t].map_or(Vec2::ZERO, |u| u[0] * b0 + u[1] * b1 + u[2] * b2);
         let color = self.colors.get(t).map_or(Spectrum::ZERO, |c| c[0] * b0 + c[1] * b1 + c[2] * b2);
+        let mut unmapped = ns;
         if self.has_perturbed_normals {
-            ns = self.normal_mapped(t, ns, uv);
+            ns = self.normal_mapped(t, ns, uv, [b0, b1, b2]);
         }
         let front = ng.dot(d) <= 0.0;
         if !front {
@@ -334,16 +345,22 @@ impl Scene {
         if ns.dot(ng) < 0.0 {
             ns = -ns;
         }
+        if unmapped.dot(ng) < 0.0 {
+            unmapped = -unmapped;
+        }
+        let frame = Frame::from_normal(ns);
+        let unmapped = if unmapped == ns { Vec3::Z } else { frame.to_local(unmapped) };
         SurfaceInteraction {
             p,
             ng,
-            frame: Frame::from_normal(ns),
+            frame,
             prim: hit.prim,
             material: self.tri_material[t],
             t: hit.t,
             front,
             uv,
             color,
+            unmapped,
         }
     }
 
@@ -383,16 +400,19 @@ impl Scene {
     /// normal map and then its bump map at `uv`, in the frame of the triangle's UV mapping
     /// (∂p/∂u, ∂p/∂v; none without UVs or with degenerate ones).
     ///
-    /// Normal map, as Cycles' Normal Map node: n' = T·c.x + B·c.y + N·c.z with c = 2·rgb − 1,
-    /// the tangent T = ∂p/∂u made orthogonal to N, B = ±N × T (the sign of the UV mapping's
-    /// handedness), then N + strength·(n' − N), normalized.
+    /// Normal map, as Cycles' Normal Map node: n' = normalize(T·c.x + B·c.y + N·c.z) with
+    /// c = 2·rgb − 1, T and its sign s the MikkTSpace corner tangents interpolated at the
+    /// barycentrics `b`, N the unnormalized interpolated corner normal (the geometric one on
+    /// flat triangles), B = s·N × T; then normalize(ns + strength·(n' − ns)). A mesh without
+    /// those tangents takes T = ∂p/∂u made orthogonal to ns and B = ±ns × T (the UV mapping's
+    /// handedness).
     ///
     /// Bump, as Cycles' Bump node in the limit of its small filter width: the surface
     /// gradient of the height h perpendicular to N, ∇h = (h_u·R_u + h_v·R_v)/det with
     /// R_u = ∂p/∂v × N, R_v = N × ∂p/∂u, det = ∂p/∂u · R_u (the basis dual to the tangents,
     /// so that ∇h·∂p/∂u = h_u), then N' = normalize(N − distance·∇h), mixed with N by the
     /// strength.
-    fn normal_mapped(&self, t: usize, ns: Vec3, uv: Vec2) -> Vec3 {
+    fn normal_mapped(&self, t: usize, ns: Vec3, uv: Vec2, b: [f32; 3]) -> Vec3 {
         let m = &self.materials[self.tri_material[t] as usize];
         let Some(uvs) = self.uvs[t] else { return ns };
         let p = &self.positions[t];
@@ -406,12 +426,21 @@ impl Scene {
         let dpdv = (e2 * d1.x - e1 * d2.x) / det;
         let mut n = ns;
         if let Some(tex) = m.normal_texture {
-            let tangent = (dpdu - ns * ns.dot(dpdu)).normalize_or_zero();
-            if tangent != Vec3::ZERO {
+            let mikk = self.tangents.get(t).map_or(Vec4::ZERO, |c| c[0] * b[0] + c[1] * b[1] + c[2] * b[2]);
+            let (tangent, sign, normal) = if mikk.truncate() != Vec3::ZERO {
+                let normal = match &self.normals[t] {
+                    Some(c) => c[0] * b[0] + c[1] * b[1] + c[2] * b[2],
+                    None => self.geo_normals[t],
+                };
+                (mikk.truncate(), mikk.w, normal)
+            } else {
                 let sign = if ns.cross(dpdu).dot(dpdv) < 0.0 { -1.0 } else { 1.0 };
-                let bitangent = ns.cross(tangent) * sign;
+                ((dpdu - ns * ns.dot(dpdu)).normalize_or_zero(), sign, ns)
+            };
+            if tangent != Vec3::ZERO {
+                let bitangent = normal.cross(tangent) * sign;
                 let c = self.textures[tex as usize].eval(uv) * 2.0 - Vec3::ONE;
-                let mapped = (tangent * c.x + bitangent * c.y + ns * c.z).normalize_or(ns);
+                let mapped = (tangent * c.x + bitangent * c.y + normal * c.z).normalize_or(ns);
                 n = (ns + (mapped - ns) * m.normal_strength).normalize_or(ns);
             }
         }
@@ -430,9 +459,21 @@ impl Scene {
 
     /// The BSDF of `material` at texture coordinates `uv` and vertex colour `color` (textures
     /// replace the base colour and the roughness where the material links them; the vertex
-    /// colour multiplies the base colour where the material reads it).
+    /// colour multiplies the base colour where the material reads it), its diffuse lobe
+    /// bump-shadowed where the surface's own normal is `unmapped` (shading frame; +Z: none).
     #[inline]
-    pub fn bsdf(&self, material: u32, front: bool, uv: Vec2, color: Spectrum) -> Bsdf {
+    pub fn bsdf(&self, material: u32, front: bool, uv: Vec2, color: Spectrum, unmapped: Vec3) -> Bsdf {
+        let bsdf = self.unbumped_bsdf(material, front, uv, color);
+        if unmapped == Vec3::Z {
+            bsdf
+        } else {
+            bsdf.bumped(unmapped)
+        }
+    }
+
+    /// `bsdf` before the bump shadowing of its diffuse lobe.
+    #[inline]
+    fn unbumped_bsdf(&self, material: u32, front: bool, uv: Vec2, color: Spectrum) -> Bsdf {
         let m = &self.materials[material as usize];
         if m.base_color_texture.is_none()
             && m.roughness_texture.is_none()
@@ -465,7 +506,7 @@ impl Scene {
     /// The BSDF at a surface point.
     #[inline]
     pub fn bsdf_at(&self, si: &SurfaceInteraction) -> Bsdf {
-        self.bsdf(si.material, si.front, si.uv, si.color)
+        self.bsdf(si.material, si.front, si.uv, si.color, si.unmapped)
     }
 
     #[inline]
