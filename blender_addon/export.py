@@ -424,6 +424,8 @@ def material_params(mat, warnings, textures=None):
     out = dict(DEFAULT_MATERIAL, name=mat.name)
     if mat.pass_index:
         out["pass_index"] = mat.pass_index  # the IndexMA pass
+    if not getattr(getattr(mat, "cycles", None), "use_bump_map_correction", True):
+        out["bump_map_correction"] = False
     node_out = _output_node(mat.node_tree, warnings, what)
     if node_out is None:
         c = tuple(mat.diffuse_color)[:3]

@@ -144,6 +144,7 @@ fn parse_material(d: &Bound<'_, PyDict>) -> PyResult<MaterialDesc> {
         bump_distance: get_or(d, "bump_distance", def.bump_distance, &ctx)?,
         bump_strength: get_or(d, "bump_strength", def.bump_strength, &ctx)?,
         vertex_color: get_or(d, "vertex_color", false, &ctx)?,
+        bump_map_correction: get_or(d, "bump_map_correction", true, &ctx)?,
         emission_texture: get_or(d, "emission_texture", None, &ctx)?,
         metal_roughness: get_or(d, "metal_roughness", None, &ctx)?,
         glass_roughness: get_or(d, "glass_roughness", None, &ctx)?,
@@ -839,6 +840,8 @@ fn builtin_scene<'py>(py: Python<'py>, name: &str, width: u32, height: u32) -> P
         md.set_item("glass_sqrt_tint", m.glass_sqrt_tint)?;
         md.set_item("metal_constant_fresnel", m.metal_constant_fresnel)?;
         md.set_item("multiscatter", m.multiscatter)?;
+        md.set_item("vertex_color", m.vertex_color)?;
+        md.set_item("bump_map_correction", m.bump_map_correction)?;
         md.set_item("pass_index", m.pass_index)?;
         for (key, value) in [
             ("base_color_texture", m.base_color_texture),

@@ -97,6 +97,9 @@ pub struct MaterialDesc {
     /// alone or through Mix › Multiply with an image); a mesh without them reads black, as
     /// Cycles reads a missing attribute.
     pub vertex_color: bool,
+    /// Diffuse lobes under a normal or bump map are shadowed (Cycles' Bump Map Correction,
+    /// on by default: `bsdf/bump_shadowing.rs`).
+    pub bump_map_correction: bool,
     /// An image that multiplies `emission` per point (an Image Texture into Emission Color:
     /// `emission` is then the strength, and the image the colour).
     pub emission_texture: Option<u32>,
@@ -168,6 +171,7 @@ impl Default for MaterialDesc {
             bump_distance: 1.0,
             bump_strength: 1.0,
             vertex_color: false,
+            bump_map_correction: true,
             emission_texture: None,
             metal_color: None,
             glass_color: None,

@@ -32,6 +32,8 @@ pub struct Material {
     pub bump_texture: Option<u32>,
     /// The base colour is multiplied by the vertex colour (`MaterialDesc::vertex_color`).
     pub vertex_color: bool,
+    /// Bump-shadow the diffuse lobes under a mapped normal (`MaterialDesc::bump_map_correction`).
+    pub bump_map_correction: bool,
     pub bump_distance: f32,
     pub bump_strength: f32,
     pub emission_texture: Option<u32>,
@@ -154,6 +156,7 @@ impl Material {
             normal_strength: d.normal_strength.max(0.0),
             bump_texture: d.bump_texture,
             vertex_color: d.vertex_color,
+            bump_map_correction: d.bump_map_correction,
             bump_distance: d.bump_distance,
             bump_strength: d.bump_strength.clamp(0.0, 1.0),
             emission_texture: d.emission_texture,

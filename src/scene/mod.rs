@@ -464,7 +464,7 @@ impl Scene {
     #[inline]
     pub fn bsdf(&self, material: u32, front: bool, uv: Vec2, color: Spectrum, unmapped: Vec3) -> Bsdf {
         let bsdf = self.unbumped_bsdf(material, front, uv, color);
-        if unmapped == Vec3::Z {
+        if unmapped == Vec3::Z || !self.materials[material as usize].bump_map_correction {
             bsdf
         } else {
             bsdf.bumped(unmapped)
@@ -793,6 +793,48 @@ mod tests {
         let texture = TextureDesc { name: "n".into(), width: 1, height: 1, pixels: vec![rgb], ..Default::default() };
         let material = MaterialDesc { normal_texture: Some(0), normal_strength: strength, ..Default::default() };
         quad_normal(uv, texture, material)
+    }
+
+    /// Under a normal map the diffuse lobe is bump-shadowed towards light near the unmapped
+    /// normal's horizon (`bsdf/bump_shadowing.rs`), and not with the material's Bump Map
+    /// Correction off; without a map nothing changes.
+    #[test]
+    fn bump_map_correction_shadows_the_diffuse_lobe_of_mapped_normals() {
+        let eval_towards = |normal_texture: Option<u32>, correction: bool| {
+            let quad = MeshDesc {
+                name: "Quad".into(),
+                positions: vec![[-1.0, -1.0, 0.0], [1.0, -1.0, 0.0], [1.0, 1.0, 0.0], [-1.0, 1.0, 0.0]],
+                indices: vec![[0, 1, 2], [0, 2, 3]],
+                corner_uvs: [[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 0.0], [1.0, 1.0], [0.0, 1.0]].to_vec(),
+                material_ids: vec![0, 0],
+                ..Default::default()
+            };
+            let lean = TextureDesc {
+                name: "n".into(),
+                width: 1,
+                height: 1,
+                pixels: vec![[0.8, 0.5, 0.9]],
+                ..Default::default()
+            };
+            let material = MaterialDesc { normal_texture, bump_map_correction: correction, ..Default::default() };
+            let desc = SceneDesc {
+                meshes: vec![quad],
+                materials: vec![material],
+                textures: vec![lean],
+                camera: camera_looking_along_y([0.0, -3.0, 0.0], 35.0, 4, 4),
+                ..Default::default()
+            };
+            let scene = Scene::build(&desc).unwrap();
+            let d = Vec3::new(0.0, 0.0, -1.0);
+            let si = scene.interaction(&scene.intersect(Vec3::new(0.2, 0.1, 2.0), d, 0.0, f32::INFINITY).unwrap(), d);
+            // light 80° from the surface's own normal, on the side the map leans to
+            let wi = si.frame.to_local(Vec3::new(80f32.to_radians().sin(), 0.0, 80f32.to_radians().cos()));
+            scene.bsdf_at(&si).eval(si.frame.to_local(-d), wi).x
+        };
+        let (bumped, uncorrected, plain) =
+            (eval_towards(Some(0), true), eval_towards(Some(0), false), eval_towards(None, true));
+        assert!(bumped < 0.9 * uncorrected, "{bumped} vs {uncorrected}");
+        assert!(uncorrected > plain, "the lean faces the light: {uncorrected} vs {plain}");
     }
 
     /// Corner colours are interpolated barycentrically and multiply the base colour (constant

@@ -2029,6 +2029,10 @@ def test_bump_and_displacement_reach_the_core(bpy_mod):
     assert not warnings, warnings
     assert "bump_texture" in p and "normal_texture" not in p
     assert p["bump_distance"] == pytest.approx(-0.2) and p["bump_strength"] == pytest.approx(0.7)
+    assert "bump_map_correction" not in p  # (on: the core's default)
+    mat.cycles.use_bump_map_correction = False
+    assert export.material_params(mat, [], export.Textures())["bump_map_correction"] is False
+    mat.cycles.use_bump_map_correction = True
     normal_map = nt.nodes.new("ShaderNodeNormalMap")
     tex2 = nt.nodes.new("ShaderNodeTexImage")
     tex2.image = img
