@@ -454,13 +454,18 @@ def vertex_colours(bpy):
     verts = [(-0.95 + 1.9 * i / n, -0.95 + 1.9 * j / n, 0.01) for j in range(n + 1) for i in range(n + 1)]
     faces = [(j * (n + 1) + i, j * (n + 1) + i + 1, (j + 1) * (n + 1) + i + 1, (j + 1) * (n + 1) + i)
              for j in range(n) for i in range(n)]
+    def empty_tree(ob):
+        """The object's (only) material, emptied: (tree, a new material output)."""
+        mat = ob.data.materials[0]
+        mat.use_nodes = True
+        nt = mat.node_tree
+        nt.nodes.clear()
+        return nt, nt.nodes.new("ShaderNodeOutputMaterial")
+
     floor = _mesh(bpy, scene, "Floor", verts, faces, bpy.data.materials.new("Painted floor"), False)
     paint(floor, "Col", "BYTE_COLOR", "CORNER", 1)
-    mat = floor.data.materials[0]
-    mat.use_nodes = True
-    nt = mat.node_tree
-    nt.nodes.clear()
-    out, diffuse = nt.nodes.new("ShaderNodeOutputMaterial"), nt.nodes.new("ShaderNodeBsdfDiffuse")
+    nt, out = empty_tree(floor)
+    diffuse = nt.nodes.new("ShaderNodeBsdfDiffuse")
     nt.links.new(nt.nodes.new("ShaderNodeVertexColor").outputs["Color"], diffuse.inputs["Color"])
     nt.links.new(diffuse.outputs[0], out.inputs["Surface"])
 
@@ -475,11 +480,8 @@ def vertex_colours(bpy):
     ball = _uv_sphere(bpy, scene, "Ball", (0.35, 0.3, 0.35), 0.33, 24, 12, bpy.data.materials.new("Painted ball"),
                       True)
     paint(ball, "Paint", "FLOAT_COLOR", "POINT", 2)
-    mat = ball.data.materials[0]
-    mat.use_nodes = True
-    nt = mat.node_tree
-    nt.nodes.clear()
-    out, g = nt.nodes.new("ShaderNodeOutputMaterial"), nt.nodes.new("ShaderNodeGroup")
+    nt, out = empty_tree(ball)
+    g = nt.nodes.new("ShaderNodeGroup")
     g.node_tree = group
     attribute = nt.nodes.new("ShaderNodeAttribute")
     attribute.attribute_name = "Paint"
