@@ -506,6 +506,48 @@ def vertex_colours(bpy):
     return scene
 
 
+def normal_mapped_ball(bpy):
+    """A real asset's normal map on a curved mesh: a smooth 16 × 8 UV sphere (Blender's own,
+    with its UV map) whose Principled BSDF takes a tangent-space normal map of rounded
+    scales (baked from a height field: MikkTSpace's frame and the bump shadowing of its
+    diffuse base both matter), beside a diffuse one with the map at strength 0.6, lit by an
+    area and a point light."""
+    scene, grey = _grey_room(bpy, smooth=False)
+    v, u = np.mgrid[0:32, 0:64]
+    h = np.sin(2 * np.pi * 8 * (u + 0.5) / 64) * np.sin(2 * np.pi * 4 * (v + 0.5) / 32)
+    dhdu, dhdv = np.gradient(h, axis=1) * 2.5, np.gradient(h, axis=0) * 2.5
+    n = np.stack([-dhdu, -dhdv, np.ones_like(h)], axis=-1)
+    n /= np.linalg.norm(n, axis=-1, keepdims=True)
+    rgba = np.ones((32, 64, 4))
+    rgba[..., :3] = 0.5 * n + 0.5
+    img = bpy.data.images.new("Scales", 64, 32, float_buffer=True)
+    img.colorspace_settings.name = "Non-Color"
+    img.pixels.foreach_set(rgba.astype(np.float32).ravel())
+    for name, location, shader, strength in (("Glossy", (-0.4, 0.2, 0.38), "ShaderNodeBsdfPrincipled", 1.0),
+                                             ("Matte", (0.45, -0.1, 0.3), "ShaderNodeBsdfDiffuse", 0.6)):
+        bpy.ops.mesh.primitive_uv_sphere_add(segments=16, ring_count=8, radius=0.3, location=location)
+        ob = bpy.context.active_object
+        ob.name = name
+        for p in ob.data.polygons:
+            p.use_smooth = True
+        mat = _material(bpy, name + " scales", shader)
+        nt = mat.node_tree
+        bsdf = next(x for x in nt.nodes if x.bl_idname == shader)
+        bsdf.inputs[0].default_value = (0.7, 0.45, 0.3, 1.0)
+        if shader == "ShaderNodeBsdfPrincipled":
+            bsdf.inputs["Roughness"].default_value = 0.35
+        tex, normal_map = nt.nodes.new("ShaderNodeTexImage"), nt.nodes.new("ShaderNodeNormalMap")
+        tex.image = img
+        normal_map.inputs["Strength"].default_value = strength
+        nt.links.new(tex.outputs["Color"], normal_map.inputs["Color"])
+        nt.links.new(normal_map.outputs["Normal"], bsdf.inputs["Normal"])
+        ob.data.materials.append(mat)
+    _lamp(bpy, scene, "Area", "AREA", 80.0, (-0.6, -0.4, 1.2), 0.5, (math.radians(-25.0), 0.0, 0.0))
+    _lamp(bpy, scene, "Lamp", "POINT", 15.0, (0.7, -0.5, 0.8), 0.05)
+    _camera_and_world(bpy, scene)
+    return scene
+
+
 def checked_in(name, keep=None):
     """One of tests/scenes/*.blend (tools/make_test_scenes.py) at this module's size and
     bounce limit; `keep` names the lights left on."""
@@ -571,6 +613,7 @@ SCENES = {
     "texture_graphs": (texture_graphs, 512, 16),
     "bump": (bump, 512, 16),
     "vertex_colours": (vertex_colours, 512, 16),
+    "normal_mapped_ball": (normal_mapped_ball, 512, 16),
     "all_lights": (checked_in("lights", {"Area", "Point", "Spot", "Sun", "World"}), 512, 16),
     "specular": (checked_in("specular"), 1024, 32),
     "textures": (checked_in("textures"), 512, 16),
