@@ -43,12 +43,19 @@ def same(a, b) -> bool:
     return type(a) is type(b) and a == b
 
 
+def _normal_mapped(desc):
+    return [m.get("normal_texture") is not None for m in desc.get("materials", [])]
+
+
 def scene_change(old, new) -> str:
     """What differs between two exported scene dicts, for the viewport: "geometry" (the
-    meshes, material ids included: rebuild everything), "shading" (materials, textures,
-    lights, world: swap them in), or "none". The camera is not compared (the viewport
-    looks through its own)."""
+    meshes, material ids included: rebuild everything — so too when a material gains or
+    loses a normal map, whose meshes' tangents are computed with the triangles), "shading"
+    (materials, textures, lights, world: swap them in), or "none". The camera is not
+    compared (the viewport looks through its own)."""
     if old is None or not same(old.get("meshes", []), new.get("meshes", [])):
+        return "geometry"
+    if _normal_mapped(old) != _normal_mapped(new):
         return "geometry"
     rest = {k for k in old.keys() | new.keys() if k not in ("meshes", "camera")}
     return "none" if all(same(old.get(k), new.get(k)) for k in rest) else "shading"

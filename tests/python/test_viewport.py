@@ -154,6 +154,13 @@ def test_each_edit_rebuilds_only_what_it_changed(bpy_mod):
     fresh._coarse = []
     np.testing.assert_array_equal(updated, fresh.step(settings))
 
+    # a normal map added to a material: its meshes' tangents are built with the triangles
+    mat_tree = mesh_ob.active_material.node_tree
+    normal_map, tex = mat_tree.nodes.new("ShaderNodeNormalMap"), mat_tree.nodes.new("ShaderNodeTexImage")
+    tex.image = bpy.data.images.new("Flat", 2, 2)
+    mat_tree.links.new(tex.outputs["Color"], normal_map.inputs["Color"])
+    mat_tree.links.new(normal_map.outputs["Normal"], node(mat_tree, "BSDF_DIFFUSE").inputs["Normal"])
+    assert session.update(export_now()) == "geometry"
     mesh_ob.location.z += 0.05
     assert session.update(export_now()) == "geometry"
     mesh_ob.data.vertices[0].co.x += 0.01
