@@ -83,6 +83,7 @@ class _Reader:
         self.xcache = pxr.UsdGeom.XformCache(time)
         self.materials = [scenedict.material("(default)")]
         self.material_index = {}
+        self.colour_layers = {}  # material index → the colour primvar its diffuseColor reads
         self.textures = []  # scene textures: material images and the dome's
         self.texture_index = {}
 
@@ -126,6 +127,7 @@ class _Reader:
             else:
                 self.warn(f"{what}: no UsdPreviewSurface or supported MaterialX surface; rendered grey diffuse")
         self.material_index[path] = len(self.materials)
+        self.colour_layers[len(self.materials)] = out.pop("vertex_color_layer", None)
         self.materials.append(out)
         return self.material_index[path]
 
@@ -147,6 +149,12 @@ class _Reader:
             return default
         if inp.HasConnectedSource():
             src = self._source(inp)
+            if src is not None and texture_key == "base_color_texture" \
+                    and src[0].GetIdAttr().Get() in ("UsdPrimvarReader_float3", "UsdPrimvarReader_float4"):
+                # a colour primvar (vertex colours): the base colour is the mesh's colours
+                var = src[0].GetInput("varname")
+                out["vertex_color"], out["vertex_color_layer"] = True, str(var.Get() if var else "") or "displayColor"
+                return (1.0, 1.0, 1.0)
             if src is not None and texture_key is not None:
                 # coverage from an image's alpha: UsdUVTexture's `a` output, MaterialX's channel 3
                 alpha = texture_key == "alpha_texture"
@@ -518,6 +526,19 @@ class _Reader:
             mat = UsdShade.MaterialBindingAPI(subset.GetPrim()).ComputeBoundMaterial()[0]
             face_mat[faces[(faces >= 0) & (faces < len(counts))]] = self.material(mat)
         out["material_ids"] = np.ascontiguousarray(face_mat[face_of_tri])
+        layers = [x for x in dict.fromkeys(self.colour_layers.get(int(i)) for i in np.unique(face_mat)) if x]
+        if len(layers) > 1:
+            self.warn(f"mesh '{name}': its materials read different colour primvars ({', '.join(layers)}); all get "
+                      f"'{layers[0]}'")
+        if layers:
+            pv = pv_api.GetPrimvar(layers[0])
+            colours = corner_values(pv.ComputeFlattened(t), pv.GetInterpolation(), f"primvar {layers[0]}") \
+                if pv and pv.HasValue() else None
+            if colours is None:
+                self.warn(f"mesh '{name}': its material reads the colour primvar '{layers[0]}', which it does not "
+                          f"have: black")
+            else:
+                out["colors"] = np.ascontiguousarray(colours[..., :3].reshape(-1, 3), dtype=np.float32)
         return out
 
     def point_instancer(self, prim):

@@ -259,3 +259,39 @@ def test_uv_texture_of_a_hand_written_stage(tmp_path):
     stage.GetRootLayer().Save()
     desc, warnings = usd.load(path, width=16, height=16)
     assert warnings == [] and "metallic_texture" in [m for m in desc["materials"] if m["name"] == "Grey"][0]
+
+
+def test_colour_primvars_read_by_the_material_are_vertex_colours(tmp_path):
+    """diffuseColor fed by a UsdPrimvarReader_float3 of a colour primvar (USD's vertex
+    colours): the material multiplies its base colour by the mesh's colours, per corner as
+    the primvar's interpolation says — a constant-coloured floor renders ρ/π·E with ρ that
+    colour (before: a warning and the reader's fallback, grey); a mesh without the primvar is
+    warned and reads black."""
+    path = _stage(tmp_path / "c.usda")
+    stage = Usd.Stage.Open(str(path))
+    floor = UsdGeom.Mesh(stage.GetPrimAtPath("/World/Floor"))
+    floor.GetPointsAttr().Set([(-0.1, -0.1, 0), (0.1, -0.1, 0), (0.1, 0.1, 0), (-0.1, 0.1, 0)])
+    paint = UsdGeom.PrimvarsAPI(floor).CreatePrimvar("paint", Sdf.ValueTypeNames.Color3fArray,
+                                                     UsdGeom.Tokens.vertex)
+    paint.Set([(0.2, 0.5, 0.8)] * 4)
+    shader = UsdShade.Shader(stage.GetPrimAtPath("/World/Grey/Surface"))
+    reader = UsdShade.Shader.Define(stage, "/World/Grey/Paint")
+    reader.CreateIdAttr("UsdPrimvarReader_float3")
+    reader.CreateInput("varname", Sdf.ValueTypeNames.String).Set("paint")
+    reader.CreateInput("fallback", Sdf.ValueTypeNames.Float3).Set((0.5, 0.5, 0.5))
+    shader.GetInput("diffuseColor").ConnectToSource(reader.ConnectableAPI(), "result")
+    stage.GetRootLayer().Save()
+    desc, warnings = usd.load(path, width=16, height=16)
+    assert warnings == []
+    mat = [m for m in desc["materials"] if m["name"] == "Grey"][0]
+    assert mat["vertex_color"] and "vertex_color_layer" not in mat
+    mesh = next(m for m in desc["meshes"] if m["name"] == "/World/Floor")
+    assert np.allclose(mesh["colors"], (0.2, 0.5, 0.8)) and len(mesh["colors"]) == 3 * len(mesh["indices"])
+    img = gdmlt.render(gdmlt.Scene(desc), method="pt", spp=256, max_bounces=0, seed=1)["layers"]["Combined"]
+    e = 100.0 * 0.04 / 4.0  # the small light's irradiance at the centre (see the light-units test)
+    got = img[6:10, 6:10].mean(axis=(0, 1))
+    assert np.allclose(got, np.array([0.2, 0.5, 0.8]) / math.pi * e, rtol=0.03), got
+    paint.GetAttr().Clear()
+    stage.GetRootLayer().Save()
+    desc, warnings = usd.load(path, width=16, height=16)
+    assert any("paint" in w and "black" in w for w in warnings), warnings
