@@ -17,10 +17,13 @@ cache need, and what a warning names.
 
 from dataclasses import dataclass
 
+import numpy as np
+
+from .texture_graph import LUMA
+
 # (deeper than any real file: a guard against a script-made group that contains itself)
 MAX_STEPS = 10_000
 _SCALAR = ("VALUE", "INT", "BOOLEAN")
-_LUMA = (0.2126, 0.7152, 0.0722)
 
 
 class NodeView:
@@ -174,5 +177,5 @@ def _convert(v, src, dst):
         return x if dst in _SCALAR else (x, x, x, 1.0) if dst == "RGBA" else (x, x, x)
     c = tuple(v)[:3]
     if dst in _SCALAR:
-        return sum(w * x for w, x in zip(_LUMA, c)) if src == "RGBA" else sum(c) / 3.0
+        return float(np.dot(LUMA, c)) if src == "RGBA" else sum(c) / 3.0
     return (*c, 1.0) if dst == "RGBA" else c

@@ -196,12 +196,11 @@ class _Graph:
     # --- sockets and nodes ----------------------------------------------------------------
 
     def _walk(self, sock, collect):
-        """The value at input socket `sock`: its link's source output, else its own value."""
+        """The value at input socket `sock` (a node_view.SocketView: groups, reroutes, muted
+        nodes and links already followed): its link's source output, else its own value."""
         if not sock.is_linked:
             return self._unlinked(sock, collect)
         link = sock.links[0]
-        if getattr(link, "is_muted", False) or not getattr(link, "is_valid", True):
-            return self._unlinked(sock, collect)
         node, out = link.from_node, link.from_socket
         if collect:
             self.signature.append((sock.identifier, node.name, out.identifier))
@@ -229,13 +228,9 @@ class _Graph:
 
     def _node(self, node, out, collect):
         t = node.type
-        if getattr(node, "mute", False):
-            raise Unsupported(f"node '{node.name}' is muted")
         walk = (lambda ident: self._walk(_input(node, ident), collect))
         if collect:
             self.signature.append(_settings(node))
-        if t == "REROUTE":
-            return self._walk(node.inputs[0], collect)
         if t == "RGB":
             return _Colour(np.array([tuple(node.outputs[0].default_value)[:3]], np.float32))
         if t == "VALUE":
