@@ -14,6 +14,12 @@ grid up to 16× finer than the image (at most 1024 texels across, 4M in all): a 
 step on a magnified 8×8 image is then sharp to 1/128 of the image, where at the image's own
 resolution it rendered 5% off Cycles. Over Closest images the grid is the image's own.
 
+A graph over one procedural texture instead of images (Noise, Checker, Gradient) is a
+function of that texture's output alone: it is evaluated on a table of the output's values
+over its range (`_PROCEDURAL_TABLES`), which the core looks up after computing the pattern
+per shading point (src/scene/procedural.rs). A Noise's Color output (three noises) only
+when it feeds the input straight, a Checker's colours only from constants.
+
 A graph with no image in it is a constant (a Math node on two values, a Mix of two colours):
 its value. A graph with a node outside this set, images under different UV transforms or
 extensions, or a loop is not evaluated: `evaluate` raises Unsupported naming it, the
@@ -139,8 +145,11 @@ def _input(node, identifier):
 class _Graph:
     """One evaluation: the image leaves found (first pass) and their texels on one grid."""
 
-    def __init__(self, image_pixels, uv_key, image_identity):
+    def __init__(self, image_pixels, uv_key, image_identity, coords=None):
         self.image_pixels = image_pixels  # node → (pixels (h·w, 4), w, h, srgb)
+        self.coords = coords  # node → (space, texspace kind, 3×4 matrix): a procedural's coordinates
+        self.procedural = None  # (node, output name) of the procedural texture leaf
+        self.samples = None  # the table's values of that leaf's output
         self.image_identity = image_identity  # node → what identifies its pixels
         self.uv_key = uv_key  # node → (transform, extension, closest)
         self.images = {}  # node name → node
@@ -158,6 +167,11 @@ class _Graph:
     def run(self, sock):
         """Loads the leaves' texels on the grid (or takes the cached result), then evaluates
         `sock` in slices of 1M texels (a 4K map's temporaries stay at tens of MB)."""
+        if self.procedural is not None:
+            if self.images:
+                raise Unsupported(f"procedural texture '{self.procedural[0].name}' together with images")
+            self.samples = np.linspace(*_procedural_domain(self.procedural[0]),
+                                       _PROCEDURAL_TABLES[self.procedural[0].type], dtype=np.float32)
         if not self.images:
             return self._walk(sock, collect=False)
         keys = {name: self.uv_key(n) for name, n in self.images.items()}
@@ -245,10 +259,32 @@ class _Graph:
                 return None
             px = self.texels[node.name]
             return _Value(px[:, 3]) if out.name == "Alpha" else _Colour(px[:, :3])
+        if t in _PROCEDURAL_TABLES:
+            return self._procedural(node, out, walk, collect)
         op = _NODES.get(t)
         if op is None:
             raise Unsupported(f"node '{node.name}' ({t})")
         return op(node, out, walk, collect)
+
+    def _procedural(self, node, out, walk, collect):
+        """A procedural texture leaf: its output at the table's values."""
+        if collect:
+            if self.procedural is not None and self.procedural[0].name != node.name:
+                raise Unsupported(f"two procedural textures ('{self.procedural[0].name}', '{node.name}')")
+            if self.coords is None:
+                raise Unsupported(f"procedural texture '{node.name}' (into a constant input)")
+            _check_procedural(node, out)
+            self.procedural = (node, out.identifier)
+            if node.type == "TEX_CHECKER":
+                _all(walk, collect, "Color1", "Color2")
+            return None
+        s = self.samples
+        if node.type == "TEX_CHECKER" and out.identifier == "Color":
+            c1, c2 = (_as_colour(c).a for c in _all(walk, collect, "Color1", "Color2"))
+            return _Colour(np.where(s[:, None] == 1.0, c1, c2))
+        if out.identifier == "Color":  # (a Gradient's grey, or the Noise's three channels: each through the table)
+            return _Colour(np.repeat(s[:, None], 3, axis=1))
+        return _Value(s)
 
 
 # --- the nodes' arithmetic (each: (node, output, walk, collect) → _Colour | _Value) -------------
@@ -560,6 +596,63 @@ def _map_range(node, out, walk, collect):
     return _Value(r)
 
 
+# --- procedural textures (evaluated per point by the core; the graph after them tabulated) ----
+
+# table entries over the output's range, per node type
+_PROCEDURAL_TABLES = {"TEX_NOISE": 2048, "TEX_CHECKER": 2, "TEX_GRADIENT": 1024}
+_NOISE_INPUTS = ("Scale", "Detail", "Roughness", "Lacunarity", "Distortion")
+
+
+def _check_procedural(node, out):
+    """Refuses what the core does not compute: a linked parameter, a Noise that is not 3D
+    fBm, a Noise Color output that goes through other nodes (checked by the caller)."""
+    params = {"TEX_NOISE": _NOISE_INPUTS, "TEX_CHECKER": ("Scale",), "TEX_GRADIENT": ()}[node.type]
+    for name in params:
+        if node.inputs[name].is_linked:
+            raise Unsupported(f"the linked input '{name}' of procedural texture '{node.name}'")
+    if node.type == "TEX_NOISE":
+        if node.noise_dimensions != "3D":
+            raise Unsupported(f"Noise Texture '{node.name}' in {node.noise_dimensions} (3D is rendered)")
+        if getattr(node, "noise_type", "FBM") != "FBM":
+            raise Unsupported(f"Noise Texture '{node.name}' of type {node.noise_type} (fBM is rendered)")
+    if out.identifier not in ("Fac", "Color"):
+        raise Unsupported(f"output '{out.name}' of '{node.name}'")
+
+
+def _procedural_domain(node):
+    """The range of a procedural texture's output that its table covers: [0, 1] for Checker
+    and Gradient (clamped there); a Noise's fBm within ±1.02 per octave's amplitude, mapped
+    to [0, 1] when normalised."""
+    if node.type != "TEX_NOISE":
+        return 0.0, 1.0
+    if getattr(node, "normalize", True):
+        return -0.02, 1.02
+    detail = min(max(float(node.inputs["Detail"].default_value), 0.0), 15.0)
+    rough = max(float(node.inputs["Roughness"].default_value), 0.0)
+    amp = sum(rough ** k for k in range(int(detail) + 2))
+    return -1.02 * amp, 1.02 * amp
+
+
+def procedural_spec(node, out_name, coords):
+    """The core's description of procedural texture `node` (its output `out_name`) read at
+    `coords` = (space, texspace kind, row-major 3×4 matrix of the Vector input's mapping)."""
+    space, _, m = coords
+    m = np.asarray(m, np.float64).reshape(3, 4)
+    spec = {"pattern": node.type[4:], "space": space, "domain": _procedural_domain(node)}
+    if node.type in ("TEX_NOISE", "TEX_CHECKER"):
+        m = m * float(node.inputs["Scale"].default_value)  # (the node scales its vector)
+    if node.type == "TEX_NOISE":
+        spec.update(detail=float(node.inputs["Detail"].default_value),
+                    roughness=float(node.inputs["Roughness"].default_value),
+                    lacunarity=float(node.inputs["Lacunarity"].default_value),
+                    distortion=float(node.inputs["Distortion"].default_value),
+                    normalize=bool(getattr(node, "normalize", True)), color=out_name == "Color")
+    if node.type == "TEX_GRADIENT":
+        spec["gradient_type"] = node.gradient_type
+    spec["transform"] = tuple(float(x) for x in m.reshape(-1))
+    return spec
+
+
 _NODES = {
     "MIX": _mix,
     "MIX_RGB": _mix,
@@ -580,7 +673,7 @@ _NODES = {
 }
 
 
-def evaluate(sock, image_pixels, uv_key, image_identity=None):
+def evaluate(sock, image_pixels, uv_key, image_identity=None, coords=None):
     """The value of the linked input `sock`: ('constant', a tuple of 3 or a float) when no
     image feeds it, else ('texture', rgb (h·w, 3) float32, w, h, transform, extension,
     closest): the images' shared UV transform and extension, closest if every image is.
@@ -589,8 +682,10 @@ def evaluate(sock, image_pixels, uv_key, image_identity=None):
     `uv_key(node)` → (transform, extension, closest); `image_identity(node)` → a hashable
     value that changes whenever the image's pixels do (the cache's key). Raises Unsupported,
     naming what it cannot evaluate."""
-    g = _Graph(image_pixels, uv_key, image_identity)
+    g = _Graph(image_pixels, uv_key, image_identity, coords)
     g.collect(sock)
+    if g.procedural is not None:
+        return _tabulated(g, sock)
     if g.images and image_pixels is None:
         raise Unsupported(f"Image Texture '{next(iter(g.images))}' (an image into a constant input)")
     v = g.run(sock)
@@ -606,3 +701,19 @@ def evaluate(sock, image_pixels, uv_key, image_identity=None):
     transform, extension, _ = keys[0]
     closest = all(k[2] for k in keys)
     return ("texture", np.ascontiguousarray(rgb, dtype=np.float32), gw, gh, transform, extension, closest)
+
+
+def _tabulated(g, sock):
+    """`evaluate` of a graph over a procedural texture: ('procedural', table (n, 3) float32,
+    the core's description of the pattern, the texspace kind it reads or None)."""
+    node, out_name = g.procedural
+    if out_name == "Color" and node.type == "TEX_NOISE" and not (
+            sock.is_linked and sock.links[0].from_node.name == node.name):
+        raise Unsupported(f"the Color output of Noise Texture '{node.name}' through other nodes (its Fac is "
+                          f"rendered through them)")
+    coords = g.coords(node)
+    v = g.run(sock)
+    v = _as_value(v) if sock.type == "VALUE" else _as_colour(v)
+    rgb = np.nan_to_num(_as_colour(v).a, nan=0.0, posinf=0.0, neginf=0.0)
+    rgb = np.ascontiguousarray(np.broadcast_to(rgb, (len(g.samples), 3)), dtype=np.float32)
+    return ("procedural", rgb, procedural_spec(node, out_name, coords), coords[1])

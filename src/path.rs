@@ -14,7 +14,7 @@ use crate::accel::TriHit;
 use crate::bsdf::{Guide, Scatter};
 use crate::math::{is_finite_spectrum, power_heuristic, Frame, Spectrum};
 use crate::sampler::Sampler;
-use crate::scene::{CameraRay, Scene, SurfaceInteraction};
+use crate::scene::{CameraRay, Scene, SurfaceInteraction, TexCoord};
 use glam::{Vec2, Vec3};
 
 /// Russian roulette: the probability that a path of throughput β goes on, min(1, √max β)
@@ -121,7 +121,7 @@ pub struct Vertex {
     pub prim: u32,
     pub front: bool,
     /// Texture coordinates and vertex colour.
-    pub uv: Vec2,
+    pub tex: TexCoord,
     pub color: Spectrum,
     /// The unmapped shading normal in `frame` (`SurfaceInteraction::unmapped`).
     pub unmapped: Vec3,
@@ -156,7 +156,7 @@ impl Vertex {
             material: si.material,
             prim: si.prim,
             front: si.front,
-            uv: si.uv,
+            tex: si.tex,
             color: si.color,
             unmapped: si.unmapped,
             wo,

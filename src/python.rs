@@ -118,8 +118,22 @@ fn parse_mesh(d: &Bound<'_, PyDict>) -> PyResult<MeshDesc> {
         Some(c) if !c.is_none() => vec3s(floats(&c, 3, &format!("{ctx}: colors"))?),
         _ => vec![],
     };
+    let corner_texspace = match item(d, "texspace")? {
+        Some(c) if !c.is_none() => vec3s(floats(&c, 3, &format!("{ctx}: texspace"))?),
+        _ => vec![],
+    };
     let pass_index = get_or(d, "pass_index", 0, &ctx)?;
-    Ok(MeshDesc { name, positions, indices, corner_normals, material_ids, corner_uvs, corner_colors, pass_index })
+    Ok(MeshDesc {
+        name,
+        positions,
+        indices,
+        corner_normals,
+        material_ids,
+        corner_uvs,
+        corner_colors,
+        corner_texspace,
+        pass_index,
+    })
 }
 
 fn parse_material(d: &Bound<'_, PyDict>) -> PyResult<MaterialDesc> {
@@ -194,6 +208,10 @@ fn parse_texture(d: &Bound<'_, PyDict>) -> PyResult<TextureDesc> {
     };
     let srgb: bool = get_or(d, "srgb", false, &ctx)?;
     let transform: Option<[f32; 6]> = get_or(d, "transform", None, &ctx)?;
+    let procedural = match item(d, "procedural")? {
+        Some(p) if !p.is_none() => Some(parse_procedural(p.cast::<PyDict>()?, &ctx)?),
+        _ => None,
+    };
     Ok(TextureDesc {
         name,
         width,
@@ -203,7 +221,45 @@ fn parse_texture(d: &Bound<'_, PyDict>) -> PyResult<TextureDesc> {
         extension,
         srgb,
         transform,
+        procedural,
     })
+}
+
+/// {"pattern": "NOISE"|"CHECKER"|"GRADIENT", "space": "UV"|"TEXSPACE", "transform": 12
+/// floats (row-major 3×4), "domain": (lo, hi); NOISE: "detail", "roughness", "lacunarity",
+/// "distortion", "normalize", "color"; GRADIENT: "gradient_type" (Blender's identifiers)}
+fn parse_procedural(d: &Bound<'_, PyDict>, ctx: &str) -> PyResult<scene::procedural::Procedural> {
+    use scene::procedural::{GradientKind, Pattern, Procedural, Space};
+    let ctx = format!("{ctx}: procedural");
+    let kind: String = get_or(d, "pattern", String::new(), &ctx)?;
+    let pattern = match kind.to_ascii_uppercase().as_str() {
+        "NOISE" => Pattern::Noise {
+            detail: get_or(d, "detail", 2.0, &ctx)?,
+            roughness: get_or(d, "roughness", 0.5, &ctx)?,
+            lacunarity: get_or(d, "lacunarity", 2.0, &ctx)?,
+            distortion: get_or(d, "distortion", 0.0, &ctx)?,
+            normalize: get_or(d, "normalize", true, &ctx)?,
+            color: get_or(d, "color", false, &ctx)?,
+        },
+        "CHECKER" => Pattern::Checker,
+        "GRADIENT" => {
+            let g: String = get_or(d, "gradient_type", "LINEAR".to_string(), &ctx)?;
+            Pattern::Gradient(
+                GradientKind::parse(&g).ok_or_else(|| verr(format!("{ctx}: unknown gradient_type '{g}'")))?,
+            )
+        }
+        other => return Err(verr(format!("{ctx}: unknown pattern '{other}' (NOISE, CHECKER or GRADIENT)"))),
+    };
+    let space: String = get_or(d, "space", "TEXSPACE".to_string(), &ctx)?;
+    let space = match space.to_ascii_uppercase().as_str() {
+        "UV" => Space::Uv,
+        "TEXSPACE" => Space::Texspace,
+        other => return Err(verr(format!("{ctx}: unknown space '{other}' (UV or TEXSPACE)"))),
+    };
+    let transform: [f32; 12] =
+        get_or(d, "transform", [1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0], &ctx)?;
+    let domain: (f32, f32) = get_or(d, "domain", (0.0, 1.0), &ctx)?;
+    Ok(Procedural { pattern, space, transform, domain })
 }
 
 fn parse_light(d: &Bound<'_, PyDict>) -> PyResult<LightDesc> {

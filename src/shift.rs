@@ -99,15 +99,22 @@ pub fn half_vector_copy(wo_x: Vec3, wi_x: Vec3, eta_x: f32, wo_y: Vec3, eta_y: f
     }
 }
 
+/// The BSDF at path vertex `v`.
 #[inline]
-fn bsdf_at(scene: &Scene, material: u32, front: bool, uv: Vec2, color: Spectrum, unmapped: Vec3) -> Bsdf {
-    scene.bsdf(material, front, uv, color, unmapped)
+fn bsdf_at(scene: &Scene, v: &Vertex) -> Bsdf {
+    scene.bsdf(v.material, v.front, v.tex, v.color, v.unmapped)
 }
 
 /// The shift's vertex class: diffuse (reconnectable) or not.
 #[inline]
-fn is_diffuse(scene: &Scene, material: u32, front: bool, uv: Vec2, color: Spectrum, unmapped: Vec3) -> bool {
-    bsdf_at(scene, material, front, uv, color, unmapped).min_roughness() > SPECULAR_ROUGHNESS_THRESHOLD
+fn is_diffuse(scene: &Scene, v: &Vertex) -> bool {
+    diffuse(&bsdf_at(scene, v))
+}
+
+/// The class of a vertex with BSDF `b`.
+#[inline]
+fn diffuse(b: &Bsdf) -> bool {
+    b.min_roughness() > SPECULAR_ROUGHNESS_THRESHOLD
 }
 
 /// Visibility from a surface point to a point (or, at infinity, along a direction) on a
@@ -140,7 +147,7 @@ impl Free {
     /// f·|cos θ| and solid-angle pdf of the offset's BSDF at y towards world direction `dir`
     /// (for light event `e` of light pdf p_l at y, if any: as the base evaluated it).
     fn scatter(&self, scene: &Scene, dir: Vec3, e: Option<(&Event, f32)>) -> (Spectrum, f32) {
-        let bsdf = bsdf_at(scene, self.y.material, self.y.front, self.y.uv, self.y.color, self.y.unmapped);
+        let bsdf = scene.bsdf_at(&self.y);
         let (wo, wi) = (self.y.frame.to_local(self.wo), self.y.frame.to_local(dir));
         match e {
             Some((e, pdf_l)) => e.bsdf_eval(&bsdf, wo, wi, pdf_l),
@@ -212,9 +219,14 @@ impl<'a> Offset<'a> {
             let x0 = base.vertices.first()?;
             let (ray, hit) = primary?;
             let y = scene.interaction(&hit?, ray.dir);
-            let diffuse = is_diffuse(scene, x0.material, x0.front, x0.uv, x0.color, x0.unmapped);
-            (diffuse == is_diffuse(scene, y.material, y.front, y.uv, y.color, y.unmapped))
-                .then_some(State::Free(Free { y, wo: -ray.dir, beta: Spectrum::ONE, r: 1.0, diffuse }))
+            let diffuse = is_diffuse(scene, x0);
+            (diffuse == self::diffuse(&scene.bsdf_at(&y))).then_some(State::Free(Free {
+                y,
+                wo: -ray.dir,
+                beta: Spectrum::ONE,
+                r: 1.0,
+                diffuse,
+            }))
         })();
         Offset { scene, base, k: 0, state: state.unwrap_or(State::Failed), step: None }
     }
@@ -247,7 +259,7 @@ impl<'a> Offset<'a> {
             (State::Joined { wo, beta, r }, Some(_)) => {
                 // x_k's BSDF towards x_{k+1} with the offset's incoming direction
                 let x = &base.vertices[k];
-                let bsdf = bsdf_at(scene, x.material, x.front, x.uv, x.color, x.unmapped);
+                let bsdf = bsdf_at(scene, x);
                 let wi = x.frame.to_local(x.wi);
                 if !(x.pdf_out > 0.0) {
                     State::Failed
@@ -258,13 +270,13 @@ impl<'a> Offset<'a> {
             }
             (State::Free(f), Some(xn)) => {
                 let xk = &base.vertices[k];
-                let next_diffuse = is_diffuse(scene, xn.material, xn.front, xn.uv, xn.color, xn.unmapped);
+                let next_diffuse = is_diffuse(scene, xn);
                 if f.diffuse && next_diffuse {
                     reconnect(scene, xk, xn, &f).unwrap_or(State::Failed)
                 } else {
                     match self.step(&f) {
                         Some(Step { hit: Some(y), dir, f: fy, pdf, j, .. })
-                            if is_diffuse(scene, y.material, y.front, y.uv, y.color, y.unmapped) == next_diffuse =>
+                            if diffuse(&scene.bsdf_at(&y)) == next_diffuse =>
                         {
                             State::Free(Free {
                                 y,
@@ -306,7 +318,7 @@ impl<'a> Offset<'a> {
             State::Failed | State::Same { .. } => None,
             State::Joined { wo, beta, r } => {
                 let x = &base.vertices[k];
-                let bsdf = bsdf_at(scene, x.material, x.front, x.uv, x.color, x.unmapped);
+                let bsdf = bsdf_at(scene, x);
                 let dir = if e.at_infinity { e.z } else { (e.z - x.p).normalize() };
                 let wi = x.frame.to_local(dir);
                 let (fy, pdf) = e.bsdf_eval(&bsdf, wo, wi, e.pdf_l);
@@ -364,7 +376,7 @@ fn nee_step(scene: &Scene, x: &Vertex, f: &Free, e: &Event) -> Option<Step> {
     }
     let wi = if e.at_infinity { e.z } else { (e.z - x.p).normalize() };
     let through = wi.dot(x.ng) < 0.0;
-    let eta = if through { bsdf_at(scene, x.material, x.front, x.uv, x.color, x.unmapped).eta() } else { 1.0 };
+    let eta = if through { bsdf_at(scene, x).eta() } else { 1.0 };
     let as_sampled = Vertex { wi, f_out: e.f, pdf_out: e.pdf_b, delta_out: false, eta_out: eta, ..*x };
     half_vector_step(scene, &as_sampled, f)
 }
@@ -374,7 +386,7 @@ fn half_vector_step(scene: &Scene, x: &Vertex, f: &Free) -> Option<Step> {
     if !(x.pdf_out > 0.0) {
         return None;
     }
-    let bsdf = bsdf_at(scene, f.y.material, f.y.front, f.y.uv, f.y.color, f.y.unmapped);
+    let bsdf = scene.bsdf_at(&f.y);
     let (wo_x, wi_x) = (x.frame.to_local(x.wo), x.frame.to_local(x.wi));
     let wo_y = f.y.frame.to_local(f.wo);
     let refraction = wi_x.z < 0.0;
@@ -524,10 +536,7 @@ pub fn offset_path(scene: &Scene, base: &Path, offset_raster: Vec2) -> Path {
                     pdf_in: own_pdf_in,
                     ..x
                 };
-                let next_diffuse = base
-                    .vertices
-                    .get(offset.k + 1)
-                    .map(|n| is_diffuse(scene, n.material, n.front, n.uv, n.color, n.unmapped));
+                let next_diffuse = base.vertices.get(offset.k + 1).map(|n| is_diffuse(scene, n));
                 if !(f.diffuse && next_diffuse == Some(true)) {
                     if let Some(s) = offset.step(&f) {
                         v.wi = s.dir;
@@ -552,7 +561,7 @@ pub fn offset_path(scene: &Scene, base: &Path, offset_raster: Vec2) -> Path {
                 out.vertices.push(v);
             }
             State::Joined { wo, .. } => {
-                let bsdf = bsdf_at(scene, x.material, x.front, x.uv, x.color, x.unmapped);
+                let bsdf = bsdf_at(scene, &x);
                 let wo_world = x.frame.to_world(wo);
                 let wi = x.frame.to_local(x.wi);
                 let (fv, pdf) =
@@ -792,10 +801,7 @@ mod tests {
             trace_path(&scene, &cfg, raster, &mut smp, Some(&mut base));
             for e in base.events.iter().filter(|e| !e.nee && e.vertex != CAMERA_VERTEX && !e.delta) {
                 let x = &base.vertices[e.vertex as usize];
-                if x.delta_out
-                    || is_diffuse(&scene, x.material, x.front, x.uv, x.color, x.unmapped)
-                    || !scene.is_triangle_light(e.light)
-                {
+                if x.delta_out || is_diffuse(&scene, x) || !scene.is_triangle_light(e.light) {
                     continue;
                 }
                 let as_light_sample = Event { nee: true, ..*e };

@@ -57,6 +57,9 @@ pub(super) struct Triangles {
     /// Corner colours; empty when no mesh has them, else one entry per triangle (black for
     /// the triangles of meshes without them).
     pub colors: Vec<[Vec3; 3]>,
+    /// Corner texture-space points; empty when no mesh has them, else one entry per triangle
+    /// (the origin for the triangles of meshes without them).
+    pub texspace: Vec<[Vec3; 3]>,
     /// MikkTSpace corner tangents (xyz, bitangent sign) of the meshes with UVs and a
     /// normal-mapped material; empty when there are none, else one entry per triangle (zero
     /// for the other meshes' triangles: their own UV frame is used).
@@ -80,10 +83,12 @@ impl Triangles {
             normals: Vec::new(),
             uvs: Vec::new(),
             colors: Vec::new(),
+            texspace: Vec::new(),
             tangents: Vec::new(),
             pass_index: Vec::new(),
         };
         let colors = meshes.iter().any(|m| !m.corner_colors.is_empty());
+        let texspace = meshes.iter().any(|m| !m.corner_texspace.is_empty());
         let wants_tangents = |m: &MeshDesc| {
             !m.corner_uvs.is_empty()
                 && (m.material_ids.is_empty() && normal_mapped.first() == Some(&true)
@@ -107,6 +112,9 @@ impl Triangles {
             if colors && m.corner_colors.is_empty() {
                 t.colors.resize(t.positions.len(), [Vec3::ZERO; 3]); // (black, as a missing attribute)
             }
+            if texspace && m.corner_texspace.is_empty() {
+                t.texspace.resize(t.positions.len(), [Vec3::ZERO; 3]);
+            }
             if pass_indices {
                 t.pass_index.resize(t.positions.len(), m.pass_index);
             }
@@ -118,6 +126,23 @@ impl Triangles {
         }
         report.triangles = t.positions.len();
         Ok(t)
+    }
+
+    /// A per-corner attribute of `m` (`what`, e.g. "corner colour") is absent or has 3
+    /// finite values per triangle.
+    fn check_corners(m: &MeshDesc, corners: &[[f32; 3]], what: &str) -> Result<(), SceneError> {
+        let bad = |what: String| SceneError::Mesh { mesh: m.name.clone(), what };
+        if !corners.is_empty() && corners.len() != 3 * m.indices.len() {
+            return Err(bad(format!(
+                "{} {what}s for {} triangles (need 3 per triangle)",
+                corners.len(),
+                m.indices.len()
+            )));
+        }
+        if corners.iter().flatten().any(|x| !x.is_finite()) {
+            return Err(bad(format!("has a NaN or Inf {what}")));
+        }
+        Ok(())
     }
 
     /// The mesh's arrays agree with each other and are finite, and its indices name its
@@ -147,16 +172,8 @@ impl Triangles {
         if m.corner_uvs.iter().flatten().any(|x| !x.is_finite()) {
             return Err(bad("has a NaN or Inf texture coordinate".into()));
         }
-        if !m.corner_colors.is_empty() && m.corner_colors.len() != 3 * m.indices.len() {
-            return Err(bad(format!(
-                "{} corner colours for {} triangles (need 3 per triangle)",
-                m.corner_colors.len(),
-                m.indices.len()
-            )));
-        }
-        if m.corner_colors.iter().flatten().any(|x| !x.is_finite()) {
-            return Err(bad("has a NaN or Inf corner colour".into()));
-        }
+        Self::check_corners(m, &m.corner_colors, "corner colour")?;
+        Self::check_corners(m, &m.corner_texspace, "texture-space point")?;
         if !m.material_ids.is_empty() && m.material_ids.len() != m.indices.len() {
             return Err(bad(format!("{} material ids for {} triangles", m.material_ids.len(), m.indices.len())));
         }
@@ -218,6 +235,9 @@ impl Triangles {
             }
             if !m.corner_colors.is_empty() {
                 self.colors.push([0, 1, 2].map(|k| Vec3::from_array(m.corner_colors[3 * t + k])));
+            }
+            if !m.corner_texspace.is_empty() {
+                self.texspace.push([0, 1, 2].map(|k| Vec3::from_array(m.corner_texspace[3 * t + k])));
             }
             self.material.push(mat);
         }

@@ -18,6 +18,7 @@ fn quad(name: &str, p: [[f32; 3]; 4], mat: u32) -> MeshDesc {
         material_ids: vec![mat, mat],
         corner_uvs: vec![],
         corner_colors: vec![],
+        corner_texspace: vec![],
         pass_index: 0,
     }
 }
@@ -353,6 +354,7 @@ fn flat_mesh(name: &str, positions: Vec<[f32; 3]>, indices: Vec<[u32; 3]>, mat: 
         material_ids: vec![mat; n],
         corner_uvs: vec![],
         corner_colors: vec![],
+        corner_texspace: vec![],
         pass_index: 0,
     }
 }

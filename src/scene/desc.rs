@@ -20,6 +20,10 @@ pub struct MeshDesc {
     /// Optional per-corner colours (3 per triangle, in triangle order; linear RGB: the
     /// colour attribute its materials read); empty = none, which reads as black.
     pub corner_colors: Vec<[f32; 3]>,
+    /// Optional per-corner texture-space points (3 per triangle, in triangle order): the
+    /// Generated or Object coordinates its materials' procedural textures read; empty = none,
+    /// which reads as the origin.
+    pub corner_texspace: Vec<[f32; 3]>,
     /// The object's Pass Index (Blender's IndexOB pass).
     pub pass_index: u32,
 }
@@ -50,6 +54,9 @@ pub struct TextureDesc {
     /// UV input): (u, v) → (m0·u + m1·v + m2, m3·u + m4·v + m5). None = identity. Surface
     /// textures only (the world's importance sampling assumes none).
     pub transform: Option<[f32; 6]>,
+    /// A procedural texture (scene/procedural.rs): its pattern, and `pixels` (width × 1) the
+    /// table of what the graph after the pattern makes of each output value in its domain.
+    pub procedural: Option<super::procedural::Procedural>,
 }
 
 /// A material, as the parameters of one uber-material close to Blender's Principled BSDF.

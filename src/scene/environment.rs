@@ -154,6 +154,7 @@ mod tests {
             extension: TextureExtension::Repeat,
             srgb: false,
             transform: None,
+            procedural: None,
         })
         .unwrap()
     }

@@ -10,6 +10,7 @@ pub mod light;
 pub mod light_select;
 pub mod light_tree;
 pub mod material;
+pub mod procedural;
 mod tangent;
 pub mod texture;
 
@@ -26,6 +27,7 @@ use crate::math::{ray_epsilon, square_to_triangle, Frame, Spectrum};
 use build::{Lighting, Shading, Triangles};
 use environment::Environment;
 use glam::{Vec2, Vec3, Vec4};
+pub use texture::TexCoord;
 
 /// A surface point found by a ray.
 #[derive(Clone, Copy, Debug)]
@@ -40,8 +42,9 @@ pub struct SurfaceInteraction {
     pub t: f32,
     /// The ray arrived on the side the geometric normal points to (outside a closed mesh).
     pub front: bool,
-    /// Texture coordinates (zero when the mesh has none).
-    pub uv: Vec2,
+    /// Texture coordinates: the UV map's and the texture-space point (zero where the mesh
+    /// has none).
+    pub tex: TexCoord,
     /// The mesh's interpolated corner colour (black when it has none).
     pub color: Spectrum,
     /// The shading normal before normal and bump mapping, in the shading frame (+Z where the
@@ -79,6 +82,9 @@ pub struct Scene {
     uvs: Vec<Option<[Vec2; 3]>>,
     /// Per-triangle corner colours; empty when no mesh has them.
     colors: Vec<[Vec3; 3]>,
+    /// Per-triangle corner texture-space points (procedural textures); empty when no mesh
+    /// has them.
+    texspace: Vec<[Vec3; 3]>,
     /// Per-triangle MikkTSpace corner tangents (xyz, bitangent sign) for normal maps; empty
     /// when no normal-mapped mesh has UVs, zero on the triangles of other meshes.
     tangents: Vec<[Vec4; 3]>,
@@ -145,6 +151,7 @@ impl Scene {
             normals: tris.normals,
             uvs: tris.uvs,
             colors: tris.colors,
+            texspace: tris.texspace,
             tangents: tris.tangents,
             tri_material: tris.material,
             tri_pass_index: tris.pass_index,
@@ -185,6 +192,7 @@ impl Scene {
             normals: Vec::new(),
             uvs: Vec::new(),
             colors: Vec::new(),
+            texspace: Vec::new(),
             tangents: Vec::new(),
             pass_index: Vec::new(),
         };
@@ -311,7 +319,7 @@ impl Scene {
                 return None;
             }
             from = self.interaction(&hit, d);
-            let tau = self.transparency(m, from.uv);
+            let tau = self.transparency(m, from.tex);
             if tau <= 0.0 {
                 return None;
             }
@@ -332,11 +340,11 @@ impl Scene {
             Some(n) => (n[0] * b0 + n[1] * b1 + n[2] * b2).normalize_or(ng),
             None => ng,
         };
-        let uv = self.uvs[t].map_or(Vec2::ZERO, |u| u[0] * b0 + u[1] * b1 + u[2] * b2);
+        let tex = self.tex_coord(t, b0, b1, b2);
         let color = self.colors.get(t).map_or(Spectrum::ZERO, |c| c[0] * b0 + c[1] * b1 + c[2] * b2);
         let mut unmapped = ns;
         if self.has_perturbed_normals {
-            ns = self.normal_mapped(t, ns, uv, [b0, b1, b2]);
+            ns = self.normal_mapped(t, ns, tex, [b0, b1, b2]);
         }
         let front = ng.dot(d) <= 0.0;
         if !front {
@@ -358,18 +366,27 @@ impl Scene {
             material: self.tri_material[t],
             t: hit.t,
             front,
-            uv,
+            tex,
             color,
             unmapped,
         }
     }
 
-    /// Emitted radiance of emissive triangle `t` (factor `emission`) at texture coordinates
-    /// `uv`: the factor, times the material's emission image where it has one.
+    /// The texture coordinates of triangle `t` at barycentrics (b0, b1, b2).
     #[inline]
-    fn emission_at(&self, t: usize, emission: Spectrum, uv: Vec2) -> Spectrum {
+    fn tex_coord(&self, t: usize, b0: f32, b1: f32, b2: f32) -> TexCoord {
+        TexCoord {
+            uv: self.uvs[t].map_or(Vec2::ZERO, |u| u[0] * b0 + u[1] * b1 + u[2] * b2),
+            point: self.texspace.get(t).map_or(Vec3::ZERO, |c| c[0] * b0 + c[1] * b1 + c[2] * b2),
+        }
+    }
+
+    /// Emitted radiance of emissive triangle `t` (factor `emission`) at texture coordinates
+    /// `tc`: the factor, times the material's emission texture where it has one.
+    #[inline]
+    fn emission_at(&self, t: usize, emission: Spectrum, tc: TexCoord) -> Spectrum {
         match self.materials[self.tri_material[t] as usize].emission_texture {
-            Some(tex) => emission * self.textures[tex as usize].eval(uv),
+            Some(tex) => emission * self.textures[tex as usize].at(tc),
             None => emission,
         }
     }
@@ -380,8 +397,7 @@ impl Scene {
         if self.materials[self.tri_material[t] as usize].emission_texture.is_none() {
             return emission;
         }
-        let uv = self.uvs[t].map_or(Vec2::ZERO, |u| u[0] * (1.0 - b1 - b2) + u[1] * b1 + u[2] * b2);
-        self.emission_at(t, emission, uv)
+        self.emission_at(t, emission, self.tex_coord(t, 1.0 - b1 - b2, b1, b2))
     }
 
     /// Barycentric coordinates (b1, b2) of point `p` (on the plane of) triangle `t`.
@@ -412,7 +428,8 @@ impl Scene {
     /// R_u = ∂p/∂v × N, R_v = N × ∂p/∂u, det = ∂p/∂u · R_u (the basis dual to the tangents,
     /// so that ∇h·∂p/∂u = h_u), then N' = normalize(N − distance·∇h), mixed with N by the
     /// strength.
-    fn normal_mapped(&self, t: usize, ns: Vec3, uv: Vec2, b: [f32; 3]) -> Vec3 {
+    fn normal_mapped(&self, t: usize, ns: Vec3, tc: TexCoord, b: [f32; 3]) -> Vec3 {
+        let uv = tc.uv;
         let m = &self.materials[self.tri_material[t] as usize];
         let Some(uvs) = self.uvs[t] else { return ns };
         let p = &self.positions[t];
@@ -457,13 +474,13 @@ impl Scene {
         n
     }
 
-    /// The BSDF of `material` at texture coordinates `uv` and vertex colour `color` (textures
+    /// The BSDF of `material` at texture coordinates `tc` and vertex colour `color` (textures
     /// replace the base colour and the roughness where the material links them; the vertex
     /// colour multiplies the base colour where the material reads it), its diffuse lobe
     /// bump-shadowed where the surface's own normal is `unmapped` (shading frame; +Z: none).
     #[inline]
-    pub fn bsdf(&self, material: u32, front: bool, uv: Vec2, color: Spectrum, unmapped: Vec3) -> Bsdf {
-        let bsdf = self.unbumped_bsdf(material, front, uv, color);
+    pub fn bsdf(&self, material: u32, front: bool, tc: TexCoord, color: Spectrum, unmapped: Vec3) -> Bsdf {
+        let bsdf = self.unbumped_bsdf(material, front, tc, color);
         if unmapped == Vec3::Z || !self.materials[material as usize].bump_map_correction {
             bsdf
         } else {
@@ -473,7 +490,7 @@ impl Scene {
 
     /// `bsdf` before the bump shadowing of its diffuse lobe.
     #[inline]
-    fn unbumped_bsdf(&self, material: u32, front: bool, uv: Vec2, color: Spectrum) -> Bsdf {
+    fn unbumped_bsdf(&self, material: u32, front: bool, tc: TexCoord, color: Spectrum) -> Bsdf {
         let m = &self.materials[material as usize];
         if m.base_color_texture.is_none()
             && m.roughness_texture.is_none()
@@ -483,30 +500,29 @@ impl Scene {
         {
             return m.bsdf(front);
         }
-        let mut base = m.base_color_texture.map_or(m.base_color, |t| self.textures[t as usize].eval(uv));
+        let mut base = m.base_color_texture.map_or(m.base_color, |t| self.textures[t as usize].at(tc));
         if m.vertex_color {
             base *= color;
         }
         let base = base.clamp(Spectrum::ZERO, Spectrum::ONE);
         let grey = |t: Option<u32>, constant: f32| {
-            t.map_or(constant, |t| crate::math::luminance(self.textures[t as usize].eval(uv)).clamp(0.0, 1.0))
+            t.map_or(constant, |t| crate::math::luminance(self.textures[t as usize].at(tc)).clamp(0.0, 1.0))
         };
         let (rough, metallic) = (grey(m.roughness_texture, m.roughness), grey(m.metallic_texture, m.metallic));
-        m.bsdf_with(front, base, rough, metallic, self.transparency(m, uv))
+        m.bsdf_with(front, base, rough, metallic, self.transparency(m, tc))
     }
 
-    /// Transparency τ of a material at `uv`: 1 − alpha from its alpha texture, else its constant.
+    /// Transparency τ of a material at `tc`: 1 − alpha from its alpha texture, else its constant.
     #[inline]
-    fn transparency(&self, m: &Material, uv: Vec2) -> f32 {
-        m.alpha_texture.map_or(m.transparency, |t| {
-            1.0 - crate::math::luminance(self.textures[t as usize].eval(uv)).clamp(0.0, 1.0)
-        })
+    fn transparency(&self, m: &Material, tc: TexCoord) -> f32 {
+        m.alpha_texture
+            .map_or(m.transparency, |t| 1.0 - crate::math::luminance(self.textures[t as usize].at(tc)).clamp(0.0, 1.0))
     }
 
     /// The BSDF at a surface point.
     #[inline]
     pub fn bsdf_at(&self, si: &SurfaceInteraction) -> Bsdf {
-        self.bsdf(si.material, si.front, si.uv, si.color, si.unmapped)
+        self.bsdf(si.material, si.front, si.tex, si.color, si.unmapped)
     }
 
     #[inline]
@@ -575,7 +591,7 @@ impl Scene {
         if li == u32::MAX {
             return None;
         }
-        let le = self.emission_at(si.prim as usize, self.lights[li as usize].emission, si.uv);
+        let le = self.emission_at(si.prim as usize, self.lights[li as usize].emission, si.tex);
         let cos_l = dir.dot(si.ng).abs();
         let d2 = (si.p - from).length_squared();
         let pdf = if cos_l > 0.0 {

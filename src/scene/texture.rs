@@ -5,9 +5,18 @@
 //! checker texture shows: interpolating decoded values instead renders it 40% brighter.
 
 use super::desc::{TextureDesc, TextureExtension};
+use super::procedural::{Procedural, Space};
 use crate::error::SceneError;
 use crate::math::Spectrum;
-use glam::Vec2;
+use glam::{Vec2, Vec3};
+
+/// Where a surface texture is looked up: the UV map's coordinates and the mesh's
+/// texture-space point (Generated or Object coordinates; zero where the mesh has none).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct TexCoord {
+    pub uv: Vec2,
+    pub point: Vec3,
+}
 
 #[derive(Clone, Debug)]
 pub struct Texture {
@@ -19,6 +28,8 @@ pub struct Texture {
     extension: TextureExtension,
     srgb: bool,
     transform: Option<[f32; 6]>,
+    /// A procedural pattern; `pixels` is then its table (scene/procedural.rs).
+    procedural: Option<Procedural>,
 }
 
 /// The sRGB transfer function, inverted (IEC 61966-2-1).
@@ -55,6 +66,14 @@ impl Texture {
         if d.transform.is_some_and(|m| m.iter().any(|v| !v.is_finite())) {
             return Err(bad("NaN or Inf in its coordinate transform".into()));
         }
+        if let Some(p) = &d.procedural {
+            if p.transform.iter().chain([&p.domain.0, &p.domain.1]).any(|v| !v.is_finite()) {
+                return Err(bad("NaN or Inf in its procedural pattern's transform or domain".into()));
+            }
+            if d.height != 1 || d.width < 2 {
+                return Err(bad(format!("a procedural table of {}×{} (needs width ≥ 2, height 1)", d.width, d.height)));
+            }
+        }
         // NaN/Inf pixels (a broken EXR) are replaced by black rather than poisoning the render.
         let pixels = d
             .pixels
@@ -77,6 +96,7 @@ impl Texture {
             extension: d.extension,
             srgb: d.srgb,
             transform: d.transform,
+            procedural: d.procedural.clone(),
         })
     }
 
@@ -131,7 +151,24 @@ impl Texture {
         Vec2::new(m[0] * uv.x + m[1] * uv.y + m[2], m[3] * uv.x + m[4] * uv.y + m[5])
     }
 
-    /// Linear colour at texture coordinates `uv` (mapped by the texture's transform first).
+    /// Linear colour of a surface texture at `tc`: an image at its UV coordinates, a
+    /// procedural pattern at its own coordinates through its table.
+    #[inline]
+    pub fn at(&self, tc: TexCoord) -> Spectrum {
+        let Some(p) = &self.procedural else { return self.eval(tc.uv) };
+        let point = match p.space {
+            Space::Uv => tc.uv.extend(0.0),
+            Space::Texspace => tc.point,
+        };
+        let out = p.output(point);
+        let channel = |c: usize| {
+            let (i, t) = p.table_position(out[c], self.width);
+            self.pixels[i][c] * (1.0 - t) + self.pixels[i + 1][c] * t
+        };
+        Spectrum::new(channel(0), channel(1), channel(2))
+    }
+
+    /// Linear colour of an image at texture coordinates `uv` (mapped by the texture's transform first).
     pub fn eval(&self, uv: Vec2) -> Spectrum {
         let c = self.interpolate(self.mapped(uv));
         if self.srgb {
@@ -145,7 +182,7 @@ impl Texture {
     /// interpolation within the texel cell `uv` falls in, through the sRGB decoding and the
     /// texture's coordinate transform; zero for closest lookup (piecewise constant).
     pub fn luminance_gradient(&self, uv: Vec2) -> Vec2 {
-        if self.closest {
+        if self.closest || self.procedural.is_some() {
             return Vec2::ZERO;
         }
         let Some(([c00, c10, c01, c11], tx, ty)) = self.cell(self.mapped(uv)) else { return Vec2::ZERO };
@@ -206,6 +243,7 @@ mod tests {
             extension: ext,
             srgb: false,
             transform: None,
+            procedural: None,
         })
         .unwrap()
     }
@@ -240,6 +278,7 @@ mod tests {
             extension: TextureExtension::Repeat,
             srgb: false,
             transform: None,
+            procedural: None,
         };
         assert!(Texture::from_desc(&d).unwrap_err().to_string().contains("broken"));
         d.width = 1;
@@ -268,6 +307,7 @@ mod tests {
             pixels: vec![[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 1.0, 1.0]],
             closest: true,
             transform: Some([2.0, 0.0, 0.25, 0.0, 2.0, 0.0]),
+            procedural: None,
             ..Default::default()
         };
         let t = Texture::from_desc(&d).unwrap();
@@ -294,6 +334,7 @@ mod tests {
             extension: TextureExtension::Extend,
             srgb: true,
             transform: None,
+            procedural: None,
         })
         .unwrap();
         let mid = t.eval(Vec2::new(0.5, 0.5)).x;
@@ -328,6 +369,7 @@ mod tests {
                 extension: ext,
                 srgb,
                 transform,
+                procedural: None,
             })
             .unwrap();
             let lum = |p: Vec2| crate::math::luminance(t.eval(p)) as f64;
@@ -361,5 +403,49 @@ mod tests {
         })
         .unwrap();
         assert_eq!(closest.luminance_gradient(Vec2::new(0.33, 0.61)), Vec2::ZERO);
+    }
+
+    /// A procedural texture reads its own coordinates (the texspace point or the UV map's)
+    /// and passes each channel of the pattern's output through its table, interpolated.
+    #[test]
+    fn procedural_textures_look_their_output_up_in_their_table() {
+        use crate::scene::procedural::{GradientKind, Pattern, Procedural, Space};
+        let gradient = |space| Procedural {
+            pattern: Pattern::Gradient(GradientKind::Linear),
+            space,
+            transform: [1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0],
+            domain: (0.0, 1.0),
+        };
+        // a table of 3 entries: 0 → (0, 1, 2), ½ → (1, 1, 0), 1 → (4, 1, 0)
+        let desc = |space| TextureDesc {
+            name: "g".into(),
+            width: 3,
+            height: 1,
+            pixels: vec![[0.0, 1.0, 2.0], [1.0, 1.0, 0.0], [4.0, 1.0, 0.0]],
+            procedural: Some(gradient(space)),
+            ..Default::default()
+        };
+        let t = Texture::from_desc(&desc(Space::Texspace)).unwrap();
+        let at = |t: &Texture, uv: [f32; 2], point: [f32; 3]| {
+            t.at(TexCoord { uv: Vec2::from_array(uv), point: Vec3::from_array(point) })
+        };
+        assert!((at(&t, [0.9, 0.9], [0.25, 7.0, 7.0]) - Vec3::new(0.5, 1.0, 1.0)).length() < 1e-6);
+        assert!((at(&t, [0.0, 0.0], [0.75, 0.0, 0.0]) - Vec3::new(2.5, 1.0, 0.0)).length() < 1e-6);
+        assert_eq!(at(&t, [0.0, 0.0], [3.0, 0.0, 0.0]), Vec3::new(4.0, 1.0, 0.0)); // (clamped to 1)
+        let t = Texture::from_desc(&desc(Space::Uv)).unwrap();
+        assert!((at(&t, [0.25, 0.9], [0.9, 0.0, 0.0]) - Vec3::new(0.5, 1.0, 1.0)).length() < 1e-6);
+        // the pattern is not an image: no UV gradient for bump mapping from it
+        assert_eq!(t.luminance_gradient(Vec2::new(0.3, 0.3)), Vec2::ZERO);
+        // tables of one entry or several rows, and non-finite transforms are refused
+        for bad in [
+            TextureDesc { width: 1, pixels: vec![[0.0; 3]], ..desc(Space::Uv) },
+            TextureDesc { width: 3, height: 2, pixels: vec![[0.0; 3]; 6], ..desc(Space::Uv) },
+            TextureDesc {
+                procedural: Some(Procedural { domain: (0.0, f32::NAN), ..gradient(Space::Uv) }),
+                ..desc(Space::Uv)
+            },
+        ] {
+            assert!(Texture::from_desc(&bad).is_err());
+        }
     }
 }

@@ -1,0 +1,423 @@
+//! Procedural textures as Cycles computes them: Noise (Perlin fBm), Checker and Gradient,
+//! evaluated per shading point on the point's coordinates (the mesh's Generated or Object
+//! coordinates, or its UV map) after an affine map (Blender's Mapping node and the node's
+//! Scale). Bit-for-bit the arithmetic of Cycles' kernel for the same inputs, so a render
+//! shows the same pattern at the same place:
+//!
+//! - Perlin's improved gradient noise (Perlin 2002) on the integer lattice, with gradients
+//!   picked by Bob Jenkins' lookup3 hash of the lattice point (the `final` mix, seeded as
+//!   Cycles seeds it), the quintic fade, scaled by 0.9820 to about [−1, 1] (the factor OSL's
+//!   authors measured); coordinates wrapped every 10⁵ units as Cycles wraps them;
+//! - fractal Brownian motion over `detail` octaves (fractional: the last octave blended in),
+//!   `roughness` the gain per octave, `lacunarity` the frequency step, normalised to [0, 1];
+//!   `distortion` displaces the point by three noises at hashed offsets first, and the Color
+//!   output adds two more fBm at hashed offsets;
+//! - Checker: the parity of the integer cells of (p + 10⁻⁶)·(1 − 10⁻⁶) per axis;
+//! - Gradient: linear, quadratic, easing, diagonal, radial, spherical and quadratic sphere,
+//!   clamped to [0, 1].
+//!
+//! What follows a pattern in the node graph (Color Ramp, Math, Mix with constants…) is a
+//! function of its output alone, so the exporter tabulates it once as a lookup table over the
+//! output's range (`Procedural::lut`), interpolated linearly; a colour output passes each
+//! channel through the table's channel.
+
+use glam::Vec3;
+
+/// What a pattern computes.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Pattern {
+    /// The Noise Texture node (3D, fBm). `color`: its Color output (three fBm), else Fac.
+    Noise { detail: f32, roughness: f32, lacunarity: f32, distortion: f32, normalize: bool, color: bool },
+    /// The Checker Texture node's Fac (1 in the cells of Color1).
+    Checker,
+    /// The Gradient Texture node's Fac.
+    Gradient(GradientKind),
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum GradientKind {
+    Linear,
+    Quadratic,
+    Easing,
+    Diagonal,
+    Radial,
+    QuadraticSphere,
+    Spherical,
+}
+
+impl GradientKind {
+    /// Blender's enum identifiers (`ShaderNodeTexGradient.gradient_type`).
+    pub fn parse(s: &str) -> Option<GradientKind> {
+        Some(match s.to_ascii_uppercase().as_str() {
+            "LINEAR" => GradientKind::Linear,
+            "QUADRATIC" => GradientKind::Quadratic,
+            "EASING" => GradientKind::Easing,
+            "DIAGONAL" => GradientKind::Diagonal,
+            "RADIAL" => GradientKind::Radial,
+            "QUADRATIC_SPHERE" => GradientKind::QuadraticSphere,
+            "SPHERICAL" => GradientKind::Spherical,
+            _ => return None,
+        })
+    }
+}
+
+/// The coordinates a pattern reads.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Space {
+    /// The mesh's UV map, as (u, v, 0).
+    Uv,
+    /// The mesh's per-corner texture-space point (`MeshDesc::corner_texspace`: Generated or
+    /// Object coordinates, whichever its materials read).
+    Texspace,
+}
+
+// --- hashing: Bob Jenkins' lookup3 `final` mix -----------------------------------------------
+
+#[inline]
+fn final_mix(mut a: u32, mut b: u32, mut c: u32) -> u32 {
+    c ^= b;
+    c = c.wrapping_sub(b.rotate_left(14));
+    a ^= c;
+    a = a.wrapping_sub(c.rotate_left(11));
+    b ^= a;
+    b = b.wrapping_sub(a.rotate_left(25));
+    c ^= b;
+    c = c.wrapping_sub(b.rotate_left(16));
+    a ^= c;
+    a = a.wrapping_sub(c.rotate_left(4));
+    b ^= a;
+    b = b.wrapping_sub(a.rotate_left(14));
+    c ^= b;
+    c.wrapping_sub(b.rotate_left(24))
+}
+
+/// lookup3's hash of two words (initial state 0xdeadbeef + 4·2 + 13).
+#[inline]
+pub fn hash2(x: u32, y: u32) -> u32 {
+    let s = 0xdeadbeefu32.wrapping_add((2 << 2) + 13);
+    final_mix(s.wrapping_add(x), s.wrapping_add(y), s)
+}
+
+/// lookup3's hash of three words (initial state 0xdeadbeef + 4·3 + 13).
+#[inline]
+pub fn hash3(x: u32, y: u32, z: u32) -> u32 {
+    let s = 0xdeadbeefu32.wrapping_add((3 << 2) + 13);
+    final_mix(s.wrapping_add(x), s.wrapping_add(y), s.wrapping_add(z))
+}
+
+/// A hash of two floats' bit patterns into [0, 1] (both ends included).
+fn hash_floats_to_unit(x: f32, y: f32) -> f32 {
+    hash2(x.to_bits(), y.to_bits()) as f32 * (1.0 / u32::MAX as f32)
+}
+
+/// The offset in [100, 200]³ that seeds one of a noise's decorrelated copies.
+fn seed_offset(seed: f32) -> Vec3 {
+    Vec3::new(
+        100.0 + hash_floats_to_unit(seed, 0.0) * 100.0,
+        100.0 + hash_floats_to_unit(seed, 1.0) * 100.0,
+        100.0 + hash_floats_to_unit(seed, 2.0) * 100.0,
+    )
+}
+
+// --- Perlin noise ----------------------------------------------------------------------------
+
+#[inline]
+fn fade(t: f32) -> f32 {
+    t * t * t * (t * (t * 6.0 - 15.0) + 10.0)
+}
+
+/// The dot product of the point's offset with one of 12 edge gradients (16 hash values).
+#[inline]
+fn grad3(hash: u32, x: f32, y: f32, z: f32) -> f32 {
+    let h = hash & 15;
+    let u = if h < 8 { x } else { y };
+    let v = if h < 4 {
+        y
+    } else if h == 12 || h == 14 {
+        x
+    } else {
+        z
+    };
+    (if h & 1 != 0 { -u } else { u }) + (if h & 2 != 0 { -v } else { v })
+}
+
+#[inline]
+fn floor_frac(x: f32) -> (i32, f32) {
+    let f = x.floor();
+    (f as i32, x - f)
+}
+
+/// Perlin's improved noise at `p`, unscaled (about ±1.02).
+fn perlin(p: Vec3) -> f32 {
+    let (ix, fx) = floor_frac(p.x);
+    let (iy, fy) = floor_frac(p.y);
+    let (iz, fz) = floor_frac(p.z);
+    let (u, v, w) = (fade(fx), fade(fy), fade(fz));
+    let g = |dx: i32, dy: i32, dz: i32| {
+        let h = hash3(ix.wrapping_add(dx) as u32, iy.wrapping_add(dy) as u32, iz.wrapping_add(dz) as u32);
+        grad3(h, fx - dx as f32, fy - dy as f32, fz - dz as f32)
+    };
+    let (x1, y1, z1) = (1.0 - u, 1.0 - v, 1.0 - w);
+    z1 * (y1 * (g(0, 0, 0) * x1 + g(1, 0, 0) * u) + v * (g(0, 1, 0) * x1 + g(1, 1, 0) * u))
+        + w * (y1 * (g(0, 0, 1) * x1 + g(1, 0, 1) * u) + v * (g(0, 1, 1) * x1 + g(1, 1, 1) * u))
+}
+
+/// Signed noise in about [−1, 1], the coordinates wrapped every 10⁵ (half a cell further
+/// beyond 10⁶), as Cycles' `snoise_3d`.
+pub fn snoise(p: Vec3) -> f32 {
+    let wrap = |x: f32| x % 100000.0 + if x.abs() >= 1000000.0 { 0.5 } else { 0.0 };
+    0.9820 * perlin(Vec3::new(wrap(p.x), wrap(p.y), wrap(p.z)))
+}
+
+/// Fractal Brownian motion: `detail` octaves (the fractional part blends the next in).
+pub fn fbm(p: Vec3, detail: f32, roughness: f32, lacunarity: f32, normalize: bool) -> f32 {
+    let (mut fscale, mut amp, mut maxamp, mut sum) = (1.0f32, 1.0f32, 0.0f32, 0.0f32);
+    for _ in 0..=(detail as i32) {
+        sum += snoise(fscale * p) * amp;
+        maxamp += amp;
+        amp *= roughness;
+        fscale *= lacunarity;
+    }
+    let rmd = detail - detail.floor();
+    if rmd != 0.0 {
+        let sum2 = sum + snoise(fscale * p) * amp;
+        return if normalize {
+            mix(0.5 * sum / maxamp + 0.5, 0.5 * sum2 / (maxamp + amp) + 0.5, rmd)
+        } else {
+            mix(sum, sum2, rmd)
+        };
+    }
+    if normalize {
+        0.5 * sum / maxamp + 0.5
+    } else {
+        sum
+    }
+}
+
+#[inline]
+fn mix(a: f32, b: f32, t: f32) -> f32 {
+    (1.0 - t) * a + t * b
+}
+
+/// The Noise Texture node (3D, fBm) at `p` (already scaled): (Fac, Color).
+pub fn noise_texture(
+    p: Vec3,
+    detail: f32,
+    roughness: f32,
+    lacunarity: f32,
+    distortion: f32,
+    normalize: bool,
+) -> (f32, Vec3) {
+    let (detail, roughness) = (detail.clamp(0.0, 15.0), roughness.max(0.0));
+    let mut p = p;
+    if distortion != 0.0 {
+        p += Vec3::new(
+            snoise(p + seed_offset(0.0)) * distortion,
+            snoise(p + seed_offset(1.0)) * distortion,
+            snoise(p + seed_offset(2.0)) * distortion,
+        );
+    }
+    let value = fbm(p, detail, roughness, lacunarity, normalize);
+    let color = Vec3::new(
+        value,
+        fbm(p + seed_offset(3.0), detail, roughness, lacunarity, normalize),
+        fbm(p + seed_offset(4.0), detail, roughness, lacunarity, normalize),
+    );
+    (value, color)
+}
+
+/// The Checker Texture node's Fac at `p` (already scaled): 1 or 0.
+pub fn checker(p: Vec3) -> f32 {
+    let cell = |x: f32| (((x + 0.000001) * 0.999999).floor() as i32).unsigned_abs() % 2;
+    let (x, y, z) = (cell(p.x), cell(p.y), cell(p.z));
+    if (x == y) == (z == 1) {
+        1.0
+    } else {
+        0.0
+    }
+}
+
+/// The Gradient Texture node's Fac at `p`, in [0, 1].
+pub fn gradient(p: Vec3, kind: GradientKind) -> f32 {
+    let f = match kind {
+        GradientKind::Linear => p.x,
+        GradientKind::Quadratic => p.x.max(0.0).powi(2),
+        GradientKind::Easing => {
+            let r = p.x.clamp(0.0, 1.0);
+            let t = r * r;
+            3.0 * t - 2.0 * t * r
+        }
+        GradientKind::Diagonal => (p.x + p.y) * 0.5,
+        GradientKind::Radial => p.y.atan2(p.x) / std::f32::consts::TAU + 0.5,
+        GradientKind::QuadraticSphere | GradientKind::Spherical => {
+            // (0.999999: a unit vector gives exactly 0, as in Cycles)
+            let r = (0.999999 - (p.x * p.x + p.y * p.y + p.z * p.z).sqrt()).max(0.0);
+            if kind == GradientKind::Spherical {
+                r
+            } else {
+                r * r
+            }
+        }
+    };
+    f.clamp(0.0, 1.0)
+}
+
+/// A pattern on its coordinates, followed by the graph after it as a lookup table.
+#[derive(Clone, Debug)]
+pub struct Procedural {
+    pub pattern: Pattern,
+    pub space: Space,
+    /// Row-major 3×4 affine map of the coordinates (Mapping node, then the node's Scale).
+    pub transform: [f32; 12],
+    /// The table's range of the pattern's output: entry 0 at `domain.0`, the last at `domain.1`.
+    pub domain: (f32, f32),
+}
+
+impl Procedural {
+    /// The pattern's output at coordinates `point` (before the transform): its Fac in all
+    /// three channels, or its colour.
+    pub fn output(&self, point: Vec3) -> Vec3 {
+        let m = &self.transform;
+        let p = Vec3::new(
+            m[0] * point.x + m[1] * point.y + m[2] * point.z + m[3],
+            m[4] * point.x + m[5] * point.y + m[6] * point.z + m[7],
+            m[8] * point.x + m[9] * point.y + m[10] * point.z + m[11],
+        );
+        match self.pattern {
+            Pattern::Noise { detail, roughness, lacunarity, distortion, normalize, color } => {
+                let (value, c) = noise_texture(p, detail, roughness, lacunarity, distortion, normalize);
+                if color {
+                    c
+                } else {
+                    Vec3::splat(value)
+                }
+            }
+            Pattern::Checker => Vec3::splat(checker(p)),
+            Pattern::Gradient(kind) => Vec3::splat(gradient(p, kind)),
+        }
+    }
+
+    /// Where `s` falls in a table of `n` entries over the domain: (entry, weight of the next).
+    #[inline]
+    pub fn table_position(&self, s: f32, n: usize) -> (usize, f32) {
+        let (lo, hi) = self.domain;
+        let x = if hi > lo { ((s - lo) / (hi - lo)).clamp(0.0, 1.0) } else { 0.0 } * (n - 1) as f32;
+        let x = if x.is_finite() { x } else { 0.0 };
+        let i = (x as usize).min(n.saturating_sub(2));
+        (i, (x - i as f32).min(1.0))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// lookup3's published test vectors are for `hashword`; the `final` mix alone is checked
+    /// by its defining property here and by the pattern tests below against Cycles' own
+    /// renders (tests/test_blender.py). These pin the values so a change is noticed.
+    #[test]
+    fn hash_is_deterministic_and_spreads_neighbours() {
+        assert_eq!(hash3(0, 0, 0), hash3(0, 0, 0));
+        let hs: Vec<u32> = (0..64).map(|i| hash3(i, 0, 0)).collect();
+        let mut sorted = hs.clone();
+        sorted.sort_unstable();
+        sorted.dedup();
+        assert_eq!(sorted.len(), 64, "neighbouring lattice points share a hash");
+        // about half the bits flip between neighbours (avalanche)
+        let flips: u32 = hs.windows(2).map(|w| (w[0] ^ w[1]).count_ones()).sum();
+        let mean = flips as f64 / 63.0;
+        assert!((12.0..20.0).contains(&mean), "mean bit flips {mean}");
+    }
+
+    #[test]
+    fn perlin_vanishes_on_the_lattice_and_is_continuous() {
+        for p in [Vec3::ZERO, Vec3::new(3.0, -7.0, 12.0), Vec3::new(-1.0, 5.0, -2.0)] {
+            assert_eq!(perlin(p), 0.0);
+        }
+        // continuity across a cell face, and values within about ±1
+        let mut max = 0.0f32;
+        for i in 0..2000 {
+            let t = i as f32 * 0.0137;
+            let p = Vec3::new(t * 1.3 - 7.1, t * 0.7 + 0.2, -t * 0.9 + 3.3);
+            let (a, b) = (snoise(p), snoise(p + Vec3::splat(1e-4)));
+            assert!((a - b).abs() < 2e-3, "jump at {p}: {a} {b}");
+            max = max.max(a.abs());
+        }
+        assert!(max > 0.4 && max <= 1.05, "range {max}");
+    }
+
+    #[test]
+    fn fbm_of_fractional_detail_blends_the_octaves_around_it() {
+        let p = Vec3::new(0.3, 1.7, -2.2);
+        let (a, b) = (fbm(p, 2.0, 0.5, 2.0, true), fbm(p, 3.0, 0.5, 2.0, true));
+        let mid = fbm(p, 2.25, 0.5, 2.0, true);
+        assert!((mid - (0.75 * a + 0.25 * b)).abs() < 1e-6);
+        // detail 0 is one octave: the noise itself, mapped to [0, 1]
+        assert!((fbm(p, 0.0, 0.5, 2.0, true) - (0.5 * snoise(p) + 0.5)).abs() < 1e-7);
+        assert!((fbm(p, 0.0, 0.5, 2.0, false) - snoise(p)).abs() < 1e-7);
+        // normalised fBm stays within [0, 1] and averages about ½
+        let vals: Vec<f32> =
+            (0..4000).map(|i| fbm(Vec3::new(i as f32 * 0.173, i as f32 * 0.071, 0.5), 6.0, 0.6, 2.0, true)).collect();
+        let mean = vals.iter().sum::<f32>() / vals.len() as f32;
+        assert!(vals.iter().all(|v| (-0.01..=1.01).contains(v)));
+        assert!((mean - 0.5).abs() < 0.03, "mean {mean}");
+    }
+
+    #[test]
+    fn distortion_moves_the_pattern_and_colour_channels_differ() {
+        let p = Vec3::new(1.3, 0.4, 2.9);
+        let (v0, c0) = noise_texture(p, 2.0, 0.5, 2.0, 0.0, true);
+        let (v1, _) = noise_texture(p, 2.0, 0.5, 2.0, 1.0, true);
+        assert_eq!(c0.x, v0);
+        assert!(v0 != v1 && c0.y != c0.x && c0.z != c0.y);
+        // the seed offsets lie in [100, 200]
+        for s in 0..5 {
+            let o = seed_offset(s as f32);
+            assert!(o.cmpge(Vec3::splat(100.0)).all() && o.cmple(Vec3::splat(200.0)).all());
+        }
+    }
+
+    #[test]
+    fn checker_alternates_per_cell_in_every_axis() {
+        let c = |x: f32, y: f32, z: f32| checker(Vec3::new(x, y, z));
+        assert_eq!(c(0.5, 0.5, 0.5), 0.0);
+        assert_eq!(c(1.5, 0.5, 0.5), 1.0);
+        assert_eq!(c(0.5, 1.5, 0.5), 1.0);
+        assert_eq!(c(0.5, 0.5, 1.5), 1.0);
+        assert_eq!(c(1.5, 1.5, 0.5), 0.0);
+        // negative cells: floor, then |·|, so cell −1 is odd like cell 1
+        assert_eq!(c(-0.5, 0.5, 0.5), 1.0);
+        assert_eq!(c(-1.5, 0.5, 0.5), 0.0);
+    }
+
+    #[test]
+    fn gradients_follow_their_formulas() {
+        let g = |x: f32, y: f32, z: f32, k| gradient(Vec3::new(x, y, z), k);
+        assert_eq!(g(0.3, 9.0, 9.0, GradientKind::Linear), 0.3);
+        assert_eq!(g(1.7, 0.0, 0.0, GradientKind::Linear), 1.0);
+        assert!((g(0.5, 0.0, 0.0, GradientKind::Quadratic) - 0.25).abs() < 1e-7);
+        assert!((g(0.5, 0.0, 0.0, GradientKind::Easing) - 0.5).abs() < 1e-7);
+        assert!((g(0.2, 0.6, 0.0, GradientKind::Diagonal) - 0.4).abs() < 1e-7);
+        assert!((g(0.0, 1.0, 0.0, GradientKind::Radial) - 0.75).abs() < 1e-6);
+        assert!((g(0.0, 0.0, 0.5, GradientKind::Spherical) - 0.499999).abs() < 1e-6);
+        assert!((g(0.0, 0.0, 0.5, GradientKind::QuadraticSphere) - 0.499999f32.powi(2)).abs() < 1e-6);
+        assert_eq!(g(0.0, 1.0, 0.0, GradientKind::Spherical), 0.0);
+    }
+
+    #[test]
+    fn the_transform_maps_before_the_pattern_and_the_table_clamps() {
+        let mut pr = Procedural {
+            pattern: Pattern::Gradient(GradientKind::Linear),
+            space: Space::Texspace,
+            transform: [2.0, 0.0, 0.0, 0.1, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0],
+            domain: (0.0, 1.0),
+        };
+        assert!((pr.output(Vec3::new(0.2, 0.0, 0.0)).x - 0.5).abs() < 1e-6);
+        assert_eq!(pr.table_position(0.5, 5), (2, 0.0));
+        assert_eq!(pr.table_position(-3.0, 5), (0, 0.0));
+        assert_eq!(pr.table_position(7.0, 5), (3, 1.0));
+        pr.domain = (0.0, 0.0);
+        assert_eq!(pr.table_position(0.3, 5), (0, 0.0));
+        assert_eq!(pr.table_position(f32::NAN, 2), (0, 0.0));
+    }
+}
