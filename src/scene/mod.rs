@@ -27,6 +27,7 @@ use crate::math::{ray_epsilon, square_to_triangle, Frame, Spectrum};
 use build::{Lighting, Shading, Triangles};
 use environment::Environment;
 use glam::{Vec2, Vec3, Vec4};
+use procedural::Space;
 pub use texture::TexCoord;
 
 /// A surface point found by a ray.
@@ -413,8 +414,10 @@ impl Scene {
     }
 
     /// The shading normal `ns` of triangle `t` perturbed by its material's tangent-space
-    /// normal map and then its bump map at `uv`, in the frame of the triangle's UV mapping
-    /// (∂p/∂u, ∂p/∂v; none without UVs or with degenerate ones).
+    /// normal map and then its bump map at `tc`, in the frame of the triangle's UV mapping
+    /// (∂p/∂u, ∂p/∂v; none without UVs or with degenerate ones) — or, for a procedural
+    /// height on the texspace point, of its edges e₁, e₂ with the height's derivatives along
+    /// them (∇_c h·(c₁ − c₀), ∇_c h·(c₂ − c₀) from its corner points c).
     ///
     /// Normal map, as Cycles' Normal Map node: n' = normalize(T·c.x + B·c.y + N·c.z) with
     /// c = 2·rgb − 1, T and its sign s the MikkTSpace corner tangents interpolated at the
@@ -429,20 +432,17 @@ impl Scene {
     /// so that ∇h·∂p/∂u = h_u), then N' = normalize(N − distance·∇h), mixed with N by the
     /// strength.
     fn normal_mapped(&self, t: usize, ns: Vec3, tc: TexCoord, b: [f32; 3]) -> Vec3 {
-        let uv = tc.uv;
         let m = &self.materials[self.tri_material[t] as usize];
-        let Some(uvs) = self.uvs[t] else { return ns };
         let p = &self.positions[t];
         let (e1, e2) = (p[1] - p[0], p[2] - p[0]);
-        let (d1, d2) = (uvs[1] - uvs[0], uvs[2] - uvs[0]);
-        let det = d1.x * d2.y - d1.y * d2.x;
-        if det.abs() < 1e-20 {
-            return ns; // degenerate UVs: no tangent frame
-        }
-        let dpdu = (e1 * d2.y - e2 * d1.y) / det;
-        let dpdv = (e2 * d1.x - e1 * d2.x) / det;
+        // the UV mapping's tangents ∂p/∂u, ∂p/∂v (none without UVs or with degenerate ones)
+        let uv_tangents = self.uvs[t].and_then(|uvs| {
+            let (d1, d2) = (uvs[1] - uvs[0], uvs[2] - uvs[0]);
+            let det = d1.x * d2.y - d1.y * d2.x;
+            (det.abs() >= 1e-20).then(|| ((e1 * d2.y - e2 * d1.y) / det, (e2 * d1.x - e1 * d2.x) / det))
+        });
         let mut n = ns;
-        if let Some(tex) = m.normal_texture {
+        if let (Some(tex), Some((dpdu, dpdv))) = (m.normal_texture, uv_tangents) {
             let mikk = self.tangents.get(t).map_or(Vec4::ZERO, |c| c[0] * b[0] + c[1] * b[1] + c[2] * b[2]);
             let (tangent, sign, normal) = if mikk.truncate() != Vec3::ZERO {
                 let normal = match &self.normals[t] {
@@ -456,19 +456,33 @@ impl Scene {
             };
             if tangent != Vec3::ZERO {
                 let bitangent = normal.cross(tangent) * sign;
-                let c = self.textures[tex as usize].eval(uv) * 2.0 - Vec3::ONE;
+                let c = self.textures[tex as usize].eval(tc.uv) * 2.0 - Vec3::ONE;
                 let mapped = (tangent * c.x + bitangent * c.y + normal * c.z).normalize_or(ns);
                 n = (ns + (mapped - ns) * m.normal_strength).normalize_or(ns);
             }
         }
         if let Some(tex) = m.bump_texture {
-            let (ru, rv) = (dpdv.cross(n), n.cross(dpdu));
-            let det = dpdu.dot(ru);
-            if det.abs() > 1e-30 {
-                let h = self.textures[tex as usize].luminance_gradient(uv);
-                let grad = (ru * h.x + rv * h.y) / det;
-                let bumped = (n - grad * m.bump_distance).normalize_or(n);
-                n = (bumped * m.bump_strength + n * (1.0 - m.bump_strength)).normalize_or(n);
+            let texture = &self.textures[tex as usize];
+            // the height's derivatives along two tangents of the surface
+            let along = match texture.procedural_space() {
+                None => uv_tangents.map(|(dpdu, dpdv)| (dpdu, dpdv, texture.luminance_gradient(tc.uv))),
+                Some(Space::Uv) => {
+                    let g = texture.procedural_luminance_gradient(tc);
+                    uv_tangents.map(|(dpdu, dpdv)| (dpdu, dpdv, Vec2::new(g.x, g.y)))
+                }
+                Some(Space::Texspace) => self.texspace.get(t).map(|c| {
+                    let g = texture.procedural_luminance_gradient(tc);
+                    (e1, e2, Vec2::new(g.dot(c[1] - c[0]), g.dot(c[2] - c[0])))
+                }),
+            };
+            if let Some((ta, tb, h)) = along {
+                let (ra, rb) = (tb.cross(n), n.cross(ta));
+                let det = ta.dot(ra);
+                if det.abs() > 1e-30 {
+                    let grad = (ra * h.x + rb * h.y) / det;
+                    let bumped = (n - grad * m.bump_distance).normalize_or(n);
+                    n = (bumped * m.bump_strength + n * (1.0 - m.bump_strength)).normalize_or(n);
+                }
             }
         }
         n
@@ -982,5 +996,91 @@ mod tests {
         let half = (Vec3::new(-0.5, 0.0, 1.0).normalize() * 0.5 + Vec3::Z * 0.5).normalize();
         assert!(close(bumped_normal(plain, 0.5, 0.5), half));
         assert!(close(bumped_normal(plain, 0.5, 0.0), Vec3::Z));
+    }
+
+    /// A procedural height bumps along its own coordinates: a gradient (h = x of the pattern
+    /// space) read on texspace points that turn and scale the quad (c = (2y, −x, z)), or on
+    /// UVs, tilts the normal against ∇h carried back to the surface; a Noise height tilts it
+    /// as its finite differences say.
+    #[test]
+    fn procedural_bump_maps_tilt_against_the_gradient_of_their_coordinates() {
+        use super::procedural::{GradientKind, Pattern, Procedural, Space};
+        let ramp = |space, pattern| TextureDesc {
+            name: "h".into(),
+            width: 2,
+            height: 1,
+            pixels: vec![[0.0; 3], [1.0; 3]],
+            procedural: Some(Procedural {
+                pattern,
+                space,
+                transform: [1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0],
+                domain: (0.0, 1.0),
+            }),
+            ..Default::default()
+        };
+        let linear = Pattern::Gradient(GradientKind::Linear);
+        let normal = |space, pattern, texspace: bool| {
+            let quad = MeshDesc {
+                name: "Quad".into(),
+                positions: vec![[-1.0, -1.0, 0.0], [1.0, -1.0, 0.0], [1.0, 1.0, 0.0], [-1.0, 1.0, 0.0]],
+                indices: vec![[0, 1, 2], [0, 2, 3]],
+                corner_uvs: [0, 1, 2, 0, 2, 3]
+                    .iter()
+                    .map(|&k| [[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]][k])
+                    .collect(),
+                corner_texspace: if texspace {
+                    // c = (2y, −x, z) + (0.5, 0.5, 0): h = 2y (+0.5), ∂h/∂y = 2
+                    let c = |p: [f32; 3]| [2.0 * p[1] + 0.5, -p[0] + 0.5, p[2]];
+                    [0, 1, 2, 0, 2, 3]
+                        .iter()
+                        .map(|&k| c([[-1.0, -1.0, 0.0], [1.0, -1.0, 0.0], [1.0, 1.0, 0.0], [-1.0, 1.0, 0.0]][k]))
+                        .collect()
+                } else {
+                    vec![]
+                },
+                material_ids: vec![0, 0],
+                ..Default::default()
+            };
+            let material =
+                MaterialDesc { bump_texture: Some(0), bump_distance: 0.1, bump_strength: 1.0, ..Default::default() };
+            let desc = SceneDesc {
+                meshes: vec![quad],
+                materials: vec![material],
+                textures: vec![ramp(space, pattern)],
+                camera: camera_looking_along_y([0.0, -3.0, 0.0], 35.0, 4, 4),
+                ..Default::default()
+            };
+            let scene = Scene::build(&desc).unwrap();
+            let (o, d) = (Vec3::new(0.05, -0.1, 2.0), Vec3::new(0.0, 0.0, -1.0));
+            let hit = scene.intersect(o, d, 0.0, f32::INFINITY).unwrap();
+            scene.interaction(&hit, d).frame.n
+        };
+        let close = |a: Vec3, b: Vec3| (a - b).length() < 1e-3;
+        let n = normal(Space::Texspace, linear, true);
+        assert!(close(n, Vec3::new(0.0, -0.2, 1.0).normalize()), "{n}");
+        // on UVs: u = (x + 1)/2, so ∂h/∂x = ½
+        let n = normal(Space::Uv, linear, false);
+        assert!(close(n, Vec3::new(-0.05, 0.0, 1.0).normalize()), "{n}");
+        // a mesh without texspace points reads the origin everywhere: a constant, no bump
+        assert!(close(normal(Space::Texspace, linear, false), Vec3::Z));
+        // noise: the tilt is the one of its central differences
+        let noise = Pattern::Noise {
+            detail: 2.0,
+            roughness: 0.5,
+            lacunarity: 2.0,
+            distortion: 0.0,
+            normalize: true,
+            color: false,
+        };
+        let n = normal(Space::Texspace, noise, true);
+        let p = Vec3::new(0.05, -0.1, 0.0);
+        let c = |p: Vec3| Vec3::new(2.0 * p.y + 0.5, -p.x + 0.5, p.z);
+        let e = 1e-3;
+        let h = |p: Vec3| super::procedural::noise_texture(c(p), 2.0, 0.5, 2.0, 0.0, true).0;
+        let g = Vec3::new(h(p + Vec3::X * e) - h(p - Vec3::X * e), h(p + Vec3::Y * e) - h(p - Vec3::Y * e), 0.0)
+            / (2.0 * e);
+        let want = (Vec3::Z - g * 0.1).normalize();
+        assert!((n - want).length() < 0.02 * (1.0 + g.length()), "{n} vs {want}");
+        assert!(g.length() > 0.1);
     }
 }

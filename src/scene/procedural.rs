@@ -277,12 +277,33 @@ impl Procedural {
     /// The pattern's output at coordinates `point` (before the transform): its Fac in all
     /// three channels, or its colour.
     pub fn output(&self, point: Vec3) -> Vec3 {
+        self.pattern_at(self.to_pattern(point))
+    }
+
+    /// Coordinates `point` in the pattern's own space (after the transform).
+    #[inline]
+    pub fn to_pattern(&self, point: Vec3) -> Vec3 {
         let m = &self.transform;
-        let p = Vec3::new(
+        Vec3::new(
             m[0] * point.x + m[1] * point.y + m[2] * point.z + m[3],
             m[4] * point.x + m[5] * point.y + m[6] * point.z + m[7],
             m[8] * point.x + m[9] * point.y + m[10] * point.z + m[11],
-        );
+        )
+    }
+
+    /// A gradient `g` in the pattern's space brought back to the coordinates' (Mᵀ·g).
+    #[inline]
+    pub fn gradient_to_coordinates(&self, g: Vec3) -> Vec3 {
+        let m = &self.transform;
+        Vec3::new(
+            m[0] * g.x + m[4] * g.y + m[8] * g.z,
+            m[1] * g.x + m[5] * g.y + m[9] * g.z,
+            m[2] * g.x + m[6] * g.y + m[10] * g.z,
+        )
+    }
+
+    /// The pattern's output at `p` in its own space.
+    pub fn pattern_at(&self, p: Vec3) -> Vec3 {
         match self.pattern {
             Pattern::Noise { detail, roughness, lacunarity, distortion, normalize, color } => {
                 let (value, c) = noise_texture(p, detail, roughness, lacunarity, distortion, normalize);
