@@ -98,7 +98,7 @@ class Textures:
         self.items = []
         self.index = {}
         self.pixels = {}  # image name → its RGBA pixels, for node graphs (read once per export)
-        self.texspace = {}  # procedural texture index → the coordinates it reads ('GENERATED', 'OBJECT')
+        self.spaces = {}  # procedural texture index → the coordinates it reads ('GENERATED', 'OBJECT', 'UV')
 
     def add(self, node, warnings, what, alpha=False):
         """Index of the texture of an Image (or Environment) Texture node, or None (with a
@@ -210,12 +210,11 @@ class Textures:
         if r[0] == "constant":
             return r
         if r[0] == "procedural":
-            _, table, spec, kind = r
+            _, table, spec = r
             self.items.append(scenedict.texture(f"{what}: {node.name} › {sock.name}", table, len(table), 1,
                                                 extension="EXTEND", srgb=False))
             self.items[-1]["procedural"] = spec
-            if kind is not None:
-                self.texspace[len(self.items) - 1] = kind
+            self.spaces[len(self.items) - 1] = spec["space"]
             return ("texture", len(self.items) - 1)
         _, rgb, w, h, transform, ext, closest = r
         if ext not in ("REPEAT", "EXTEND", "CLIP"):
@@ -256,8 +255,8 @@ def _mapping_matrix(m):
 
 
 def _procedural_coordinates(node):
-    """What a procedural texture's Vector input reads, for the core: (space, texspace kind,
-    row-major 3×4 matrix): unlinked or a Texture Coordinate's Generated output: the mesh's
+    """What a procedural texture's Vector input reads, for the core: (space, row-major 3×4
+    matrix): unlinked or a Texture Coordinate's Generated output: the mesh's
     Generated coordinates; its Object output (of the object itself): Object coordinates; its
     UV output or a UV Map node: the active render UV map (space 'UV'); a Mapping node on
     those maps them. Anything else raises texture_graph.Unsupported."""
@@ -266,29 +265,29 @@ def _procedural_coordinates(node):
     identity = (1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0)
     sock = node.inputs["Vector"]
     if not sock.is_linked:
-        return ("TEXSPACE", "GENERATED", identity)
+        return ("GENERATED", identity)
 
     def source(link):
         n, out = link.from_node, link.from_socket.name
         if n.type == "UVMAP" or n.type == "TEX_COORD" and out == "UV":
-            return ("UV", None)
+            return "UV"
         if n.type == "TEX_COORD" and out == "Generated":
-            return ("TEXSPACE", "GENERATED")
+            return "GENERATED"
         if n.type == "TEX_COORD" and out == "Object" and getattr(n, "object", None) is None:
-            return ("TEXSPACE", "OBJECT")
+            return "OBJECT"
         return None
 
     link = sock.links[0]
     found = source(link)
     if found is not None:
-        return (*found, identity)
+        return (found, identity)
     m = _mapping_on(link, lambda l: source(l) is not None)
     if m is None:
         raise texture_graph.Unsupported(f"the Vector input of '{node.name}' ({link.from_node.type}; supported: "
                                         f"Generated, Object, UV, and a Mapping node on those)")
     lin, t = _mapping_matrix(m)
     found = source(m.inputs["Vector"].links[0])
-    return (*found, tuple(float(x) for r in range(3) for x in (*lin[r], t[r])))
+    return (found, tuple(float(x) for r in range(3) for x in (*lin[r], t[r])))
 
 
 def _uv_transform(node, warnings, what):
@@ -979,12 +978,12 @@ def _matrix(m):
     return np.array([list(row) for row in m], dtype=np.float64)
 
 
-def _mesh_local_arrays(ob, colour_layer=None, texspace=None):
+def _mesh_local_arrays(ob, colour_layer=None, spaces=()):
     """Triangulated mesh of an evaluated object, in object space, or None if it has no faces:
     (positions, triangles, corner normals, material slots, corner UVs or None, corner colours
-    or None, corner texture-space points or None). `colour_layer`: the colour attribute to
-    read ('' = the default one), or None; `texspace`: the coordinates procedural textures
-    read ('GENERATED', 'OBJECT'), or None."""
+    or None, {space: corner coordinates} of `spaces`). `colour_layer`: the colour attribute
+    to read ('' = the default one), or None; `spaces`: the coordinates its procedural
+    textures read ('GENERATED', 'OBJECT')."""
     try:
         me = ob.to_mesh()
     except RuntimeError:
@@ -1025,15 +1024,14 @@ def _mesh_local_arrays(ob, colour_layer=None, texspace=None):
                 attr.data.foreach_get("color", rgba)  # (scene linear, byte colours too)
                 rgba = rgba.reshape(-1, 4)
                 colours = np.ascontiguousarray(rgba[tv if attr.domain == "POINT" else tl, :3])
-        points = None
-        if texspace is not None:
-            points = co.reshape(-1, 3)[tv].astype(np.float64)
-            if texspace == "GENERATED":  # the auto (bounding box) or the mesh's own texture space → [0, 1]³
+        points = {}
+        for space in spaces:
+            p = co.reshape(-1, 3)[tv].astype(np.float64)
+            if space == "GENERATED":  # the auto (bounding box) or the mesh's own texture space → [0, 1]³
                 loc = np.array(me.texspace_location[:], np.float64)
                 size = np.array(me.texspace_size[:], np.float64)
-                size = np.where(size != 0.0, size, 1.0)
-                points = (points - loc) / (2.0 * size) + 0.5
-            points = np.ascontiguousarray(points, dtype=np.float32)
+                p = (p - loc) / (2.0 * np.where(size != 0.0, size, 1.0)) + 0.5
+            points[space] = np.ascontiguousarray(p, dtype=np.float32)
         return co.reshape(-1, 3), tv.reshape(-1, 3), normals, mi, uvs, colours, points
     finally:
         ob.to_mesh_clear()
@@ -1043,28 +1041,18 @@ def _colour_layer(ob, layers, warnings):
     """The colour attribute the materials of `ob` read (`layers`: per slot, a name, '' for the
     default attribute, or None): one per mesh; where its materials ask for different ones,
     the first, with a warning."""
-    return _one_per_mesh(ob, layers, "colour attributes", warnings)
-
-
-def _one_per_mesh(ob, wanted, what, warnings):
-    """Of what the materials of `ob` each ask its mesh to carry (`wanted`: per slot, or None),
-    the first, with a warning where they ask for different ones."""
-    wanted = list(dict.fromkeys(x for x in wanted if x is not None))
+    wanted = list(dict.fromkeys(x for x in layers if x is not None))
     if len(wanted) > 1:
-        warnings.append(f"object '{ob.name}': its materials read different {what} "
+        warnings.append(f"object '{ob.name}': its materials read different colour attributes "
                         f"({', '.join(repr(x) for x in wanted)}); all of them get {wanted[0]!r}")
     return wanted[0] if wanted else None
 
 
-def _material_texspace(mat, params, textures, warnings):
-    """The coordinates (Generated or Object) the procedural textures of material `mat` read,
-    or None; one per material (the first where they differ, warned)."""
-    kinds = list(dict.fromkeys(textures.texspace[v] for k, v in params.items()
-                               if k.endswith("_texture") and v in textures.texspace))
-    if len(kinds) > 1:
-        warnings.append(f"material '{mat.name}': its procedural textures read different coordinates "
-                        f"({', '.join(kinds)}); all of them get {kinds[0]}")
-    return kinds[0] if kinds else None
+def _mesh_coordinates(params, textures):
+    """The mesh coordinates (Generated, Object) the procedural textures of a material's
+    `params` read."""
+    return {textures.spaces[v] for k, v in params.items()
+            if k.endswith("_texture") and textures.spaces.get(v) in ("GENERATED", "OBJECT")}
 
 
 def _light(ob, matrix, warnings):
@@ -1251,7 +1239,7 @@ def export_scene(depsgraph, test_break=lambda: False, need_camera=True):
     textures = Textures()
     mat_index = {}
     colour_layers = {}  # material index → the colour attribute it reads
-    texspaces = {}  # material index → the coordinates its procedural textures read
+    coordinates = {}  # material index → the mesh coordinates its procedural textures read
     meshes, lights = [], []
     cache = {}
     for k, inst in enumerate(depsgraph.object_instances):
@@ -1280,15 +1268,15 @@ def export_scene(depsgraph, test_break=lambda: False, need_camera=True):
                 mat_index[mat.name] = len(materials)
                 params = material_params(mat, warnings, textures)
                 colour_layers[len(materials)] = params.pop("vertex_color_layer", None)
-                texspaces[len(materials)] = _material_texspace(mat, params, textures, warnings)
+                coordinates[len(materials)] = _mesh_coordinates(params, textures)
                 materials.append(params)
             slot_to_global.append(mat_index[mat.name])
         layer = _colour_layer(ob, [colour_layers.get(i) for i in slot_to_global], warnings)
-        texspace = _one_per_mesh(ob, [texspaces.get(i) for i in slot_to_global], "texture coordinates", warnings)
-        key = (ob.name, ob.data.name if ob.data is not None else "", layer, texspace) if inst.is_instance else None
+        spaces = tuple(sorted(set().union(*(coordinates.get(i, ()) for i in slot_to_global))))
+        key = (ob.name, ob.data.name if ob.data is not None else "", layer, spaces) if inst.is_instance else None
         arrays = cache.get(key) if key else None
         if arrays is None:
-            arrays = _mesh_local_arrays(ob, layer, texspace)
+            arrays = _mesh_local_arrays(ob, layer, spaces)
             if key:
                 cache[key] = arrays
         if arrays is None:
@@ -1312,13 +1300,13 @@ def export_scene(depsgraph, test_break=lambda: False, need_camera=True):
             tris, nrm = tris[:, ::-1], nrm.reshape(-1, 3, 3)[:, ::-1].reshape(-1, 3)
             uvs = None if uvs is None else uvs.reshape(-1, 3, 2)[:, ::-1].reshape(-1, 2)
             colours = None if colours is None else colours.reshape(-1, 3, 3)[:, ::-1].reshape(-1, 3)
-            points = None if points is None else points.reshape(-1, 3, 3)[:, ::-1].reshape(-1, 3)
+            points = {k: p.reshape(-1, 3, 3)[:, ::-1].reshape(-1, 3) for k, p in points.items()}
         name = ob.name if not inst.is_instance else f"{inst.parent.name if inst.parent else ''}/{ob.name}"
         meshes.append(scenedict.mesh(name, np.ascontiguousarray(pos), np.ascontiguousarray(tris, dtype=np.uint32),
                                      np.ascontiguousarray(nrm), mat_ids, uvs, ob.pass_index,
                                      None if colours is None else np.ascontiguousarray(colours)))
-        if points is not None:
-            meshes[-1]["texspace"] = np.ascontiguousarray(points)
+        for space, p in points.items():
+            meshes[-1][space.lower()] = np.ascontiguousarray(p)
     world, world_texture, world_rotation = _world(scene, warnings, textures)
     if scene.render.use_motion_blur:
         warnings.append("motion blur is not rendered yet: the frame is rendered at its shutter's start")

@@ -147,7 +147,7 @@ class _Graph:
 
     def __init__(self, image_pixels, uv_key, image_identity, coords=None):
         self.image_pixels = image_pixels  # node → (pixels (h·w, 4), w, h, srgb)
-        self.coords = coords  # node → (space, texspace kind, 3×4 matrix): a procedural's coordinates
+        self.coords = coords  # node → (space, 3×4 matrix): the coordinates a procedural reads
         self.procedural = None  # (node, output name) of the procedural texture leaf
         self.samples = None  # the table's values of that leaf's output
         self.image_identity = image_identity  # node → what identifies its pixels
@@ -635,8 +635,9 @@ def _procedural_domain(node):
 
 def procedural_spec(node, out_name, coords):
     """The core's description of procedural texture `node` (its output `out_name`) read at
-    `coords` = (space, texspace kind, row-major 3×4 matrix of the Vector input's mapping)."""
-    space, _, m = coords
+    `coords` = (space: 'GENERATED', 'OBJECT' or 'UV'; row-major 3×4 matrix of the Vector
+    input's mapping)."""
+    space, m = coords
     m = np.asarray(m, np.float64).reshape(3, 4)
     spec = {"pattern": node.type[4:], "space": space, "domain": _procedural_domain(node)}
     if node.type in ("TEX_NOISE", "TEX_CHECKER"):
@@ -705,7 +706,7 @@ def evaluate(sock, image_pixels, uv_key, image_identity=None, coords=None):
 
 def _tabulated(g, sock):
     """`evaluate` of a graph over a procedural texture: ('procedural', table (n, 3) float32,
-    the core's description of the pattern, the texspace kind it reads or None)."""
+    the core's description of the pattern)."""
     node, out_name = g.procedural
     if out_name == "Color" and node.type == "TEX_NOISE" and not (
             sock.is_linked and sock.links[0].from_node.name == node.name):
@@ -716,4 +717,4 @@ def _tabulated(g, sock):
     v = _as_value(v) if sock.type == "VALUE" else _as_colour(v)
     rgb = np.nan_to_num(_as_colour(v).a, nan=0.0, posinf=0.0, neginf=0.0)
     rgb = np.ascontiguousarray(np.broadcast_to(rgb, (len(g.samples), 3)), dtype=np.float32)
-    return ("procedural", rgb, procedural_spec(node, out_name, coords), coords[1])
+    return ("procedural", rgb, procedural_spec(node, out_name, coords))

@@ -118,10 +118,13 @@ fn parse_mesh(d: &Bound<'_, PyDict>) -> PyResult<MeshDesc> {
         Some(c) if !c.is_none() => vec3s(floats(&c, 3, &format!("{ctx}: colors"))?),
         _ => vec![],
     };
-    let corner_texspace = match item(d, "texspace")? {
-        Some(c) if !c.is_none() => vec3s(floats(&c, 3, &format!("{ctx}: texspace"))?),
-        _ => vec![],
+    let corners = |key: &'static str| -> PyResult<Vec<[f32; 3]>> {
+        Ok(match item(d, key)? {
+            Some(c) if !c.is_none() => vec3s(floats(&c, 3, &format!("{ctx}: {key}"))?),
+            _ => vec![],
+        })
     };
+    let (corner_generated, corner_object) = (corners("generated")?, corners("object")?);
     let pass_index = get_or(d, "pass_index", 0, &ctx)?;
     Ok(MeshDesc {
         name,
@@ -131,7 +134,8 @@ fn parse_mesh(d: &Bound<'_, PyDict>) -> PyResult<MeshDesc> {
         material_ids,
         corner_uvs,
         corner_colors,
-        corner_texspace,
+        corner_generated,
+        corner_object,
         pass_index,
     })
 }
@@ -225,7 +229,7 @@ fn parse_texture(d: &Bound<'_, PyDict>) -> PyResult<TextureDesc> {
     })
 }
 
-/// {"pattern": "NOISE"|"CHECKER"|"GRADIENT", "space": "UV"|"TEXSPACE", "transform": 12
+/// {"pattern": "NOISE"|"CHECKER"|"GRADIENT", "space": "GENERATED"|"OBJECT"|"UV", "transform": 12
 /// floats (row-major 3×4), "domain": (lo, hi); NOISE: "detail", "roughness", "lacunarity",
 /// "distortion", "normalize", "color"; GRADIENT: "gradient_type" (Blender's identifiers)}
 fn parse_procedural(d: &Bound<'_, PyDict>, ctx: &str) -> PyResult<scene::procedural::Procedural> {
@@ -250,11 +254,12 @@ fn parse_procedural(d: &Bound<'_, PyDict>, ctx: &str) -> PyResult<scene::procedu
         }
         other => return Err(verr(format!("{ctx}: unknown pattern '{other}' (NOISE, CHECKER or GRADIENT)"))),
     };
-    let space: String = get_or(d, "space", "TEXSPACE".to_string(), &ctx)?;
+    let space: String = get_or(d, "space", "GENERATED".to_string(), &ctx)?;
     let space = match space.to_ascii_uppercase().as_str() {
         "UV" => Space::Uv,
-        "TEXSPACE" => Space::Texspace,
-        other => return Err(verr(format!("{ctx}: unknown space '{other}' (UV or TEXSPACE)"))),
+        "GENERATED" => Space::Generated,
+        "OBJECT" => Space::Object,
+        other => return Err(verr(format!("{ctx}: unknown space '{other}' (GENERATED, OBJECT or UV)"))),
     };
     let transform: [f32; 12] =
         get_or(d, "transform", [1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0], &ctx)?;

@@ -548,6 +548,64 @@ def normal_mapped_ball(bpy):
     return scene
 
 
+def procedural(bpy):
+    """Procedural textures as artists wire them: a smooth ball whose Principled base colour is
+    a Noise through a Color Ramp and whose roughness is a second, mapped Noise (Object
+    coordinates), bumped by that Noise; a floor card with a Checker colour on its UVs; a
+    card on the back wall with a spherical Gradient on mapped Generated coordinates; lit by
+    an area and a point light."""
+    sys.path.insert(0, str(ROOT / "tools"))
+    from make_test_scenes import uv_card
+
+    scene, grey = _grey_room(bpy, smooth=False)
+    bpy.ops.mesh.primitive_uv_sphere_add(segments=32, ring_count=16, radius=0.35, location=(-0.2, 0.1, 0.4))
+    ball = bpy.context.active_object
+    for p in ball.data.polygons:
+        p.use_smooth = True
+    mat = _material(bpy, "Mottled", "ShaderNodeBsdfPrincipled")
+    nt = mat.node_tree
+    bsdf = next(x for x in nt.nodes if x.type == "BSDF_PRINCIPLED")
+    colour, ramp = nt.nodes.new("ShaderNodeTexNoise"), nt.nodes.new("ShaderNodeValToRGB")
+    colour.inputs["Scale"].default_value, colour.inputs["Detail"].default_value = 6.0, 4.0
+    (e0, e1) = ramp.color_ramp.elements
+    e0.color, e1.color, e0.position, e1.position = (0.8, 0.3, 0.1, 1.0), (0.2, 0.5, 0.7, 1.0), 0.4, 0.6
+    nt.links.new(colour.outputs["Fac"], ramp.inputs["Fac"])
+    nt.links.new(ramp.outputs["Color"], bsdf.inputs["Base Color"])
+    rough, coords, mapping = (nt.nodes.new(k) for k in ("ShaderNodeTexNoise", "ShaderNodeTexCoord", "ShaderNodeMapping"))
+    rough.inputs["Scale"].default_value, mapping.inputs["Rotation"].default_value = 3.0, (0.5, 0.0, 0.8)
+    nt.links.new(coords.outputs["Object"], mapping.inputs["Vector"])
+    nt.links.new(mapping.outputs["Vector"], rough.inputs["Vector"])
+    nt.links.new(rough.outputs["Fac"], bsdf.inputs["Roughness"])
+    bump_node = nt.nodes.new("ShaderNodeBump")
+    bump_node.inputs["Distance"].default_value = 0.05
+    nt.links.new(rough.outputs["Fac"], bump_node.inputs["Height"])
+    nt.links.new(bump_node.outputs["Normal"], bsdf.inputs["Normal"])
+    ball.data.materials.append(mat)
+    nt, out = uv_card(bpy, scene, "Floor", [(-0.95, -0.95, 0.01), (0.95, -0.95, 0.01), (0.95, 0.95, 0.01),
+                                            (-0.95, 0.95, 0.01)], "Checkered")
+    diffuse, checker = nt.nodes.new("ShaderNodeBsdfDiffuse"), nt.nodes.new("ShaderNodeTexChecker")
+    checker.inputs["Scale"].default_value = 6.0
+    checker.inputs["Color1"].default_value, checker.inputs["Color2"].default_value = (0.8, 0.8, 0.7, 1), (0.2, 0.3, 0.4, 1)
+    nt.links.new(nt.nodes.new("ShaderNodeTexCoord").outputs["UV"], checker.inputs["Vector"])
+    nt.links.new(checker.outputs["Color"], diffuse.inputs["Color"])
+    nt.links.new(diffuse.outputs[0], out.inputs["Surface"])
+    nt, out = uv_card(bpy, scene, "Card", [(-0.8, 0.9, 0.1), (0.6, 0.9, 0.1), (0.6, 0.9, 1.3), (-0.8, 0.9, 1.3)],
+                      "Glow")
+    diffuse, gradient = nt.nodes.new("ShaderNodeBsdfDiffuse"), nt.nodes.new("ShaderNodeTexGradient")
+    gradient.gradient_type = "SPHERICAL"
+    coords, mapping = nt.nodes.new("ShaderNodeTexCoord"), nt.nodes.new("ShaderNodeMapping")
+    mapping.vector_type = "TEXTURE"
+    mapping.inputs["Location"].default_value, mapping.inputs["Scale"].default_value = (0.5, 0.5, 0.5), (0.6, 0.6, 1.0)
+    nt.links.new(coords.outputs["Generated"], mapping.inputs["Vector"])
+    nt.links.new(mapping.outputs["Vector"], gradient.inputs["Vector"])
+    nt.links.new(gradient.outputs["Color"], diffuse.inputs["Color"])
+    nt.links.new(diffuse.outputs[0], out.inputs["Surface"])
+    _lamp(bpy, scene, "Area", "AREA", 80.0, (-0.6, -0.4, 1.2), 0.5, (math.radians(-25.0), 0.0, 0.0))
+    _lamp(bpy, scene, "Lamp", "POINT", 15.0, (0.7, -0.5, 0.8), 0.05)
+    _camera_and_world(bpy, scene)
+    return scene
+
+
 def checked_in(name, keep=None):
     """One of tests/scenes/*.blend (tools/make_test_scenes.py) at this module's size and
     bounce limit; `keep` names the lights left on."""
@@ -614,6 +672,7 @@ SCENES = {
     "bump": (bump, 512, 16),
     "vertex_colours": (vertex_colours, 512, 16),
     "normal_mapped_ball": (normal_mapped_ball, 512, 16),
+    "procedural": (procedural, 512, 16),
     "all_lights": (checked_in("lights", {"Area", "Point", "Spot", "Sun", "World"}), 512, 16),
     "specular": (checked_in("specular"), 1024, 32),
     "textures": (checked_in("textures"), 512, 16),

@@ -57,9 +57,10 @@ pub(super) struct Triangles {
     /// Corner colours; empty when no mesh has them, else one entry per triangle (black for
     /// the triangles of meshes without them).
     pub colors: Vec<[Vec3; 3]>,
-    /// Corner texture-space points; empty when no mesh has them, else one entry per triangle
-    /// (the origin for the triangles of meshes without them).
-    pub texspace: Vec<[Vec3; 3]>,
+    /// Corner Generated and Object coordinates; each empty when no mesh has them, else one
+    /// entry per triangle (the origin for the triangles of meshes without them).
+    pub generated: Vec<[Vec3; 3]>,
+    pub object: Vec<[Vec3; 3]>,
     /// MikkTSpace corner tangents (xyz, bitangent sign) of the meshes with UVs and a
     /// normal-mapped material; empty when there are none, else one entry per triangle (zero
     /// for the other meshes' triangles: their own UV frame is used).
@@ -83,12 +84,14 @@ impl Triangles {
             normals: Vec::new(),
             uvs: Vec::new(),
             colors: Vec::new(),
-            texspace: Vec::new(),
+            generated: Vec::new(),
+            object: Vec::new(),
             tangents: Vec::new(),
             pass_index: Vec::new(),
         };
         let colors = meshes.iter().any(|m| !m.corner_colors.is_empty());
-        let texspace = meshes.iter().any(|m| !m.corner_texspace.is_empty());
+        let generated = meshes.iter().any(|m| !m.corner_generated.is_empty());
+        let object = meshes.iter().any(|m| !m.corner_object.is_empty());
         let wants_tangents = |m: &MeshDesc| {
             !m.corner_uvs.is_empty()
                 && (m.material_ids.is_empty() && normal_mapped.first() == Some(&true)
@@ -112,8 +115,11 @@ impl Triangles {
             if colors && m.corner_colors.is_empty() {
                 t.colors.resize(t.positions.len(), [Vec3::ZERO; 3]); // (black, as a missing attribute)
             }
-            if texspace && m.corner_texspace.is_empty() {
-                t.texspace.resize(t.positions.len(), [Vec3::ZERO; 3]);
+            if generated && m.corner_generated.is_empty() {
+                t.generated.resize(t.positions.len(), [Vec3::ZERO; 3]);
+            }
+            if object && m.corner_object.is_empty() {
+                t.object.resize(t.positions.len(), [Vec3::ZERO; 3]);
             }
             if pass_indices {
                 t.pass_index.resize(t.positions.len(), m.pass_index);
@@ -173,7 +179,8 @@ impl Triangles {
             return Err(bad("has a NaN or Inf texture coordinate".into()));
         }
         Self::check_corners(m, &m.corner_colors, "corner colour")?;
-        Self::check_corners(m, &m.corner_texspace, "texture-space point")?;
+        Self::check_corners(m, &m.corner_generated, "Generated coordinate")?;
+        Self::check_corners(m, &m.corner_object, "Object coordinate")?;
         if !m.material_ids.is_empty() && m.material_ids.len() != m.indices.len() {
             return Err(bad(format!("{} material ids for {} triangles", m.material_ids.len(), m.indices.len())));
         }
@@ -236,8 +243,10 @@ impl Triangles {
             if !m.corner_colors.is_empty() {
                 self.colors.push([0, 1, 2].map(|k| Vec3::from_array(m.corner_colors[3 * t + k])));
             }
-            if !m.corner_texspace.is_empty() {
-                self.texspace.push([0, 1, 2].map(|k| Vec3::from_array(m.corner_texspace[3 * t + k])));
+            for (corners, tris) in [(&m.corner_generated, &mut self.generated), (&m.corner_object, &mut self.object)] {
+                if !corners.is_empty() {
+                    tris.push([0, 1, 2].map(|k| Vec3::from_array(corners[3 * t + k])));
+                }
             }
             self.material.push(mat);
         }

@@ -18,7 +18,8 @@ fn quad(name: &str, p: [[f32; 3]; 4], mat: u32) -> MeshDesc {
         material_ids: vec![mat, mat],
         corner_uvs: vec![],
         corner_colors: vec![],
-        corner_texspace: vec![],
+        corner_generated: vec![],
+        corner_object: vec![],
         pass_index: 0,
     }
 }
@@ -354,7 +355,8 @@ fn flat_mesh(name: &str, positions: Vec<[f32; 3]>, indices: Vec<[u32; 3]>, mat: 
         material_ids: vec![mat; n],
         corner_uvs: vec![],
         corner_colors: vec![],
-        corner_texspace: vec![],
+        corner_generated: vec![],
+        corner_object: vec![],
         pass_index: 0,
     }
 }

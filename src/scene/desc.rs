@@ -20,10 +20,11 @@ pub struct MeshDesc {
     /// Optional per-corner colours (3 per triangle, in triangle order; linear RGB: the
     /// colour attribute its materials read); empty = none, which reads as black.
     pub corner_colors: Vec<[f32; 3]>,
-    /// Optional per-corner texture-space points (3 per triangle, in triangle order): the
-    /// Generated or Object coordinates its materials' procedural textures read; empty = none,
-    /// which reads as the origin.
-    pub corner_texspace: Vec<[f32; 3]>,
+    /// Optional per-corner Generated and Object coordinates (3 per triangle, in triangle
+    /// order), where its materials' procedural textures read them; empty = none, which reads
+    /// as the origin.
+    pub corner_generated: Vec<[f32; 3]>,
+    pub corner_object: Vec<[f32; 3]>,
     /// The object's Pass Index (Blender's IndexOB pass).
     pub pass_index: u32,
 }

@@ -43,7 +43,7 @@ pub struct SurfaceInteraction {
     pub t: f32,
     /// The ray arrived on the side the geometric normal points to (outside a closed mesh).
     pub front: bool,
-    /// Texture coordinates: the UV map's and the texture-space point (zero where the mesh
+    /// Texture coordinates: the UV map's, Generated and Object (zero where the mesh
     /// has none).
     pub tex: TexCoord,
     /// The mesh's interpolated corner colour (black when it has none).
@@ -83,9 +83,10 @@ pub struct Scene {
     uvs: Vec<Option<[Vec2; 3]>>,
     /// Per-triangle corner colours; empty when no mesh has them.
     colors: Vec<[Vec3; 3]>,
-    /// Per-triangle corner texture-space points (procedural textures); empty when no mesh
-    /// has them.
-    texspace: Vec<[Vec3; 3]>,
+    /// Per-triangle corner Generated and Object coordinates (procedural textures); each empty
+    /// when no mesh has them.
+    generated: Vec<[Vec3; 3]>,
+    object: Vec<[Vec3; 3]>,
     /// Per-triangle MikkTSpace corner tangents (xyz, bitangent sign) for normal maps; empty
     /// when no normal-mapped mesh has UVs, zero on the triangles of other meshes.
     tangents: Vec<[Vec4; 3]>,
@@ -152,7 +153,8 @@ impl Scene {
             normals: tris.normals,
             uvs: tris.uvs,
             colors: tris.colors,
-            texspace: tris.texspace,
+            generated: tris.generated,
+            object: tris.object,
             tangents: tris.tangents,
             tri_material: tris.material,
             tri_pass_index: tris.pass_index,
@@ -193,7 +195,8 @@ impl Scene {
             normals: Vec::new(),
             uvs: Vec::new(),
             colors: Vec::new(),
-            texspace: Vec::new(),
+            generated: Vec::new(),
+            object: Vec::new(),
             tangents: Vec::new(),
             pass_index: Vec::new(),
         };
@@ -378,7 +381,8 @@ impl Scene {
     fn tex_coord(&self, t: usize, b0: f32, b1: f32, b2: f32) -> TexCoord {
         TexCoord {
             uv: self.uvs[t].map_or(Vec2::ZERO, |u| u[0] * b0 + u[1] * b1 + u[2] * b2),
-            point: self.texspace.get(t).map_or(Vec3::ZERO, |c| c[0] * b0 + c[1] * b1 + c[2] * b2),
+            generated: self.generated.get(t).map_or(Vec3::ZERO, |c| c[0] * b0 + c[1] * b1 + c[2] * b2),
+            object: self.object.get(t).map_or(Vec3::ZERO, |c| c[0] * b0 + c[1] * b1 + c[2] * b2),
         }
     }
 
@@ -416,8 +420,8 @@ impl Scene {
     /// The shading normal `ns` of triangle `t` perturbed by its material's tangent-space
     /// normal map and then its bump map at `tc`, in the frame of the triangle's UV mapping
     /// (∂p/∂u, ∂p/∂v; none without UVs or with degenerate ones) — or, for a procedural
-    /// height on the texspace point, of its edges e₁, e₂ with the height's derivatives along
-    /// them (∇_c h·(c₁ − c₀), ∇_c h·(c₂ − c₀) from its corner points c).
+    /// height on Generated or Object coordinates, of its edges e₁, e₂ with the height's
+    /// derivatives along them (∇_c h·(c₁ − c₀), ∇_c h·(c₂ − c₀) from its corner coordinates c).
     ///
     /// Normal map, as Cycles' Normal Map node: n' = normalize(T·c.x + B·c.y + N·c.z) with
     /// c = 2·rgb − 1, T and its sign s the MikkTSpace corner tangents interpolated at the
@@ -470,10 +474,13 @@ impl Scene {
                     let g = texture.procedural_luminance_gradient(tc);
                     uv_tangents.map(|(dpdu, dpdv)| (dpdu, dpdv, Vec2::new(g.x, g.y)))
                 }
-                Some(Space::Texspace) => self.texspace.get(t).map(|c| {
-                    let g = texture.procedural_luminance_gradient(tc);
-                    (e1, e2, Vec2::new(g.dot(c[1] - c[0]), g.dot(c[2] - c[0])))
-                }),
+                Some(space @ (Space::Generated | Space::Object)) => {
+                    let corners = if space == Space::Generated { &self.generated } else { &self.object };
+                    corners.get(t).map(|c| {
+                        let g = texture.procedural_luminance_gradient(tc);
+                        (e1, e2, Vec2::new(g.dot(c[1] - c[0]), g.dot(c[2] - c[0])))
+                    })
+                }
             };
             if let Some((ta, tb, h)) = along {
                 let (ra, rb) = (tb.cross(n), n.cross(ta));
@@ -999,7 +1006,7 @@ mod tests {
     }
 
     /// A procedural height bumps along its own coordinates: a gradient (h = x of the pattern
-    /// space) read on texspace points that turn and scale the quad (c = (2y, −x, z)), or on
+    /// space) read on Generated coordinates that turn and scale the quad (c = (2y, −x, z)), or on
     /// UVs, tilts the normal against ∇h carried back to the surface; a Noise height tilts it
     /// as its finite differences say.
     #[test]
@@ -1028,7 +1035,7 @@ mod tests {
                     .iter()
                     .map(|&k| [[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]][k])
                     .collect(),
-                corner_texspace: if texspace {
+                corner_generated: if texspace {
                     // c = (2y, −x, z) + (0.5, 0.5, 0): h = 2y (+0.5), ∂h/∂y = 2
                     let c = |p: [f32; 3]| [2.0 * p[1] + 0.5, -p[0] + 0.5, p[2]];
                     [0, 1, 2, 0, 2, 3]
@@ -1056,13 +1063,13 @@ mod tests {
             scene.interaction(&hit, d).frame.n
         };
         let close = |a: Vec3, b: Vec3| (a - b).length() < 1e-3;
-        let n = normal(Space::Texspace, linear, true);
+        let n = normal(Space::Generated, linear, true);
         assert!(close(n, Vec3::new(0.0, -0.2, 1.0).normalize()), "{n}");
         // on UVs: u = (x + 1)/2, so ∂h/∂x = ½
         let n = normal(Space::Uv, linear, false);
         assert!(close(n, Vec3::new(-0.05, 0.0, 1.0).normalize()), "{n}");
-        // a mesh without texspace points reads the origin everywhere: a constant, no bump
-        assert!(close(normal(Space::Texspace, linear, false), Vec3::Z));
+        // a mesh without Generated coordinates reads the origin everywhere: a constant, no bump
+        assert!(close(normal(Space::Generated, linear, false), Vec3::Z));
         // noise: the tilt is the one of its central differences
         let noise = Pattern::Noise {
             detail: 2.0,
@@ -1072,7 +1079,7 @@ mod tests {
             normalize: true,
             color: false,
         };
-        let n = normal(Space::Texspace, noise, true);
+        let n = normal(Space::Generated, noise, true);
         let p = Vec3::new(0.05, -0.1, 0.0);
         let c = |p: Vec3| Vec3::new(2.0 * p.y + 0.5, -p.x + 0.5, p.z);
         let e = 1e-3;

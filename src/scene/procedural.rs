@@ -66,9 +66,11 @@ impl GradientKind {
 pub enum Space {
     /// The mesh's UV map, as (u, v, 0).
     Uv,
-    /// The mesh's per-corner texture-space point (`MeshDesc::corner_texspace`: Generated or
-    /// Object coordinates, whichever its materials read).
-    Texspace,
+    /// Blender's Generated coordinates: the undeformed mesh in its texture space (the
+    /// bounding box by default) as [0, 1]³ (`MeshDesc::corner_generated`).
+    Generated,
+    /// Object coordinates: the point in the object's own frame (`MeshDesc::corner_object`).
+    Object,
 }
 
 // --- hashing: Bob Jenkins' lookup3 `final` mix -----------------------------------------------
@@ -429,7 +431,7 @@ mod tests {
     fn the_transform_maps_before_the_pattern_and_the_table_clamps() {
         let mut pr = Procedural {
             pattern: Pattern::Gradient(GradientKind::Linear),
-            space: Space::Texspace,
+            space: Space::Generated,
             transform: [2.0, 0.0, 0.0, 0.1, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0],
             domain: (0.0, 1.0),
         };

@@ -14,12 +14,25 @@ use glam::{Vec2, Vec3};
 /// bump a surface by it.
 pub const PROCEDURAL_BUMP_STEP: f32 = 1e-3;
 
-/// Where a surface texture is looked up: the UV map's coordinates and the mesh's
-/// texture-space point (Generated or Object coordinates; zero where the mesh has none).
+/// Where a surface texture is looked up: the UV map's coordinates and the mesh's Generated
+/// and Object coordinates (zero where the mesh carries none).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct TexCoord {
     pub uv: Vec2,
-    pub point: Vec3,
+    pub generated: Vec3,
+    pub object: Vec3,
+}
+
+impl TexCoord {
+    /// The coordinates of `space`, as a point ((u, v, 0) for the UV map).
+    #[inline]
+    pub fn point(&self, space: Space) -> Vec3 {
+        match space {
+            Space::Uv => self.uv.extend(0.0),
+            Space::Generated => self.generated,
+            Space::Object => self.object,
+        }
+    }
 }
 
 #[derive(Clone, Debug)]
@@ -160,11 +173,7 @@ impl Texture {
     #[inline]
     pub fn at(&self, tc: TexCoord) -> Spectrum {
         let Some(p) = &self.procedural else { return self.eval(tc.uv) };
-        let point = match p.space {
-            Space::Uv => tc.uv.extend(0.0),
-            Space::Texspace => tc.point,
-        };
-        self.table(p, p.output(point))
+        self.table(p, p.output(tc.point(p.space)))
     }
 
     /// A procedural pattern's output `out` through the texture's table, channel by channel.
@@ -183,16 +192,13 @@ impl Texture {
     }
 
     /// The gradient of a procedural texture's luminance at `tc` with respect to the
-    /// coordinates it reads (the texspace point, or (u, v, 0)): central differences over
+    /// coordinates it reads (`TexCoord::point`): central differences over
     /// `PROCEDURAL_BUMP_STEP` of the pattern's own space (Cycles' Bump node differences over
     /// a tenth of a pixel's footprint, about as much for common scales), through the
     /// transform. Zero for an image.
     pub fn procedural_luminance_gradient(&self, tc: TexCoord) -> Vec3 {
         let Some(p) = &self.procedural else { return Vec3::ZERO };
-        let q = p.to_pattern(match p.space {
-            Space::Uv => tc.uv.extend(0.0),
-            Space::Texspace => tc.point,
-        });
+        let q = p.to_pattern(tc.point(p.space));
         let h = PROCEDURAL_BUMP_STEP;
         let lum = |d: Vec3| crate::math::luminance(self.table(p, p.pattern_at(q + d)));
         let g = Vec3::new(
@@ -440,7 +446,7 @@ mod tests {
         assert_eq!(closest.luminance_gradient(Vec2::new(0.33, 0.61)), Vec2::ZERO);
     }
 
-    /// A procedural texture reads its own coordinates (the texspace point or the UV map's)
+    /// A procedural texture reads its own coordinates (Generated, Object or the UV map's)
     /// and passes each channel of the pattern's output through its table, interpolated.
     #[test]
     fn procedural_textures_look_their_output_up_in_their_table() {
@@ -460,9 +466,9 @@ mod tests {
             procedural: Some(gradient(space)),
             ..Default::default()
         };
-        let t = Texture::from_desc(&desc(Space::Texspace)).unwrap();
+        let t = Texture::from_desc(&desc(Space::Object)).unwrap();
         let at = |t: &Texture, uv: [f32; 2], point: [f32; 3]| {
-            t.at(TexCoord { uv: Vec2::from_array(uv), point: Vec3::from_array(point) })
+            t.at(TexCoord { uv: Vec2::from_array(uv), generated: Vec3::splat(9.0), object: Vec3::from_array(point) })
         };
         assert!((at(&t, [0.9, 0.9], [0.25, 7.0, 7.0]) - Vec3::new(0.5, 1.0, 1.0)).length() < 1e-6);
         assert!((at(&t, [0.0, 0.0], [0.75, 0.0, 0.0]) - Vec3::new(2.5, 1.0, 0.0)).length() < 1e-6);

@@ -356,20 +356,20 @@ def test_reconstruct_takes_an_irls_schedule_and_refuses_a_bad_one():
 
 def test_bad_procedural_textures_are_refused_naming_them():
     """A procedural texture of an unknown pattern, a NaN in its transform, a table of one
-    entry, or texture-space points of the wrong count or with a NaN are messages naming the
+    entry, or Object coordinates of the wrong count or with a NaN are messages naming the
     texture or the mesh, not a panic or NaN pixels; a good one renders finite pixels."""
     import numpy as np
 
     d = gdmlt.builtin_scene("cornell", 8, 8)
     table = np.linspace(0.0, 1.0, 6, dtype=np.float32).repeat(3).reshape(-1, 3)
-    noise = {"pattern": "NOISE", "space": "TEXSPACE", "detail": 3.0, "domain": (-0.02, 1.02),
+    noise = {"pattern": "NOISE", "space": "OBJECT", "detail": 3.0, "domain": (-0.02, 1.02),
              "transform": (4.0, 0, 0, 0, 0, 4.0, 0, 0, 0, 0, 4.0, 0)}
     d["textures"] = [{"name": "Marble", "width": 6, "height": 1, "channels": 3, "pixels": table,
                       "procedural": dict(noise)}]
     d["materials"][0]["base_color_texture"] = 0
     mesh = d["meshes"][0]
     corners = 3 * len(np.asarray(mesh["indices"]).reshape(-1, 3))
-    mesh["texspace"] = np.random.default_rng(1).uniform(-1, 1, (corners, 3)).astype(np.float32)
+    mesh["object"] = np.random.default_rng(1).uniform(-1, 1, (corners, 3)).astype(np.float32)
     res = gdmlt.render(gdmlt.Scene(d), spp=2, seed=1)
     assert np.isfinite(res["layers"]["Combined"]).all()
     for bad, message in [({"pattern": "MARBLE"}, "Marble.*unknown pattern 'MARBLE'"),
@@ -382,12 +382,12 @@ def test_bad_procedural_textures_are_refused_naming_them():
     with pytest.raises(ValueError, match="Marble.*procedural table of 1×1"):
         gdmlt.Scene(d)
     d["textures"][0].update(width=6, pixels=table)
-    mesh["texspace"] = mesh["texspace"][:-1]
-    with pytest.raises(ValueError, match=f"{mesh['name']}.*texture-space points for"):
+    mesh["object"] = mesh["object"][:-1]
+    with pytest.raises(ValueError, match=f"{mesh['name']}.*Object coordinates for"):
         gdmlt.Scene(d)
-    mesh["texspace"] = np.zeros((corners, 3), np.float32)
-    mesh["texspace"][2, 0] = np.inf
-    with pytest.raises(ValueError, match=f"{mesh['name']}.*NaN or Inf texture-space point"):
+    mesh["object"] = np.zeros((corners, 3), np.float32)
+    mesh["object"][2, 0] = np.inf
+    with pytest.raises(ValueError, match=f"{mesh['name']}.*NaN or Inf Object coordinate"):
         gdmlt.Scene(d)
 
 
