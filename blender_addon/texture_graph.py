@@ -14,11 +14,11 @@ grid up to 16× finer than the image (at most 1024 texels across, 4M in all): a 
 step on a magnified 8×8 image is then sharp to 1/128 of the image, where at the image's own
 resolution it rendered 5% off Cycles. Over Closest images the grid is the image's own.
 
-A graph over one procedural texture instead of images (Noise, Checker, Gradient) is a
+A graph over one procedural texture instead of images (Noise, Voronoi, Checker, Gradient) is a
 function of that texture's output alone: it is evaluated on a table of the output's values
 over its range (`_PROCEDURAL_TABLES`), which the core looks up after computing the pattern
-per shading point (src/scene/procedural.rs). A Noise's Color output (three noises) only
-when it feeds the input straight, a Checker's colours only from constants.
+per shading point (src/scene/procedural.rs). A Noise's or Voronoi's Color output (three
+values) only when it feeds the input straight, a Checker's colours only from constants.
 
 A graph with no image in it is a constant (a Math node on two values, a Mix of two colours):
 its value. A graph with a node outside this set, images under different UV transforms or
@@ -282,7 +282,7 @@ class _Graph:
         if node.type == "TEX_CHECKER" and out.identifier == "Color":
             c1, c2 = (_as_colour(c).a for c in _all(walk, collect, "Color1", "Color2"))
             return _Colour(np.where(s[:, None] == 1.0, c1, c2))
-        if out.identifier == "Color":  # (a Gradient's grey, or the Noise's three channels: each through the table)
+        if out.identifier == "Color":  # (a Gradient's grey, or three channels: each through the table)
             return _Colour(np.repeat(s[:, None], 3, axis=1))
         return _Value(s)
 
@@ -599,23 +599,32 @@ def _map_range(node, out, walk, collect):
 # --- procedural textures (evaluated per point by the core; the graph after them tabulated) ----
 
 # table entries over the output's range, per node type
-_PROCEDURAL_TABLES = {"TEX_NOISE": 2048, "TEX_CHECKER": 2, "TEX_GRADIENT": 1024}
+_PROCEDURAL_TABLES = {"TEX_NOISE": 2048, "TEX_VORONOI": 4096, "TEX_CHECKER": 2, "TEX_GRADIENT": 1024}
 _NOISE_INPUTS = ("Scale", "Detail", "Roughness", "Lacunarity", "Distortion")
+_VORONOI_INPUTS = ("Scale", "Detail", "Roughness", "Lacunarity", "Randomness", "Exponent")
+# outputs whose value (not colour) is the pattern, and colour outputs of three values
+_SCALAR_OUTPUTS = {"TEX_NOISE": "Fac", "TEX_VORONOI": "Distance", "TEX_CHECKER": "Fac", "TEX_GRADIENT": "Fac"}
 
 
 def _check_procedural(node, out):
     """Refuses what the core does not compute: a linked parameter, a Noise that is not 3D
     fBm, a Noise Color output that goes through other nodes (checked by the caller)."""
-    params = {"TEX_NOISE": _NOISE_INPUTS, "TEX_CHECKER": ("Scale",), "TEX_GRADIENT": ()}[node.type]
+    params = {"TEX_NOISE": _NOISE_INPUTS, "TEX_VORONOI": _VORONOI_INPUTS, "TEX_CHECKER": ("Scale",),
+              "TEX_GRADIENT": ()}[node.type]
     for name in params:
-        if node.inputs[name].is_linked:
+        if name in node.inputs and node.inputs[name].is_linked:
             raise Unsupported(f"the linked input '{name}' of procedural texture '{node.name}'")
     if node.type == "TEX_NOISE":
         if node.noise_dimensions != "3D":
             raise Unsupported(f"Noise Texture '{node.name}' in {node.noise_dimensions} (3D is rendered)")
         if getattr(node, "noise_type", "FBM") != "FBM":
             raise Unsupported(f"Noise Texture '{node.name}' of type {node.noise_type} (fBM is rendered)")
-    if out.identifier not in ("Fac", "Color"):
+    if node.type == "TEX_VORONOI":
+        if node.voronoi_dimensions != "3D":
+            raise Unsupported(f"Voronoi Texture '{node.name}' in {node.voronoi_dimensions} (3D is rendered)")
+        if node.feature not in ("F1", "F2"):
+            raise Unsupported(f"Voronoi Texture '{node.name}' feature {node.feature} (F1 and F2 are rendered)")
+    if out.identifier not in (_SCALAR_OUTPUTS[node.type], "Color"):
         raise Unsupported(f"output '{out.name}' of '{node.name}'")
 
 
@@ -623,6 +632,15 @@ def _procedural_domain(node):
     """The range of a procedural texture's output that its table covers: [0, 1] for Checker
     and Gradient (clamped there); a Noise's fBm within ±1.02 per octave's amplitude, mapped
     to [0, 1] when normalised."""
+    if node.type == "TEX_VORONOI":
+        # F1 within √3 of the point by any metric but Manhattan (3), F2 within twice that;
+        # normalised: over the largest distance (within about 2)
+        if node.normalize:
+            return 0.0, 2.5
+        detail = min(max(float(node.inputs["Detail"].default_value), 0.0), 15.0)
+        rough = min(max(float(node.inputs["Roughness"].default_value), 0.0), 1.0)
+        amp = sum(rough ** k for k in range(int(detail) + 2))
+        return 0.0, 3.0 * (2.0 if node.feature == "F2" else 1.0) * amp
     if node.type != "TEX_NOISE":
         return 0.0, 1.0
     if getattr(node, "normalize", True):
@@ -640,7 +658,7 @@ def procedural_spec(node, out_name, coords):
     space, m = coords
     m = np.asarray(m, np.float64).reshape(3, 4)
     spec = {"pattern": node.type[4:], "space": space, "domain": _procedural_domain(node)}
-    if node.type in ("TEX_NOISE", "TEX_CHECKER"):
+    if node.type in ("TEX_NOISE", "TEX_VORONOI", "TEX_CHECKER"):
         m = m * float(node.inputs["Scale"].default_value)  # (the node scales its vector)
     if node.type == "TEX_NOISE":
         spec.update(detail=float(node.inputs["Detail"].default_value),
@@ -648,6 +666,14 @@ def procedural_spec(node, out_name, coords):
                     lacunarity=float(node.inputs["Lacunarity"].default_value),
                     distortion=float(node.inputs["Distortion"].default_value),
                     normalize=bool(getattr(node, "normalize", True)), color=out_name == "Color")
+    if node.type == "TEX_VORONOI":
+        spec.update(f2=node.feature == "F2", metric=node.distance,
+                    exponent=float(node.inputs["Exponent"].default_value) if "Exponent" in node.inputs else 0.5,
+                    randomness=float(node.inputs["Randomness"].default_value),
+                    detail=float(node.inputs["Detail"].default_value),
+                    roughness=float(node.inputs["Roughness"].default_value),
+                    lacunarity=float(node.inputs["Lacunarity"].default_value),
+                    normalize=bool(node.normalize), color=out_name == "Color")
     if node.type == "TEX_GRADIENT":
         spec["gradient_type"] = node.gradient_type
     spec["transform"] = tuple(float(x) for x in m.reshape(-1))
@@ -708,10 +734,10 @@ def _tabulated(g, sock):
     """`evaluate` of a graph over a procedural texture: ('procedural', table (n, 3) float32,
     the core's description of the pattern)."""
     node, out_name = g.procedural
-    if out_name == "Color" and node.type == "TEX_NOISE" and not (
+    if out_name == "Color" and node.type in ("TEX_NOISE", "TEX_VORONOI") and not (
             sock.is_linked and sock.links[0].from_node.name == node.name):
-        raise Unsupported(f"the Color output of Noise Texture '{node.name}' through other nodes (its Fac is "
-                          f"rendered through them)")
+        raise Unsupported(f"the Color output of '{node.name}' through other nodes (its "
+                          f"{_SCALAR_OUTPUTS[node.type]} is rendered through them)")
     coords = g.coords(node)
     v = g.run(sock)
     v = _as_value(v) if sock.type == "VALUE" else _as_colour(v)

@@ -229,11 +229,12 @@ fn parse_texture(d: &Bound<'_, PyDict>) -> PyResult<TextureDesc> {
     })
 }
 
-/// {"pattern": "NOISE"|"CHECKER"|"GRADIENT", "space": "GENERATED"|"OBJECT"|"UV", "transform": 12
+/// {"pattern": "NOISE"|"VORONOI"|"CHECKER"|"GRADIENT", "space": "GENERATED"|"OBJECT"|"UV", "transform": 12
 /// floats (row-major 3×4), "domain": (lo, hi); NOISE: "detail", "roughness", "lacunarity",
-/// "distortion", "normalize", "color"; GRADIENT: "gradient_type" (Blender's identifiers)}
+/// "distortion", "normalize", "color"; VORONOI: "f2", "metric", "exponent", "randomness",
+/// "detail", "roughness", "lacunarity", "normalize", "color"; GRADIENT: "gradient_type" (Blender's identifiers)}
 fn parse_procedural(d: &Bound<'_, PyDict>, ctx: &str) -> PyResult<scene::procedural::Procedural> {
-    use scene::procedural::{GradientKind, Pattern, Procedural, Space};
+    use scene::procedural::{GradientKind, Metric, Pattern, Procedural, Space, VoronoiParams};
     let ctx = format!("{ctx}: procedural");
     let kind: String = get_or(d, "pattern", String::new(), &ctx)?;
     let pattern = match kind.to_ascii_uppercase().as_str() {
@@ -245,6 +246,22 @@ fn parse_procedural(d: &Bound<'_, PyDict>, ctx: &str) -> PyResult<scene::procedu
             normalize: get_or(d, "normalize", true, &ctx)?,
             color: get_or(d, "color", false, &ctx)?,
         },
+        "VORONOI" => {
+            let metric: String = get_or(d, "metric", "EUCLIDEAN".to_string(), &ctx)?;
+            Pattern::Voronoi {
+                voronoi: VoronoiParams {
+                    f2: get_or(d, "f2", false, &ctx)?,
+                    metric: Metric::parse(&metric).ok_or_else(|| verr(format!("{ctx}: unknown metric '{metric}'")))?,
+                    exponent: get_or(d, "exponent", 0.5, &ctx)?,
+                    randomness: get_or(d, "randomness", 1.0, &ctx)?,
+                    detail: get_or(d, "detail", 0.0, &ctx)?,
+                    roughness: get_or(d, "roughness", 0.5, &ctx)?,
+                    lacunarity: get_or(d, "lacunarity", 2.0, &ctx)?,
+                    normalize: get_or(d, "normalize", false, &ctx)?,
+                },
+                color: get_or(d, "color", false, &ctx)?,
+            }
+        }
         "CHECKER" => Pattern::Checker,
         "GRADIENT" => {
             let g: String = get_or(d, "gradient_type", "LINEAR".to_string(), &ctx)?;
@@ -252,7 +269,7 @@ fn parse_procedural(d: &Bound<'_, PyDict>, ctx: &str) -> PyResult<scene::procedu
                 GradientKind::parse(&g).ok_or_else(|| verr(format!("{ctx}: unknown gradient_type '{g}'")))?,
             )
         }
-        other => return Err(verr(format!("{ctx}: unknown pattern '{other}' (NOISE, CHECKER or GRADIENT)"))),
+        other => return Err(verr(format!("{ctx}: unknown pattern '{other}' (NOISE, VORONOI, CHECKER or GRADIENT)"))),
     };
     let space: String = get_or(d, "space", "GENERATED".to_string(), &ctx)?;
     let space = match space.to_ascii_uppercase().as_str() {

@@ -1,4 +1,4 @@
-//! Procedural textures as Cycles computes them: Noise (Perlin fBm), Checker and Gradient,
+//! Procedural textures as Cycles computes them: Noise (Perlin fBm), Voronoi, Checker and Gradient,
 //! evaluated per shading point on the point's coordinates (the mesh's Generated or Object
 //! coordinates, or its UV map) after an affine map (Blender's Mapping node and the node's
 //! Scale). Bit-for-bit the arithmetic of Cycles' kernel for the same inputs, so a render
@@ -12,6 +12,10 @@
 //!   `roughness` the gain per octave, `lacunarity` the frequency step, normalised to [0, 1];
 //!   `distortion` displaces the point by three noises at hashed offsets first, and the Color
 //!   output adds two more fBm at hashed offsets;
+//! - Voronoi (Worley 1996): per unit cell one feature point at a hashed offset (times
+//!   `randomness`), the nearest (F1) or second nearest (F2) of the 27 cells around by the
+//!   chosen metric, its distance and a hashed colour per cell; fractal over `detail` octaves
+//!   as Cycles sums them, normalised by the largest distance when asked;
 //! - Checker: the parity of the integer cells of (p + 10⁻⁶)·(1 − 10⁻⁶) per axis;
 //! - Gradient: linear, quadratic, easing, diagonal, radial, spherical and quadratic sphere,
 //!   clamped to [0, 1].
@@ -28,10 +32,48 @@ use glam::Vec3;
 pub enum Pattern {
     /// The Noise Texture node (3D, fBm). `color`: its Color output (three fBm), else Fac.
     Noise { detail: f32, roughness: f32, lacunarity: f32, distortion: f32, normalize: bool, color: bool },
+    /// The Voronoi Texture node (3D, F1 or F2). `color`: its Color output, else Distance.
+    Voronoi { voronoi: VoronoiParams, color: bool },
     /// The Checker Texture node's Fac (1 in the cells of Color1).
     Checker,
     /// The Gradient Texture node's Fac.
     Gradient(GradientKind),
+}
+
+/// The Voronoi Texture node's settings.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct VoronoiParams {
+    /// F2 (the second nearest point), else F1.
+    pub f2: bool,
+    pub metric: Metric,
+    /// Minkowski's exponent.
+    pub exponent: f32,
+    pub randomness: f32,
+    pub detail: f32,
+    pub roughness: f32,
+    pub lacunarity: f32,
+    pub normalize: bool,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Metric {
+    Euclidean,
+    Manhattan,
+    Chebychev,
+    Minkowski,
+}
+
+impl Metric {
+    /// Blender's enum identifiers (`ShaderNodeTexVoronoi.distance`).
+    pub fn parse(s: &str) -> Option<Metric> {
+        Some(match s.to_ascii_uppercase().as_str() {
+            "EUCLIDEAN" => Metric::Euclidean,
+            "MANHATTAN" => Metric::Manhattan,
+            "CHEBYCHEV" => Metric::Chebychev,
+            "MINKOWSKI" => Metric::Minkowski,
+            _ => return None,
+        })
+    }
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -107,9 +149,29 @@ pub fn hash3(x: u32, y: u32, z: u32) -> u32 {
     final_mix(s.wrapping_add(x), s.wrapping_add(y), s.wrapping_add(z))
 }
 
+#[inline]
+fn unit(h: u32) -> f32 {
+    h as f32 * (1.0 / u32::MAX as f32)
+}
+
 /// A hash of two floats' bit patterns into [0, 1] (both ends included).
 fn hash_floats_to_unit(x: f32, y: f32) -> f32 {
-    hash2(x.to_bits(), y.to_bits()) as f32 * (1.0 / u32::MAX as f32)
+    unit(hash2(x.to_bits(), y.to_bits()))
+}
+
+/// Three hashes in [0, 1] of an integer cell (a Voronoi cell's feature point and colour):
+/// the 3D PCG hash of Jarzynski & Olano 2020 on signed integers, as Cycles computes it.
+fn hash_cell_to_unit3(c: [i32; 3]) -> Vec3 {
+    let mut v = c.map(|x| x.wrapping_mul(1664525).wrapping_add(1013904223));
+    let round = |v: &mut [i32; 3]| {
+        v[0] = v[0].wrapping_add(v[1].wrapping_mul(v[2]));
+        v[1] = v[1].wrapping_add(v[2].wrapping_mul(v[0]));
+        v[2] = v[2].wrapping_add(v[0].wrapping_mul(v[1]));
+    };
+    round(&mut v);
+    v = v.map(|x| x ^ (x >> 16));
+    round(&mut v);
+    Vec3::from_array(v.map(|x| (x & 0x7FFFFFFF) as f32 * (1.0 / 0x7FFFFFFF as f32)))
 }
 
 /// The offset in [100, 200]³ that seeds one of a noise's decorrelated copies.
@@ -228,6 +290,85 @@ pub fn noise_texture(
     (value, color)
 }
 
+fn voronoi_distance(a: Vec3, b: Vec3, v: &VoronoiParams) -> f32 {
+    let d = (a - b).abs();
+    match v.metric {
+        Metric::Euclidean => a.distance(b),
+        Metric::Manhattan => d.x + d.y + d.z,
+        Metric::Chebychev => d.max_element(),
+        Metric::Minkowski => {
+            (d.x.powf(v.exponent) + d.y.powf(v.exponent) + d.z.powf(v.exponent)).powf(1.0 / v.exponent)
+        }
+    }
+}
+
+/// One octave: (distance, colour) of the nearest (F1) or second nearest (F2) feature point.
+fn voronoi_octave(p: Vec3, v: &VoronoiParams) -> (f32, Vec3) {
+    let cell_f = p.floor();
+    let local = p - cell_f;
+    let cell = [cell_f.x as i32, cell_f.y as i32, cell_f.z as i32];
+    let at = |o: [i32; 3]| [cell[0].wrapping_add(o[0]), cell[1].wrapping_add(o[1]), cell[2].wrapping_add(o[2])];
+    let (mut d1, mut d2) = (f32::MAX, f32::MAX);
+    let (mut o1, mut o2) = ([0i32; 3], [0i32; 3]);
+    for k in -1..=1 {
+        for j in -1..=1 {
+            for i in -1..=1 {
+                let offset = [i, j, k];
+                let point = Vec3::new(i as f32, j as f32, k as f32) + hash_cell_to_unit3(at(offset)) * v.randomness;
+                let d = voronoi_distance(point, local, v);
+                if d < d1 {
+                    (d2, o2) = (d1, o1);
+                    (d1, o1) = (d, offset);
+                } else if d < d2 {
+                    (d2, o2) = (d, offset);
+                }
+            }
+        }
+    }
+    let (d, o) = if v.f2 { (d2, o2) } else { (d1, o1) };
+    (d, hash_cell_to_unit3(at(o)))
+}
+
+/// The Voronoi Texture node (3D, F1/F2) at `p` (already scaled): (Distance, Color).
+pub fn voronoi_texture(p: Vec3, v: &VoronoiParams) -> (f32, Vec3) {
+    let v = VoronoiParams {
+        detail: v.detail.clamp(0.0, 15.0),
+        roughness: v.roughness.clamp(0.0, 1.0),
+        randomness: v.randomness.clamp(0.0, 1.0),
+        ..*v
+    };
+    let max_distance =
+        voronoi_distance(Vec3::ZERO, Vec3::splat(0.5 + 0.5 * v.randomness), &v) * if v.f2 { 2.0 } else { 1.0 };
+    let single = v.detail == 0.0 || v.roughness == 0.0 || v.lacunarity == 0.0;
+    let (mut amp, mut max_amp, mut scale) = (1.0f32, 0.0f32, 1.0f32);
+    let (mut dist, mut color) = (0.0f32, Vec3::ZERO);
+    for i in 0..=(v.detail.ceil() as i32) {
+        let (d, c) = voronoi_octave(p * scale, &v);
+        if single {
+            (max_amp, dist, color) = (1.0, d, c);
+            break;
+        } else if i as f32 <= v.detail {
+            max_amp += amp;
+            dist += d * amp;
+            color += c * amp;
+            scale *= v.lacunarity;
+            amp *= v.roughness;
+        } else {
+            let rmd = v.detail - v.detail.floor();
+            if rmd != 0.0 {
+                max_amp = mix(max_amp, max_amp + amp, rmd);
+                dist = mix(dist, dist + d * amp, rmd);
+                color = color.lerp(color + c * amp, rmd);
+            }
+        }
+    }
+    if v.normalize {
+        dist /= max_amp * max_distance;
+        color /= max_amp;
+    }
+    (dist, color)
+}
+
 /// The Checker Texture node's Fac at `p` (already scaled): 1 or 0.
 pub fn checker(p: Vec3) -> f32 {
     let cell = |x: f32| (((x + 0.000001) * 0.999999).floor() as i32).unsigned_abs() % 2;
@@ -315,6 +456,14 @@ impl Procedural {
                     Vec3::splat(value)
                 }
             }
+            Pattern::Voronoi { voronoi, color } => {
+                let (d, c) = voronoi_texture(p, &voronoi);
+                if color {
+                    c
+                } else {
+                    Vec3::splat(d)
+                }
+            }
             Pattern::Checker => Vec3::splat(checker(p)),
             Pattern::Gradient(kind) => Vec3::splat(gradient(p, kind)),
         }
@@ -398,6 +547,67 @@ mod tests {
             let o = seed_offset(s as f32);
             assert!(o.cmpge(Vec3::splat(100.0)).all() && o.cmple(Vec3::splat(200.0)).all());
         }
+    }
+
+    fn voronoi(f2: bool, metric: Metric) -> VoronoiParams {
+        VoronoiParams {
+            f2,
+            metric,
+            exponent: 0.5,
+            randomness: 1.0,
+            detail: 0.0,
+            roughness: 0.5,
+            lacunarity: 2.0,
+            normalize: false,
+        }
+    }
+
+    /// F1 is the distance to the nearest feature point, F2 to the second: checked against a
+    /// brute-force search over the 5³ cells around; the colour is constant within a cell's
+    /// region and the distance vanishes at the feature points.
+    #[test]
+    fn voronoi_finds_the_nearest_feature_points() {
+        let points = |c: Vec3| {
+            (-2..=2).flat_map(move |k| {
+                (-2..=2).flat_map(move |j| {
+                    (-2..=2).map(move |i| {
+                        let cell = c.floor() + Vec3::new(i as f32, j as f32, k as f32);
+                        cell + hash_cell_to_unit3([cell.x as i32, cell.y as i32, cell.z as i32])
+                    })
+                })
+            })
+        };
+        let mut exact_f2 = 0;
+        for n in 0..300 {
+            let p = Vec3::new(n as f32 * 0.377 - 40.0, n as f32 * 0.213 + 3.1, -(n as f32) * 0.119);
+            let mut d: Vec<f32> = points(p).map(|q| q.distance(p)).collect();
+            d.sort_by(|a, b| a.partial_cmp(b).unwrap());
+            let (f1, _) = voronoi_texture(p, &voronoi(false, Metric::Euclidean));
+            let (f2, _) = voronoi_texture(p, &voronoi(true, Metric::Euclidean));
+            assert!((f1 - d[0]).abs() < 1e-5, "{p}: {f1} vs {}", d[0]);
+            // (the 27 cells around may miss the true second point, rarely: never nearer)
+            assert!(f2 >= d[1] - 1e-5, "{p}: {f2} vs {}", d[1]);
+            exact_f2 += usize::from((f2 - d[1]).abs() < 1e-5);
+            let m = |metric| voronoi_texture(p, &voronoi(false, metric)).0;
+            assert!(m(Metric::Chebychev) <= f1 + 1e-6 && f1 <= m(Metric::Manhattan) + 1e-6);
+        }
+        assert!(exact_f2 >= 290, "{exact_f2}");
+        let site = Vec3::new(3.0, -2.0, 5.0) + hash_cell_to_unit3([3, -2, 5]);
+        let (d, c) = voronoi_texture(site, &voronoi(false, Metric::Euclidean));
+        assert!(d < 1e-5);
+        assert_eq!(c, hash_cell_to_unit3([3, -2, 5]));
+        // normalised F1 of randomness 1 lies within [0, 1] for the most part
+        let mut v = voronoi(false, Metric::Euclidean);
+        v.normalize = true;
+        let vals: Vec<f32> =
+            (0..2000).map(|i| voronoi_texture(Vec3::new(i as f32 * 0.37, i as f32 * 0.11, 0.5), &v).0).collect();
+        assert!(vals.iter().all(|&x| (0.0..1.2).contains(&x)));
+        // fractional detail blends the octaves around it, as for noise
+        let at = |detail| {
+            let v = VoronoiParams { detail, ..voronoi(false, Metric::Euclidean) };
+            voronoi_texture(Vec3::new(0.3, 1.7, -2.2), &v).0
+        };
+        assert!((at(1.25) - (0.75 * at(1.0) + 0.25 * at(2.0))).abs() < 1e-5);
     }
 
     #[test]

@@ -1708,7 +1708,7 @@ def test_node_groups_agree_with_cycles(bpy_mod, tmp_out):
 
 def _procedural_cards():
     """Emission colours from procedural textures (name, wiring(nt) → the colour socket, on a
-    sphere?): Noise through a Color Ramp, a Noise's Color with distortion, a detailed Noise on
+    sphere?): Voronoi (F1 and F2, every metric, fractal, its Distance and Color), Noise through a Color Ramp, a Noise's Color with distortion, a detailed Noise on
     mapped Object coordinates, an unnormalised Noise on UVs through Math, a Checker, Gradients
     (easing; spherical on mapped Generated coordinates; radial on Object coordinates), and
     on a turned, squashed smooth sphere a Noise on Generated and a Checker on Object
@@ -1765,6 +1765,20 @@ def _procedural_cards():
         wire.__name__ = f"gradient_{kind.lower()}"
         return wire
 
+    def voronoi(feature="F1", metric="EUCLIDEAN", output="Distance", ramp=False, **inputs):
+        def wire(nt):
+            v = nt.nodes.new("ShaderNodeTexVoronoi")
+            v.feature, v.distance, v.normalize = feature, metric, ramp
+            for k, x in inputs.items():
+                v.inputs[k].default_value = x
+            if not ramp:
+                return v.outputs[output]
+            r = nt.nodes.new("ShaderNodeValToRGB")
+            nt.links.new(v.outputs[output], r.inputs["Fac"])
+            return r.outputs["Color"]
+        wire.__name__ = f"voronoi_{feature}_{metric}_{output}".lower()
+        return wire
+
     def sphere_checker(nt):
         c = node(nt, "ShaderNodeTexChecker", Scale=4.0)
         nt.links.new(nt.nodes.new("ShaderNodeTexCoord").outputs["Object"], c.inputs["Vector"])
@@ -1773,11 +1787,15 @@ def _procedural_cards():
     return [(noise_ramp, False), (noise_colour, False), (noise_object, False), (noise_uv_raw, False),
             (checker, False), (gradient("EASING"), False),
             (gradient("SPHERICAL", "Generated", Location=(0.45, 0.45, 0.0), Scale=(0.5, 0.5, 1.0)), False),
-            (gradient("RADIAL", "Object"), False), (noise_colour, True), (sphere_checker, True)]
+            (gradient("RADIAL", "Object"), False), (noise_colour, True), (sphere_checker, True),
+            (voronoi(Scale=4.0), False), (voronoi(output="Color", Scale=3.0, Randomness=0.8), False),
+            (voronoi("F2", "MANHATTAN", ramp=True, Scale=3.0, Detail=2.5), False),
+            (voronoi("F1", "CHEBYCHEV", Scale=5.0), False),
+            (voronoi("F1", "MINKOWSKI", "Color", Scale=5.0, Exponent=1.5), True)]
 
 
 def test_procedural_textures_agree_with_cycles(bpy_mod, tmp_out):
-    """Noise, Checker and Gradient textures (on Generated, Object and UV coordinates, through
+    """Noise, Voronoi, Checker and Gradient textures (on Generated, Object and UV coordinates, through
     Mapping nodes and the colour and value nodes after them) emit what Cycles' do, pixel by
     pixel: the mean relative difference of each card within twice that of two GDMLT seeds
     (the pixel filter's jitter) plus 0.2%. Before, each was 'not evaluated': its input's
