@@ -14,7 +14,7 @@ grid up to 16× finer than the image (at most 1024 texels across, 4M in all): a 
 step on a magnified 8×8 image is then sharp to 1/128 of the image, where at the image's own
 resolution it rendered 5% off Cycles. Over Closest images the grid is the image's own.
 
-A graph over one procedural texture instead of images (Noise, Voronoi, Checker, Gradient) is a
+A graph over one procedural texture instead of images (Noise, Voronoi, Wave, Checker, Gradient) is a
 function of that texture's output alone: it is evaluated on a table of the output's values
 over its range (`_PROCEDURAL_TABLES`), which the core looks up after computing the pattern
 per shading point (src/scene/procedural.rs). A Noise's or Voronoi's Color output (three
@@ -150,6 +150,7 @@ class _Graph:
         self.coords = coords  # node → (space, 3×4 matrix): the coordinates a procedural reads
         self.procedural = None  # (node, output name) of the procedural texture leaf
         self.samples = None  # the table's values of that leaf's output
+        self.domain = None  # (their first and last)
         self.image_identity = image_identity  # node → what identifies its pixels
         self.uv_key = uv_key  # node → (transform, extension, closest)
         self.images = {}  # node name → node
@@ -170,8 +171,9 @@ class _Graph:
         if self.procedural is not None:
             if self.images:
                 raise Unsupported(f"procedural texture '{self.procedural[0].name}' together with images")
-            self.samples = np.linspace(*_procedural_domain(self.procedural[0]),
-                                       _PROCEDURAL_TABLES[self.procedural[0].type], dtype=np.float32)
+            node, out_name = self.procedural
+            self.domain = _procedural_domain(node, _pattern(node, out_name))
+            self.samples = np.linspace(*self.domain, _PROCEDURAL_TABLES[node.type], dtype=np.float32)
         if not self.images:
             return self._walk(sock, collect=False)
         keys = {name: self.uv_key(n) for name, n in self.images.items()}
@@ -599,26 +601,28 @@ def _map_range(node, out, walk, collect):
 # --- procedural textures (evaluated per point by the core; the graph after them tabulated) ----
 
 # table entries over the output's range, per node type
-_PROCEDURAL_TABLES = {"TEX_NOISE": 2048, "TEX_VORONOI": 4096, "TEX_CHECKER": 2, "TEX_GRADIENT": 1024}
-_NOISE_INPUTS = ("Scale", "Detail", "Roughness", "Lacunarity", "Distortion")
+_PROCEDURAL_TABLES = {"TEX_NOISE": 2048, "TEX_VORONOI": 4096, "TEX_WAVE": 2048, "TEX_CHECKER": 2,
+                      "TEX_GRADIENT": 1024}
+_NOISE_INPUTS = ("Scale", "Detail", "Roughness", "Lacunarity", "Offset", "Gain", "Distortion")
+_WAVE_INPUTS = ("Scale", "Distortion", "Detail", "Detail Scale", "Detail Roughness", "Phase Offset")
 _VORONOI_INPUTS = ("Scale", "Detail", "Roughness", "Lacunarity", "Randomness", "Exponent")
 # outputs whose value (not colour) is the pattern, and colour outputs of three values
-_SCALAR_OUTPUTS = {"TEX_NOISE": "Fac", "TEX_VORONOI": "Distance", "TEX_CHECKER": "Fac", "TEX_GRADIENT": "Fac"}
+_SCALAR_OUTPUTS = {"TEX_NOISE": "Fac", "TEX_VORONOI": "Distance", "TEX_WAVE": "Fac", "TEX_CHECKER": "Fac",
+                   "TEX_GRADIENT": "Fac"}
 
 
 def _check_procedural(node, out):
-    """Refuses what the core does not compute: a linked parameter, a Noise that is not 3D
-    fBm, a Noise Color output that goes through other nodes (checked by the caller)."""
-    params = {"TEX_NOISE": _NOISE_INPUTS, "TEX_VORONOI": _VORONOI_INPUTS, "TEX_CHECKER": ("Scale",),
-              "TEX_GRADIENT": ()}[node.type]
+    """Refuses what the core does not compute: a linked parameter, a Noise or Voronoi that is
+    not 3D, Voronoi features other than F1 and F2, an output it does not compute (a colour
+    output through other nodes is checked by the caller)."""
+    params = {"TEX_NOISE": _NOISE_INPUTS, "TEX_VORONOI": _VORONOI_INPUTS, "TEX_WAVE": _WAVE_INPUTS,
+              "TEX_CHECKER": ("Scale",), "TEX_GRADIENT": ()}[node.type]
     for name in params:
         if name in node.inputs and node.inputs[name].is_linked:
             raise Unsupported(f"the linked input '{name}' of procedural texture '{node.name}'")
     if node.type == "TEX_NOISE":
         if node.noise_dimensions != "3D":
             raise Unsupported(f"Noise Texture '{node.name}' in {node.noise_dimensions} (3D is rendered)")
-        if getattr(node, "noise_type", "FBM") != "FBM":
-            raise Unsupported(f"Noise Texture '{node.name}' of type {node.noise_type} (fBM is rendered)")
     if node.type == "TEX_VORONOI":
         if node.voronoi_dimensions != "3D":
             raise Unsupported(f"Voronoi Texture '{node.name}' in {node.voronoi_dimensions} (3D is rendered)")
@@ -628,13 +632,13 @@ def _check_procedural(node, out):
         raise Unsupported(f"output '{out.name}' of '{node.name}'")
 
 
-def _procedural_domain(node):
-    """The range of a procedural texture's output that its table covers: [0, 1] for Checker
-    and Gradient (clamped there); a Noise's fBm within ±1.02 per octave's amplitude, mapped
-    to [0, 1] when normalised."""
+def _procedural_domain(node, params):
+    """The range of a procedural texture's output (`params`: its pattern's description) that
+    its table covers: [0, 1] for Checker, Gradient and Wave (within it); a Noise's fBm
+    within ±1.02 per octave's amplitude, mapped to [0, 1] when normalised; Voronoi distances
+    within 3 (twice for F2) per octave's amplitude, about 2 normalised; the multifractal
+    Noise types over the range the core samples (`gdmlt.procedural_range`)."""
     if node.type == "TEX_VORONOI":
-        # F1 within √3 of the point by any metric but Manhattan (3), F2 within twice that;
-        # normalised: over the largest distance (within about 2)
         if node.normalize:
             return 0.0, 2.5
         detail = min(max(float(node.inputs["Detail"].default_value), 0.0), 15.0)
@@ -643,6 +647,10 @@ def _procedural_domain(node):
         return 0.0, 3.0 * (2.0 if node.feature == "F2" else 1.0) * amp
     if node.type != "TEX_NOISE":
         return 0.0, 1.0
+    if params.get("noise_type", "FBM") != "FBM":
+        import gdmlt
+
+        return gdmlt.procedural_range(params)
     if getattr(node, "normalize", True):
         return -0.02, 1.02
     detail = min(max(float(node.inputs["Detail"].default_value), 0.0), 15.0)
@@ -651,33 +659,46 @@ def _procedural_domain(node):
     return -1.02 * amp, 1.02 * amp
 
 
-def procedural_spec(node, out_name, coords):
-    """The core's description of procedural texture `node` (its output `out_name`) read at
-    `coords` = (space: 'GENERATED', 'OBJECT' or 'UV'; row-major 3×4 matrix of the Vector
-    input's mapping)."""
-    space, m = coords
-    m = np.asarray(m, np.float64).reshape(3, 4)
-    spec = {"pattern": node.type[4:], "space": space, "domain": _procedural_domain(node)}
-    if node.type in ("TEX_NOISE", "TEX_VORONOI", "TEX_CHECKER"):
-        m = m * float(node.inputs["Scale"].default_value)  # (the node scales its vector)
+def _value(node, name, default=0.0):
+    return float(node.inputs[name].default_value) if name in node.inputs else default
+
+
+def _pattern(node, out_name):
+    """The core's description of procedural texture `node`'s pattern (its output
+    `out_name`), without its coordinates."""
+    spec = {"pattern": node.type[4:]}
     if node.type == "TEX_NOISE":
-        spec.update(detail=float(node.inputs["Detail"].default_value),
-                    roughness=float(node.inputs["Roughness"].default_value),
-                    lacunarity=float(node.inputs["Lacunarity"].default_value),
-                    distortion=float(node.inputs["Distortion"].default_value),
-                    normalize=bool(getattr(node, "normalize", True)), color=out_name == "Color")
+        spec.update(noise_type=getattr(node, "noise_type", "FBM"), detail=_value(node, "Detail"),
+                    roughness=_value(node, "Roughness"), lacunarity=_value(node, "Lacunarity"),
+                    offset=_value(node, "Offset"), gain=_value(node, "Gain", 1.0),
+                    distortion=_value(node, "Distortion"), normalize=bool(getattr(node, "normalize", True)),
+                    color=out_name == "Color")
     if node.type == "TEX_VORONOI":
-        spec.update(f2=node.feature == "F2", metric=node.distance,
-                    exponent=float(node.inputs["Exponent"].default_value) if "Exponent" in node.inputs else 0.5,
-                    randomness=float(node.inputs["Randomness"].default_value),
-                    detail=float(node.inputs["Detail"].default_value),
-                    roughness=float(node.inputs["Roughness"].default_value),
-                    lacunarity=float(node.inputs["Lacunarity"].default_value),
+        spec.update(f2=node.feature == "F2", metric=node.distance, exponent=_value(node, "Exponent", 0.5),
+                    randomness=_value(node, "Randomness"), detail=_value(node, "Detail"),
+                    roughness=_value(node, "Roughness"), lacunarity=_value(node, "Lacunarity"),
                     normalize=bool(node.normalize), color=out_name == "Color")
+    if node.type == "TEX_WAVE":
+        rings = node.wave_type == "RINGS"
+        spec.update(rings=rings, direction=node.rings_direction if rings else node.bands_direction,
+                    profile=node.wave_profile, distortion=_value(node, "Distortion"), detail=_value(node, "Detail"),
+                    detail_scale=_value(node, "Detail Scale"), detail_roughness=_value(node, "Detail Roughness"),
+                    phase=_value(node, "Phase Offset"))
     if node.type == "TEX_GRADIENT":
         spec["gradient_type"] = node.gradient_type
-    spec["transform"] = tuple(float(x) for x in m.reshape(-1))
     return spec
+
+
+def procedural_spec(node, out_name, coords, domain):
+    """The core's description of procedural texture `node` (its output `out_name`) read at
+    `coords` = (space: 'GENERATED', 'OBJECT' or 'UV'; row-major 3×4 matrix of the Vector
+    input's mapping), its table over `domain`."""
+    space, m = coords
+    m = np.asarray(m, np.float64).reshape(3, 4)
+    if node.type != "TEX_GRADIENT":
+        m = m * float(node.inputs["Scale"].default_value)  # (the node scales its vector)
+    return {**_pattern(node, out_name), "space": space, "domain": tuple(domain),
+            "transform": tuple(float(x) for x in m.reshape(-1))}
 
 
 _NODES = {
@@ -743,4 +764,4 @@ def _tabulated(g, sock):
     v = _as_value(v) if sock.type == "VALUE" else _as_colour(v)
     rgb = np.nan_to_num(_as_colour(v).a, nan=0.0, posinf=0.0, neginf=0.0)
     rgb = np.ascontiguousarray(np.broadcast_to(rgb, (len(g.samples), 3)), dtype=np.float32)
-    return ("procedural", rgb, procedural_spec(node, out_name, coords))
+    return ("procedural", rgb, procedural_spec(node, out_name, coords, g.domain))

@@ -229,23 +229,62 @@ fn parse_texture(d: &Bound<'_, PyDict>) -> PyResult<TextureDesc> {
     })
 }
 
-/// {"pattern": "NOISE"|"VORONOI"|"CHECKER"|"GRADIENT", "space": "GENERATED"|"OBJECT"|"UV", "transform": 12
-/// floats (row-major 3×4), "domain": (lo, hi); NOISE: "detail", "roughness", "lacunarity",
-/// "distortion", "normalize", "color"; VORONOI: "f2", "metric", "exponent", "randomness",
-/// "detail", "roughness", "lacunarity", "normalize", "color"; GRADIENT: "gradient_type" (Blender's identifiers)}
+/// {"pattern": "NOISE"|"VORONOI"|"WAVE"|"CHECKER"|"GRADIENT", "space": "GENERATED"|"OBJECT"|
+/// "UV", "transform": 12 floats (row-major 3×4), "domain": (lo, hi); NOISE: "noise_type",
+/// "detail", "roughness", "lacunarity", "offset", "gain", "distortion", "normalize", "color";
+/// VORONOI: "f2", "metric", "exponent", "randomness", "detail", "roughness", "lacunarity",
+/// "normalize", "color"; WAVE: "rings", "direction", "profile", "distortion", "detail",
+/// "detail_scale", "detail_roughness", "phase"; GRADIENT: "gradient_type" (Blender's
+/// identifiers)}
 fn parse_procedural(d: &Bound<'_, PyDict>, ctx: &str) -> PyResult<scene::procedural::Procedural> {
-    use scene::procedural::{GradientKind, Metric, Pattern, Procedural, Space, VoronoiParams};
+    use scene::procedural::{
+        GradientKind, Metric, NoiseKind, NoiseParams, Pattern, Procedural, Space, VoronoiParams, WaveParams,
+        WaveProfile,
+    };
     let ctx = format!("{ctx}: procedural");
     let kind: String = get_or(d, "pattern", String::new(), &ctx)?;
     let pattern = match kind.to_ascii_uppercase().as_str() {
-        "NOISE" => Pattern::Noise {
-            detail: get_or(d, "detail", 2.0, &ctx)?,
-            roughness: get_or(d, "roughness", 0.5, &ctx)?,
-            lacunarity: get_or(d, "lacunarity", 2.0, &ctx)?,
-            distortion: get_or(d, "distortion", 0.0, &ctx)?,
-            normalize: get_or(d, "normalize", true, &ctx)?,
-            color: get_or(d, "color", false, &ctx)?,
-        },
+        "NOISE" => {
+            let kind: String = get_or(d, "noise_type", "FBM".to_string(), &ctx)?;
+            Pattern::Noise {
+                noise: NoiseParams {
+                    kind: NoiseKind::parse(&kind).ok_or_else(|| verr(format!("{ctx}: unknown noise_type '{kind}'")))?,
+                    detail: get_or(d, "detail", 2.0, &ctx)?,
+                    roughness: get_or(d, "roughness", 0.5, &ctx)?,
+                    lacunarity: get_or(d, "lacunarity", 2.0, &ctx)?,
+                    offset: get_or(d, "offset", 0.0, &ctx)?,
+                    gain: get_or(d, "gain", 1.0, &ctx)?,
+                    distortion: get_or(d, "distortion", 0.0, &ctx)?,
+                    normalize: get_or(d, "normalize", true, &ctx)?,
+                },
+                color: get_or(d, "color", false, &ctx)?,
+            }
+        }
+        "WAVE" => {
+            let direction: String = get_or(d, "direction", "X".to_string(), &ctx)?;
+            let profile: String = get_or(d, "profile", "SIN".to_string(), &ctx)?;
+            Pattern::Wave(WaveParams {
+                rings: get_or(d, "rings", false, &ctx)?,
+                direction: match direction.to_ascii_uppercase().as_str() {
+                    "X" => 0,
+                    "Y" => 1,
+                    "Z" => 2,
+                    "DIAGONAL" | "SPHERICAL" => 3,
+                    other => return Err(verr(format!("{ctx}: unknown wave direction '{other}'"))),
+                },
+                profile: match profile.to_ascii_uppercase().as_str() {
+                    "SIN" => WaveProfile::Sine,
+                    "SAW" => WaveProfile::Saw,
+                    "TRI" => WaveProfile::Triangle,
+                    other => return Err(verr(format!("{ctx}: unknown wave profile '{other}'"))),
+                },
+                distortion: get_or(d, "distortion", 0.0, &ctx)?,
+                detail: get_or(d, "detail", 2.0, &ctx)?,
+                detail_scale: get_or(d, "detail_scale", 1.0, &ctx)?,
+                detail_roughness: get_or(d, "detail_roughness", 0.5, &ctx)?,
+                phase: get_or(d, "phase", 0.0, &ctx)?,
+            })
+        }
         "VORONOI" => {
             let metric: String = get_or(d, "metric", "EUCLIDEAN".to_string(), &ctx)?;
             Pattern::Voronoi {
@@ -269,7 +308,9 @@ fn parse_procedural(d: &Bound<'_, PyDict>, ctx: &str) -> PyResult<scene::procedu
                 GradientKind::parse(&g).ok_or_else(|| verr(format!("{ctx}: unknown gradient_type '{g}'")))?,
             )
         }
-        other => return Err(verr(format!("{ctx}: unknown pattern '{other}' (NOISE, VORONOI, CHECKER or GRADIENT)"))),
+        other => {
+            return Err(verr(format!("{ctx}: unknown pattern '{other}' (NOISE, VORONOI, WAVE, CHECKER or GRADIENT)")))
+        }
     };
     let space: String = get_or(d, "space", "GENERATED".to_string(), &ctx)?;
     let space = match space.to_ascii_uppercase().as_str() {
@@ -850,6 +891,14 @@ fn default_settings(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
     Ok(out)
 }
 
+/// The range of a procedural texture's output (a texture dict's "procedural" entry, its
+/// domain ignored) over many points: the domain of the table the add-on builds for a pattern
+/// without closed-form bounds.
+#[pyfunction]
+fn procedural_range(spec: &Bound<'_, PyDict>) -> PyResult<(f32, f32)> {
+    Ok(parse_procedural(spec, "procedural_range")?.sampled_range())
+}
+
 /// The scene dict of a built-in scene (the names in `scene::builtin::BUILTIN_SCENES`).
 #[pyfunction]
 #[pyo3(signature = (name, width=256, height=256))]
@@ -1117,6 +1166,7 @@ fn init_module(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Scene>()?;
     m.add_function(wrap_pyfunction!(render, m)?)?;
     m.add_function(wrap_pyfunction!(builtin_scene, m)?)?;
+    m.add_function(wrap_pyfunction!(procedural_range, m)?)?;
     m.add_function(wrap_pyfunction!(write_exr, m)?)?;
     m.add_function(wrap_pyfunction!(write_png, m)?)?;
     m.add_function(wrap_pyfunction!(reconstruct, m)?)?;

@@ -37,6 +37,7 @@ Scene, render, builtin_scene = _impl.Scene, _impl.render, _impl.builtin_scene
 write_exr, write_png, reconstruct = _impl.write_exr, _impl.write_png, _impl.reconstruct
 METHODS, __version__, BUILD_TARGET = _impl.METHODS, _impl.__version__, _impl.BUILD_TARGET
 RR_START_DEPTH, check_memory, bootstrap_paths = _impl.RR_START_DEPTH, _impl.check_memory, _impl.bootstrap_paths
+procedural_range = _impl.procedural_range
 from .addon import enable_addon, addon_dir
 from .oidn import denoise
 

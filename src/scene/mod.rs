@@ -1071,19 +1071,15 @@ mod tests {
         // a mesh without Generated coordinates reads the origin everywhere: a constant, no bump
         assert!(close(normal(Space::Generated, linear, false), Vec3::Z));
         // noise: the tilt is the one of its central differences
-        let noise = Pattern::Noise {
-            detail: 2.0,
-            roughness: 0.5,
-            lacunarity: 2.0,
-            distortion: 0.0,
-            normalize: true,
-            color: false,
-        };
+        let noise =
+            Pattern::Noise { noise: super::procedural::NoiseParams::fbm(2.0, 0.5, 2.0, 0.0, true), color: false };
         let n = normal(Space::Generated, noise, true);
         let p = Vec3::new(0.05, -0.1, 0.0);
         let c = |p: Vec3| Vec3::new(2.0 * p.y + 0.5, -p.x + 0.5, p.z);
         let e = 1e-3;
-        let h = |p: Vec3| super::procedural::noise_texture(c(p), 2.0, 0.5, 2.0, 0.0, true).0;
+        let h = |p: Vec3| {
+            super::procedural::noise_texture(c(p), &super::procedural::NoiseParams::fbm(2.0, 0.5, 2.0, 0.0, true)).0
+        };
         let g = Vec3::new(h(p + Vec3::X * e) - h(p - Vec3::X * e), h(p + Vec3::Y * e) - h(p - Vec3::Y * e), 0.0)
             / (2.0 * e);
         let want = (Vec3::Z - g * 0.1).normalize();

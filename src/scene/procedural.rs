@@ -30,14 +30,93 @@ use glam::Vec3;
 /// What a pattern computes.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Pattern {
-    /// The Noise Texture node (3D, fBm). `color`: its Color output (three fBm), else Fac.
-    Noise { detail: f32, roughness: f32, lacunarity: f32, distortion: f32, normalize: bool, color: bool },
+    /// The Noise Texture node (3D). `color`: its Color output (three noises), else Fac.
+    Noise { noise: NoiseParams, color: bool },
+    /// The Wave Texture node (Fac; its Color is the same grey).
+    Wave(WaveParams),
     /// The Voronoi Texture node (3D, F1 or F2). `color`: its Color output, else Distance.
     Voronoi { voronoi: VoronoiParams, color: bool },
     /// The Checker Texture node's Fac (1 in the cells of Color1).
     Checker,
     /// The Gradient Texture node's Fac.
     Gradient(GradientKind),
+}
+
+/// The Noise Texture node's settings.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct NoiseParams {
+    pub kind: NoiseKind,
+    pub detail: f32,
+    pub roughness: f32,
+    pub lacunarity: f32,
+    /// The multifractal terrains' offset and gain.
+    pub offset: f32,
+    pub gain: f32,
+    pub distortion: f32,
+    /// fBm only: mapped to [0, 1].
+    pub normalize: bool,
+}
+
+impl NoiseParams {
+    /// The node's defaults (fBm, detail 2, roughness ½, lacunarity 2, normalised).
+    pub fn fbm(detail: f32, roughness: f32, lacunarity: f32, distortion: f32, normalize: bool) -> NoiseParams {
+        NoiseParams {
+            kind: NoiseKind::Fbm,
+            detail,
+            roughness,
+            lacunarity,
+            offset: 0.0,
+            gain: 1.0,
+            distortion,
+            normalize,
+        }
+    }
+}
+
+/// The Noise Texture node's types (Blender's former Musgrave Texture).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum NoiseKind {
+    Fbm,
+    Multifractal,
+    HybridMultifractal,
+    RidgedMultifractal,
+    HeteroTerrain,
+}
+
+impl NoiseKind {
+    /// Blender's enum identifiers (`ShaderNodeTexNoise.noise_type`).
+    pub fn parse(s: &str) -> Option<NoiseKind> {
+        Some(match s.to_ascii_uppercase().as_str() {
+            "FBM" => NoiseKind::Fbm,
+            "MULTIFRACTAL" => NoiseKind::Multifractal,
+            "HYBRID_MULTIFRACTAL" => NoiseKind::HybridMultifractal,
+            "RIDGED_MULTIFRACTAL" => NoiseKind::RidgedMultifractal,
+            "HETERO_TERRAIN" => NoiseKind::HeteroTerrain,
+            _ => return None,
+        })
+    }
+}
+
+/// The Wave Texture node's settings.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct WaveParams {
+    /// Rings (else bands).
+    pub rings: bool,
+    /// Bands: X, Y, Z, diagonal; rings: X, Y, Z, spherical (0..3).
+    pub direction: u8,
+    pub profile: WaveProfile,
+    pub distortion: f32,
+    pub detail: f32,
+    pub detail_scale: f32,
+    pub detail_roughness: f32,
+    pub phase: f32,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum WaveProfile {
+    Sine,
+    Saw,
+    Triangle,
 }
 
 /// The Voronoi Texture node's settings.
@@ -258,21 +337,134 @@ pub fn fbm(p: Vec3, detail: f32, roughness: f32, lacunarity: f32, normalize: boo
     }
 }
 
+/// Multifractal: the product of (1 + amplitude·noise) over the octaves.
+fn multifractal(mut p: Vec3, detail: f32, roughness: f32, lacunarity: f32) -> f32 {
+    let (mut value, mut pwr) = (1.0f32, 1.0f32);
+    for _ in 0..=(detail as i32) {
+        value *= pwr * snoise(p) + 1.0;
+        pwr *= roughness;
+        p *= lacunarity;
+    }
+    let rmd = detail - detail.floor();
+    if rmd != 0.0 {
+        value *= rmd * pwr * snoise(p) + 1.0;
+    }
+    value
+}
+
+/// Heterogeneous terrain: each octave's increment scaled by the value so far.
+fn hetero_terrain(mut p: Vec3, detail: f32, roughness: f32, lacunarity: f32, offset: f32) -> f32 {
+    let mut pwr = roughness;
+    let mut value = offset + snoise(p);
+    p *= lacunarity;
+    for _ in 1..=(detail as i32) {
+        value += (snoise(p) + offset) * pwr * value;
+        pwr *= roughness;
+        p *= lacunarity;
+    }
+    let rmd = detail - detail.floor();
+    if rmd != 0.0 {
+        value += rmd * (snoise(p) + offset) * pwr * value;
+    }
+    value
+}
+
+/// Hybrid additive/multiplicative multifractal terrain.
+fn hybrid_multifractal(mut p: Vec3, detail: f32, roughness: f32, lacunarity: f32, offset: f32, gain: f32) -> f32 {
+    let (mut pwr, mut value, mut weight) = (1.0f32, 0.0f32, 1.0f32);
+    let mut i = 0;
+    while weight > 0.001 && i <= detail as i32 {
+        weight = weight.min(1.0);
+        let signal = (snoise(p) + offset) * pwr;
+        pwr *= roughness;
+        value += weight * signal;
+        weight *= gain * signal;
+        p *= lacunarity;
+        i += 1;
+    }
+    let rmd = detail - detail.floor();
+    if rmd != 0.0 && weight > 0.001 {
+        weight = weight.min(1.0);
+        value += rmd * weight * (snoise(p) + offset) * pwr;
+    }
+    value
+}
+
+/// Ridged multifractal terrain (whole octaves only, as Cycles).
+fn ridged_multifractal(mut p: Vec3, detail: f32, roughness: f32, lacunarity: f32, offset: f32, gain: f32) -> f32 {
+    let mut pwr = roughness;
+    let mut signal = offset - snoise(p).abs();
+    signal *= signal;
+    let mut value = signal;
+    for _ in 1..=(detail as i32) {
+        p *= lacunarity;
+        let weight = (signal * gain).clamp(0.0, 1.0);
+        signal = offset - snoise(p).abs();
+        signal *= signal;
+        signal *= weight;
+        value += signal * pwr;
+        pwr *= roughness;
+    }
+    value
+}
+
+/// The Noise node's fractal of its type at `p`.
+fn noise_select(p: Vec3, n: &NoiseParams) -> f32 {
+    match n.kind {
+        NoiseKind::Fbm => fbm(p, n.detail, n.roughness, n.lacunarity, n.normalize),
+        NoiseKind::Multifractal => multifractal(p, n.detail, n.roughness, n.lacunarity),
+        NoiseKind::HybridMultifractal => hybrid_multifractal(p, n.detail, n.roughness, n.lacunarity, n.offset, n.gain),
+        NoiseKind::RidgedMultifractal => ridged_multifractal(p, n.detail, n.roughness, n.lacunarity, n.offset, n.gain),
+        NoiseKind::HeteroTerrain => hetero_terrain(p, n.detail, n.roughness, n.lacunarity, n.offset),
+    }
+}
+
+/// The Wave Texture node at `p` (already scaled): its Fac.
+pub fn wave_texture(p: Vec3, w: &WaveParams) -> f32 {
+    use std::f32::consts::{FRAC_PI_2, TAU};
+    let p = (p + Vec3::splat(0.000001)) * 0.999999;
+    let mut n = if !w.rings {
+        match w.direction {
+            0 => p.x * 20.0,
+            1 => p.y * 20.0,
+            2 => p.z * 20.0,
+            _ => (p.x + p.y + p.z) * 10.0,
+        }
+    } else {
+        let keep = match w.direction {
+            0 => Vec3::new(0.0, 1.0, 1.0),
+            1 => Vec3::new(1.0, 0.0, 1.0),
+            2 => Vec3::new(1.0, 1.0, 0.0),
+            _ => Vec3::ONE,
+        };
+        (p * keep).length() * 20.0
+    };
+    n += w.phase;
+    if w.distortion != 0.0 {
+        n += w.distortion * (fbm(p * w.detail_scale, w.detail, w.detail_roughness, 2.0, true) * 2.0 - 1.0);
+    }
+    match w.profile {
+        WaveProfile::Sine => 0.5 + 0.5 * (n - FRAC_PI_2).sin(),
+        WaveProfile::Saw => {
+            let n = n / TAU;
+            n - n.floor()
+        }
+        WaveProfile::Triangle => {
+            let n = n / TAU;
+            (n - (n + 0.5).floor()).abs() * 2.0
+        }
+    }
+}
+
 #[inline]
 fn mix(a: f32, b: f32, t: f32) -> f32 {
     (1.0 - t) * a + t * b
 }
 
-/// The Noise Texture node (3D, fBm) at `p` (already scaled): (Fac, Color).
-pub fn noise_texture(
-    p: Vec3,
-    detail: f32,
-    roughness: f32,
-    lacunarity: f32,
-    distortion: f32,
-    normalize: bool,
-) -> (f32, Vec3) {
-    let (detail, roughness) = (detail.clamp(0.0, 15.0), roughness.max(0.0));
+/// The Noise Texture node (3D) at `p` (already scaled): (Fac, Color).
+pub fn noise_texture(p: Vec3, n: &NoiseParams) -> (f32, Vec3) {
+    let n = NoiseParams { detail: n.detail.clamp(0.0, 15.0), roughness: n.roughness.max(0.0), ..*n };
+    let distortion = n.distortion;
     let mut p = p;
     if distortion != 0.0 {
         p += Vec3::new(
@@ -281,12 +473,8 @@ pub fn noise_texture(
             snoise(p + seed_offset(2.0)) * distortion,
         );
     }
-    let value = fbm(p, detail, roughness, lacunarity, normalize);
-    let color = Vec3::new(
-        value,
-        fbm(p + seed_offset(3.0), detail, roughness, lacunarity, normalize),
-        fbm(p + seed_offset(4.0), detail, roughness, lacunarity, normalize),
-    );
+    let value = noise_select(p, &n);
+    let color = Vec3::new(value, noise_select(p + seed_offset(3.0), &n), noise_select(p + seed_offset(4.0), &n));
     (value, color)
 }
 
@@ -448,8 +636,8 @@ impl Procedural {
     /// The pattern's output at `p` in its own space.
     pub fn pattern_at(&self, p: Vec3) -> Vec3 {
         match self.pattern {
-            Pattern::Noise { detail, roughness, lacunarity, distortion, normalize, color } => {
-                let (value, c) = noise_texture(p, detail, roughness, lacunarity, distortion, normalize);
+            Pattern::Noise { noise, color } => {
+                let (value, c) = noise_texture(p, &noise);
                 if color {
                     c
                 } else {
@@ -464,9 +652,30 @@ impl Procedural {
                     Vec3::splat(d)
                 }
             }
+            Pattern::Wave(wave) => Vec3::splat(wave_texture(p, &wave)),
             Pattern::Checker => Vec3::splat(checker(p)),
             Pattern::Gradient(kind) => Vec3::splat(gradient(p, kind)),
         }
+    }
+
+    /// The range of the pattern's output channels over 32768 points spread through a cube of
+    /// 200 lattice cells (its patterns are the same everywhere), widened by 2% each side: the
+    /// domain of the table of a pattern whose bounds have no closed form (the multifractal
+    /// noises).
+    pub fn sampled_range(&self) -> (f32, f32) {
+        let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
+        for i in 0..32768u32 {
+            let p = Vec3::new(unit(hash3(i, 0, 7)), unit(hash3(i, 1, 7)), unit(hash3(i, 2, 7))) * 200.0 - 100.0;
+            let v = self.pattern_at(p);
+            if v.is_finite() {
+                (lo, hi) = (lo.min(v.min_element()), hi.max(v.max_element()));
+            }
+        }
+        if lo > hi {
+            return (0.0, 1.0);
+        }
+        let margin = 0.02 * (hi - lo).max(1e-6);
+        (lo - margin, hi + margin)
     }
 
     /// Where `s` falls in a table of `n` entries over the domain: (entry, weight of the next).
@@ -538,8 +747,8 @@ mod tests {
     #[test]
     fn distortion_moves_the_pattern_and_colour_channels_differ() {
         let p = Vec3::new(1.3, 0.4, 2.9);
-        let (v0, c0) = noise_texture(p, 2.0, 0.5, 2.0, 0.0, true);
-        let (v1, _) = noise_texture(p, 2.0, 0.5, 2.0, 1.0, true);
+        let (v0, c0) = noise_texture(p, &NoiseParams::fbm(2.0, 0.5, 2.0, 0.0, true));
+        let (v1, _) = noise_texture(p, &NoiseParams::fbm(2.0, 0.5, 2.0, 1.0, true));
         assert_eq!(c0.x, v0);
         assert!(v0 != v1 && c0.y != c0.x && c0.z != c0.y);
         // the seed offsets lie in [100, 200]
@@ -608,6 +817,77 @@ mod tests {
             voronoi_texture(Vec3::new(0.3, 1.7, -2.2), &v).0
         };
         assert!((at(1.25) - (0.75 * at(1.0) + 0.25 * at(2.0))).abs() < 1e-5);
+    }
+
+    /// At detail 0 each multifractal type is its first octave's formula; the sampled range
+    /// holds what the pattern gives elsewhere.
+    #[test]
+    fn noise_types_start_from_their_first_octave() {
+        let p = Vec3::new(0.37, -1.21, 2.9);
+        let n = snoise(p);
+        let with = |kind| NoiseParams {
+            kind,
+            detail: 0.0,
+            offset: 0.8,
+            gain: 1.5,
+            ..NoiseParams::fbm(0.0, 0.5, 2.0, 0.0, true)
+        };
+        let at = |kind| noise_texture(p, &with(kind)).0;
+        assert!((at(NoiseKind::Multifractal) - (1.0 + n)).abs() < 1e-6);
+        assert!((at(NoiseKind::RidgedMultifractal) - (0.8 - n.abs()).powi(2)).abs() < 1e-6);
+        assert!((at(NoiseKind::HeteroTerrain) - (0.8 + n)).abs() < 1e-6);
+        assert!((at(NoiseKind::HybridMultifractal) - (n + 0.8)).abs() < 1e-6);
+        let pr = Procedural {
+            pattern: Pattern::Noise {
+                noise: NoiseParams { kind: NoiseKind::Multifractal, ..NoiseParams::fbm(4.0, 0.6, 2.0, 0.0, true) },
+                color: false,
+            },
+            space: Space::Generated,
+            transform: [1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0],
+            domain: (0.0, 1.0),
+        };
+        let (lo, hi) = pr.sampled_range();
+        assert!(lo < 0.5 && hi > 1.5, "{lo} {hi}");
+        let inside = (0..5000)
+            .filter(|&i| {
+                let v = pr.pattern_at(Vec3::new(i as f32 * 0.731 + 500.0, i as f32 * 0.117, -(i as f32) * 0.31)).x;
+                (lo..=hi).contains(&v)
+            })
+            .count();
+        assert!(inside >= 4990, "{inside}");
+    }
+
+    /// Wave bands and rings follow their profiles: a sine band is ½ − ½·cos(20x) (after the
+    /// 10⁻⁶ nudge), a saw rises from 0 to 1 over 2π/20, a triangle peaks at half a period.
+    #[test]
+    fn waves_follow_their_profiles() {
+        let w = |rings, direction, profile| WaveParams {
+            rings,
+            direction,
+            profile,
+            distortion: 0.0,
+            detail: 2.0,
+            detail_scale: 1.0,
+            detail_roughness: 0.5,
+            phase: 0.0,
+        };
+        let nudge = |x: f32| (x + 0.000001) * 0.999999;
+        for x in [0.0f32, 0.05, 0.1, 0.3, 0.77] {
+            let p = Vec3::new(x, 0.4, -0.2);
+            let sine = wave_texture(p, &w(false, 0, WaveProfile::Sine));
+            assert!((sine - (0.5 - 0.5 * (20.0 * nudge(x)).cos())).abs() < 1e-5, "{x}");
+            let saw = wave_texture(p, &w(false, 0, WaveProfile::Saw));
+            let t = 20.0 * nudge(x) / std::f32::consts::TAU;
+            assert!((saw - (t - t.floor())).abs() < 1e-5);
+            let tri = wave_texture(p, &w(false, 0, WaveProfile::Triangle));
+            assert!((tri - 2.0 * (t - (t + 0.5).floor()).abs()).abs() < 1e-5);
+        }
+        // rings around Z ignore z; spherical rings see all three
+        let a = wave_texture(Vec3::new(0.3, 0.4, 0.0), &w(true, 2, WaveProfile::Sine));
+        let b = wave_texture(Vec3::new(0.3, 0.4, 5.0), &w(true, 2, WaveProfile::Sine));
+        assert!((a - b).abs() < 1e-5);
+        let c = wave_texture(Vec3::new(0.3, 0.4, 0.2), &w(true, 3, WaveProfile::Sine));
+        assert!((a - c).abs() > 1e-3);
     }
 
     #[test]

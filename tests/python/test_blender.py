@@ -1708,7 +1708,8 @@ def test_node_groups_agree_with_cycles(bpy_mod, tmp_out):
 
 def _procedural_cards():
     """Emission colours from procedural textures (name, wiring(nt) → the colour socket, on a
-    sphere?): Voronoi (F1 and F2, every metric, fractal, its Distance and Color), Noise through a Color Ramp, a Noise's Color with distortion, a detailed Noise on
+    sphere?): Voronoi (F1 and F2, every metric, fractal, its Distance and Color), Wave bands
+    and rings with distortion, the multifractal Noise types through a Map Range, Noise through a Color Ramp, a Noise's Color with distortion, a detailed Noise on
     mapped Object coordinates, an unnormalised Noise on UVs through Math, a Checker, Gradients
     (easing; spherical on mapped Generated coordinates; radial on Object coordinates), and
     on a turned, squashed smooth sphere a Noise on Generated and a Checker on Object
@@ -1779,6 +1780,27 @@ def _procedural_cards():
         wire.__name__ = f"voronoi_{feature}_{metric}_{output}".lower()
         return wire
 
+    def wave(kind, direction, profile, **inputs):
+        def wire(nt):
+            w = node(nt, "ShaderNodeTexWave", **inputs)
+            w.wave_type, w.wave_profile = kind, profile
+            setattr(w, "rings_direction" if kind == "RINGS" else "bands_direction", direction)
+            return w.outputs["Fac"]
+        wire.__name__ = f"wave_{kind}_{direction}_{profile}".lower()
+        return wire
+
+    def noise_type(kind, **inputs):
+        def wire(nt):
+            n = nt.nodes.new("ShaderNodeTexNoise")
+            n.noise_type = kind
+            for k, x in inputs.items():
+                n.inputs[k].default_value = x
+            r = node(nt, "ShaderNodeMapRange", **{"From Min": -0.5, "From Max": 2.0})
+            nt.links.new(n.outputs["Fac"], r.inputs[0])
+            return r.outputs[0]
+        wire.__name__ = f"noise_{kind.lower()}"
+        return wire
+
     def sphere_checker(nt):
         c = node(nt, "ShaderNodeTexChecker", Scale=4.0)
         nt.links.new(nt.nodes.new("ShaderNodeTexCoord").outputs["Object"], c.inputs["Vector"])
@@ -1791,11 +1813,16 @@ def _procedural_cards():
             (voronoi(Scale=4.0), False), (voronoi(output="Color", Scale=3.0, Randomness=0.8), False),
             (voronoi("F2", "MANHATTAN", ramp=True, Scale=3.0, Detail=2.5), False),
             (voronoi("F1", "CHEBYCHEV", Scale=5.0), False),
-            (voronoi("F1", "MINKOWSKI", "Color", Scale=5.0, Exponent=1.5), True)]
+            (voronoi("F1", "MINKOWSKI", "Color", Scale=5.0, Exponent=1.5), True),
+            (wave("BANDS", "DIAGONAL", "SAW", Distortion=4.0, Scale=1.5), False),
+            (wave("RINGS", "SPHERICAL", "TRI", Scale=1.0, Distortion=2.0, Detail=3.0), False),
+            (noise_type("RIDGED_MULTIFRACTAL", Scale=3.0), False),
+            (noise_type("HYBRID_MULTIFRACTAL", Scale=3.0, Detail=4.0), False),
+            (noise_type("MULTIFRACTAL", Scale=3.0, Detail=3.5), True)]
 
 
 def test_procedural_textures_agree_with_cycles(bpy_mod, tmp_out):
-    """Noise, Voronoi, Checker and Gradient textures (on Generated, Object and UV coordinates, through
+    """Noise, Voronoi, Wave, Checker and Gradient textures (on Generated, Object and UV coordinates, through
     Mapping nodes and the colour and value nodes after them) emit what Cycles' do, pixel by
     pixel: the mean relative difference of each card within twice that of two GDMLT seeds
     (the pixel filter's jitter) plus 0.2%. Before, each was 'not evaluated': its input's
