@@ -14,11 +14,12 @@ grid up to 16× finer than the image (at most 1024 texels across, 4M in all): a 
 step on a magnified 8×8 image is then sharp to 1/128 of the image, where at the image's own
 resolution it rendered 5% off Cycles. Over Closest images the grid is the image's own.
 
-A graph over one procedural texture instead of images (Noise, Voronoi, Wave, Checker, Gradient) is a
+A graph over one procedural texture instead of images (Noise, Voronoi, Wave, Brick, Checker, Gradient) is a
 function of that texture's output alone: it is evaluated on a table of the output's values
 over its range (`_PROCEDURAL_TABLES`), which the core looks up after computing the pattern
-per shading point (src/scene/procedural.rs). A Noise's or Voronoi's Color output (three
-values) only when it feeds the input straight, a Checker's colours only from constants.
+per shading point (src/scene/procedural.rs). A Noise's, Voronoi's or Brick's Color output
+(three values) only when it feeds the input straight, a Checker's or Brick's colours only
+from constants.
 
 A graph with no image in it is a constant (a Math node on two values, a Mix of two colours):
 its value. A graph with a node outside this set, images under different UV transforms or
@@ -284,7 +285,7 @@ class _Graph:
         if node.type == "TEX_CHECKER" and out.identifier == "Color":
             c1, c2 = (_as_colour(c).a for c in _all(walk, collect, "Color1", "Color2"))
             return _Colour(np.where(s[:, None] == 1.0, c1, c2))
-        if out.identifier == "Color":  # (a Gradient's grey, or three channels: each through the table)
+        if out.identifier == "Color":  # (a Gradient's or Wave's grey, or three channels the core computes)
             return _Colour(np.repeat(s[:, None], 3, axis=1))
         return _Value(s)
 
@@ -601,14 +602,19 @@ def _map_range(node, out, walk, collect):
 # --- procedural textures (evaluated per point by the core; the graph after them tabulated) ----
 
 # table entries over the output's range, per node type
-_PROCEDURAL_TABLES = {"TEX_NOISE": 2048, "TEX_VORONOI": 4096, "TEX_WAVE": 2048, "TEX_CHECKER": 2,
-                      "TEX_GRADIENT": 1024}
+_PROCEDURAL_TABLES = {"TEX_NOISE": 2048, "TEX_VORONOI": 4096, "TEX_WAVE": 2048, "TEX_BRICK": 1024,
+                      "TEX_CHECKER": 2, "TEX_GRADIENT": 1024}
 _NOISE_INPUTS = ("Scale", "Detail", "Roughness", "Lacunarity", "Offset", "Gain", "Distortion")
 _WAVE_INPUTS = ("Scale", "Distortion", "Detail", "Detail Scale", "Detail Roughness", "Phase Offset")
+_BRICK_INPUTS = ("Color1", "Color2", "Mortar", "Scale", "Mortar Size", "Mortar Smooth", "Bias", "Brick Width",
+                 "Row Height")
 _VORONOI_INPUTS = ("Scale", "Detail", "Roughness", "Lacunarity", "Randomness", "Exponent")
 # outputs whose value (not colour) is the pattern, and colour outputs of three values
-_SCALAR_OUTPUTS = {"TEX_NOISE": "Fac", "TEX_VORONOI": "Distance", "TEX_WAVE": "Fac", "TEX_CHECKER": "Fac",
-                   "TEX_GRADIENT": "Fac"}
+_SCALAR_OUTPUTS = {"TEX_NOISE": "Fac", "TEX_VORONOI": "Distance", "TEX_WAVE": "Fac", "TEX_BRICK": "Fac",
+                   "TEX_CHECKER": "Fac", "TEX_GRADIENT": "Fac"}
+# the colour outputs the core computes itself (three values, or the Brick's colours): only
+# straight into a shader input, through an identity table
+_COLOUR_OUTPUTS = ("TEX_NOISE", "TEX_VORONOI", "TEX_BRICK")
 
 
 def _check_procedural(node, out):
@@ -616,7 +622,7 @@ def _check_procedural(node, out):
     not 3D, Voronoi features other than F1 and F2, an output it does not compute (a colour
     output through other nodes is checked by the caller)."""
     params = {"TEX_NOISE": _NOISE_INPUTS, "TEX_VORONOI": _VORONOI_INPUTS, "TEX_WAVE": _WAVE_INPUTS,
-              "TEX_CHECKER": ("Scale",), "TEX_GRADIENT": ()}[node.type]
+              "TEX_BRICK": _BRICK_INPUTS, "TEX_CHECKER": ("Scale",), "TEX_GRADIENT": ()}[node.type]
     for name in params:
         if name in node.inputs and node.inputs[name].is_linked:
             raise Unsupported(f"the linked input '{name}' of procedural texture '{node.name}'")
@@ -645,6 +651,8 @@ def _procedural_domain(node, params):
         rough = min(max(float(node.inputs["Roughness"].default_value), 0.0), 1.0)
         amp = sum(rough ** k for k in range(int(detail) + 2))
         return 0.0, 3.0 * (2.0 if node.feature == "F2" else 1.0) * amp
+    if node.type == "TEX_BRICK" and params["color"]:  # (an identity table over its colours)
+        return 0.0, max(1.0, *params["color1"], *params["color2"], *params["mortar"])
     if node.type != "TEX_NOISE":
         return 0.0, 1.0
     if params.get("noise_type", "FBM") != "FBM":
@@ -684,6 +692,15 @@ def _pattern(node, out_name):
                     profile=node.wave_profile, distortion=_value(node, "Distortion"), detail=_value(node, "Detail"),
                     detail_scale=_value(node, "Detail Scale"), detail_roughness=_value(node, "Detail Roughness"),
                     phase=_value(node, "Phase Offset"))
+    if node.type == "TEX_BRICK":
+        spec.update(mortar_size=_value(node, "Mortar Size"), mortar_smooth=_value(node, "Mortar Smooth"),
+                    bias=_value(node, "Bias"), brick_width=_value(node, "Brick Width"),
+                    row_height=_value(node, "Row Height"), offset=float(node.offset),
+                    offset_frequency=int(node.offset_frequency), squash=float(node.squash),
+                    squash_frequency=int(node.squash_frequency),
+                    **{k: tuple(float(x) for x in tuple(node.inputs[n].default_value)[:3])
+                       for k, n in (("color1", "Color1"), ("color2", "Color2"), ("mortar", "Mortar"))},
+                    color=out_name == "Color")
     if node.type == "TEX_GRADIENT":
         spec["gradient_type"] = node.gradient_type
     return spec
@@ -755,7 +772,7 @@ def _tabulated(g, sock):
     """`evaluate` of a graph over a procedural texture: ('procedural', table (n, 3) float32,
     the core's description of the pattern)."""
     node, out_name = g.procedural
-    if out_name == "Color" and node.type in ("TEX_NOISE", "TEX_VORONOI") and not (
+    if out_name == "Color" and node.type in _COLOUR_OUTPUTS and not (
             sock.is_linked and sock.links[0].from_node.name == node.name):
         raise Unsupported(f"the Color output of '{node.name}' through other nodes (its "
                           f"{_SCALAR_OUTPUTS[node.type]} is rendered through them)")

@@ -229,17 +229,19 @@ fn parse_texture(d: &Bound<'_, PyDict>) -> PyResult<TextureDesc> {
     })
 }
 
-/// {"pattern": "NOISE"|"VORONOI"|"WAVE"|"CHECKER"|"GRADIENT", "space": "GENERATED"|"OBJECT"|
+/// {"pattern": "NOISE"|"VORONOI"|"WAVE"|"BRICK"|"CHECKER"|"GRADIENT", "space": "GENERATED"|"OBJECT"|
 /// "UV", "transform": 12 floats (row-major 3×4), "domain": (lo, hi); NOISE: "noise_type",
 /// "detail", "roughness", "lacunarity", "offset", "gain", "distortion", "normalize", "color";
 /// VORONOI: "f2", "metric", "exponent", "randomness", "detail", "roughness", "lacunarity",
 /// "normalize", "color"; WAVE: "rings", "direction", "profile", "distortion", "detail",
-/// "detail_scale", "detail_roughness", "phase"; GRADIENT: "gradient_type" (Blender's
+/// "detail_scale", "detail_roughness", "phase"; BRICK: "mortar_size", "mortar_smooth", "bias",
+/// "brick_width", "row_height", "offset", "offset_frequency", "squash", "squash_frequency",
+/// "color1", "color2", "mortar", "color"; GRADIENT: "gradient_type" (Blender's
 /// identifiers)}
 fn parse_procedural(d: &Bound<'_, PyDict>, ctx: &str) -> PyResult<scene::procedural::Procedural> {
     use scene::procedural::{
-        GradientKind, Metric, NoiseKind, NoiseParams, Pattern, Procedural, Space, VoronoiParams, WaveParams,
-        WaveProfile,
+        BrickParams, GradientKind, Metric, NoiseKind, NoiseParams, Pattern, Procedural, Space, VoronoiParams,
+        WaveParams, WaveProfile,
     };
     let ctx = format!("{ctx}: procedural");
     let kind: String = get_or(d, "pattern", String::new(), &ctx)?;
@@ -301,6 +303,28 @@ fn parse_procedural(d: &Bound<'_, PyDict>, ctx: &str) -> PyResult<scene::procedu
                 color: get_or(d, "color", false, &ctx)?,
             }
         }
+        "BRICK" => {
+            let colour = |key: &'static str, def| -> PyResult<glam::Vec3> {
+                Ok(glam::Vec3::from_array(get_or(d, key, def, &ctx)?))
+            };
+            Pattern::Brick {
+                brick: BrickParams {
+                    mortar_size: get_or(d, "mortar_size", 0.02, &ctx)?,
+                    mortar_smooth: get_or(d, "mortar_smooth", 0.1, &ctx)?,
+                    bias: get_or(d, "bias", 0.0, &ctx)?,
+                    brick_width: get_or(d, "brick_width", 0.5, &ctx)?,
+                    row_height: get_or(d, "row_height", 0.25, &ctx)?,
+                    offset: get_or(d, "offset", 0.5, &ctx)?,
+                    offset_frequency: get_or(d, "offset_frequency", 2, &ctx)?,
+                    squash: get_or(d, "squash", 1.0, &ctx)?,
+                    squash_frequency: get_or(d, "squash_frequency", 2, &ctx)?,
+                    color1: colour("color1", [0.8; 3])?,
+                    color2: colour("color2", [0.2; 3])?,
+                    mortar: colour("mortar", [0.0; 3])?,
+                },
+                color: get_or(d, "color", false, &ctx)?,
+            }
+        }
         "CHECKER" => Pattern::Checker,
         "GRADIENT" => {
             let g: String = get_or(d, "gradient_type", "LINEAR".to_string(), &ctx)?;
@@ -309,7 +333,9 @@ fn parse_procedural(d: &Bound<'_, PyDict>, ctx: &str) -> PyResult<scene::procedu
             )
         }
         other => {
-            return Err(verr(format!("{ctx}: unknown pattern '{other}' (NOISE, VORONOI, WAVE, CHECKER or GRADIENT)")))
+            return Err(verr(format!(
+                "{ctx}: unknown pattern '{other}' (NOISE, VORONOI, WAVE, BRICK, CHECKER or GRADIENT)"
+            )))
         }
     };
     let space: String = get_or(d, "space", "GENERATED".to_string(), &ctx)?;

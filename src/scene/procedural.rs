@@ -34,6 +34,9 @@ pub enum Pattern {
     Noise { noise: NoiseParams, color: bool },
     /// The Wave Texture node (Fac; its Color is the same grey).
     Wave(WaveParams),
+    /// The Brick Texture node. `color`: its Color output (the bricks' tint between Color1 and
+    /// Color2, the mortar's colour over the mortar), else Fac (the mortar's weight).
+    Brick { brick: BrickParams, color: bool },
     /// The Voronoi Texture node (3D, F1 or F2). `color`: its Color output, else Distance.
     Voronoi { voronoi: VoronoiParams, color: bool },
     /// The Checker Texture node's Fac (1 in the cells of Color1).
@@ -117,6 +120,25 @@ pub enum WaveProfile {
     Sine,
     Saw,
     Triangle,
+}
+
+/// The Brick Texture node's settings.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BrickParams {
+    pub mortar_size: f32,
+    pub mortar_smooth: f32,
+    pub bias: f32,
+    pub brick_width: f32,
+    pub row_height: f32,
+    /// Every `offset_frequency`-th row shifted by this fraction of a brick.
+    pub offset: f32,
+    pub offset_frequency: i32,
+    /// Every `squash_frequency`-th row's bricks this much wider.
+    pub squash: f32,
+    pub squash_frequency: i32,
+    pub color1: Vec3,
+    pub color2: Vec3,
+    pub mortar: Vec3,
 }
 
 /// The Voronoi Texture node's settings.
@@ -557,6 +579,52 @@ pub fn voronoi_texture(p: Vec3, v: &VoronoiParams) -> (f32, Vec3) {
     (dist, color)
 }
 
+/// Cycles' integer noise of a brick's number: in [0, 1).
+fn brick_noise(n: u32) -> f32 {
+    let mut n = n.wrapping_add(1013) & 0x7fffffff;
+    n ^= n >> 13;
+    let nn = n.wrapping_mul(n.wrapping_mul(n).wrapping_mul(60493).wrapping_add(19990303)).wrapping_add(1376312589)
+        & 0x7fffffff;
+    0.5 * (nn as f32 / 1073741824.0)
+}
+
+/// The Brick Texture node at `p` (already scaled): (the brick's tint, the mortar's weight).
+pub fn brick(p: Vec3, b: &BrickParams) -> (f32, f32) {
+    let row = (p.y / b.row_height).floor() as i32;
+    let (mut width, mut offset) = (b.brick_width, 0.0);
+    if b.offset_frequency != 0 && b.squash_frequency != 0 {
+        width *= if row % b.squash_frequency != 0 { 1.0 } else { b.squash };
+        offset = if row % b.offset_frequency != 0 { 0.0 } else { width * b.offset };
+    }
+    let number = ((p.x + offset) / width).floor() as i32;
+    let x = (p.x + offset) - width * number as f32;
+    let y = p.y - b.row_height * row as f32;
+    let key = (row.wrapping_shl(16)).wrapping_add(number & 0xFFFF) as u32;
+    let tint = (brick_noise(key) + b.bias).clamp(0.0, 1.0);
+    let min_dist = x.min(y).min((width - x).min(b.row_height - y));
+    let mortar = if min_dist >= b.mortar_size {
+        0.0
+    } else if b.mortar_smooth == 0.0 {
+        1.0
+    } else {
+        let f = (1.0 - min_dist / b.mortar_size) / b.mortar_smooth;
+        if f <= 0.0 {
+            0.0
+        } else if f >= 1.0 {
+            1.0
+        } else {
+            3.0 * f * f - 2.0 * f * f * f
+        }
+    };
+    (tint, mortar)
+}
+
+/// The Brick Texture node's Color from (tint, mortar weight).
+fn brick_color(b: &BrickParams, tint: f32, mortar: f32) -> Vec3 {
+    let c1 = if mortar != 1.0 { b.color1 * (1.0 - tint) + b.color2 * tint } else { b.color1 };
+    c1 * (1.0 - mortar) + b.mortar * mortar
+}
+
 /// The Checker Texture node's Fac at `p` (already scaled): 1 or 0.
 pub fn checker(p: Vec3) -> f32 {
     let cell = |x: f32| (((x + 0.000001) * 0.999999).floor() as i32).unsigned_abs() % 2;
@@ -653,6 +721,14 @@ impl Procedural {
                 }
             }
             Pattern::Wave(wave) => Vec3::splat(wave_texture(p, &wave)),
+            Pattern::Brick { brick: b, color } => {
+                let (tint, mortar) = brick(p, &b);
+                if color {
+                    brick_color(&b, tint, mortar)
+                } else {
+                    Vec3::splat(mortar)
+                }
+            }
             Pattern::Checker => Vec3::splat(checker(p)),
             Pattern::Gradient(kind) => Vec3::splat(gradient(p, kind)),
         }
@@ -888,6 +964,43 @@ mod tests {
         assert!((a - b).abs() < 1e-5);
         let c = wave_texture(Vec3::new(0.3, 0.4, 0.2), &w(true, 3, WaveProfile::Sine));
         assert!((a - c).abs() > 1e-3);
+    }
+
+    /// Bricks: mortar along the rows' and bricks' edges (smoothly within the mortar when
+    /// asked), every other row offset, the tint constant within a brick and varying between.
+    #[test]
+    fn bricks_lie_in_offset_rows_between_mortar() {
+        let b = BrickParams {
+            mortar_size: 0.02,
+            mortar_smooth: 0.0,
+            bias: 0.0,
+            brick_width: 0.5,
+            row_height: 0.25,
+            offset: 0.5,
+            offset_frequency: 2,
+            squash: 1.0,
+            squash_frequency: 2,
+            color1: Vec3::ZERO,
+            color2: Vec3::ONE,
+            mortar: Vec3::new(5.0, 0.0, 0.0),
+        };
+        // row 1 (y in [0.25, 0.5)) is not offset: bricks start at x = 0, 0.5, …
+        assert_eq!(brick(Vec3::new(0.25, 0.375, 0.0), &b).1, 0.0);
+        assert_eq!(brick(Vec3::new(0.51, 0.375, 0.0), &b).1, 1.0);
+        assert_eq!(brick(Vec3::new(0.25, 0.26, 0.0), &b).1, 1.0);
+        // row 0 (and row 2) is offset by a quarter: its joints at x = 0.25, 0.75
+        assert_eq!(brick(Vec3::new(0.5, 0.125, 0.0), &b).1, 0.0);
+        assert_eq!(brick(Vec3::new(0.26, 0.125, 0.0), &b).1, 1.0);
+        let t = |x, y| brick(Vec3::new(x, y, 0.0), &b).0;
+        assert_eq!(t(0.1, 0.3), t(0.4, 0.45));
+        let tints: Vec<f32> = (0..20).map(|i| t(0.25 + 0.5 * i as f32, 0.375)).collect();
+        assert!(tints.iter().all(|v| (0.0..=1.0).contains(v)));
+        assert!(tints.windows(2).filter(|w| w[0] != w[1]).count() > 15);
+        assert_eq!(brick_color(&b, 0.3, 1.0), Vec3::new(5.0, 0.0, 0.0));
+        assert_eq!(brick_color(&b, 0.3, 0.0), Vec3::splat(0.3));
+        let smooth = BrickParams { mortar_smooth: 0.5, ..b };
+        let m = brick(Vec3::new(0.515, 0.375, 0.0), &smooth).1; // a quarter into the mortar: ½
+        assert!((m - 0.5).abs() < 1e-3, "{m}");
     }
 
     #[test]

@@ -1709,7 +1709,8 @@ def test_node_groups_agree_with_cycles(bpy_mod, tmp_out):
 def _procedural_cards():
     """Emission colours from procedural textures (name, wiring(nt) → the colour socket, on a
     sphere?): Voronoi (F1 and F2, every metric, fractal, its Distance and Color), Wave bands
-    and rings with distortion, the multifractal Noise types through a Map Range, Noise through a Color Ramp, a Noise's Color with distortion, a detailed Noise on
+    and rings with distortion, the multifractal Noise types through a Map Range, Bricks (offset
+    and squashed rows, smooth mortar; Fac and Color), Noise through a Color Ramp, a Noise's Color with distortion, a detailed Noise on
     mapped Object coordinates, an unnormalised Noise on UVs through Math, a Checker, Gradients
     (easing; spherical on mapped Generated coordinates; radial on Object coordinates), and
     on a turned, squashed smooth sphere a Noise on Generated and a Checker on Object
@@ -1801,6 +1802,18 @@ def _procedural_cards():
         wire.__name__ = f"noise_{kind.lower()}"
         return wire
 
+    def brick(output, **inputs):
+        def wire(nt):
+            b = nt.nodes.new("ShaderNodeTexBrick")
+            for k, x in inputs.items():
+                if k in ("offset", "squash", "offset_frequency", "squash_frequency"):
+                    setattr(b, k, x)
+                else:
+                    b.inputs[k].default_value = x
+            return b.outputs[output]
+        wire.__name__ = f"brick_{output.lower()}"
+        return wire
+
     def sphere_checker(nt):
         c = node(nt, "ShaderNodeTexChecker", Scale=4.0)
         nt.links.new(nt.nodes.new("ShaderNodeTexCoord").outputs["Object"], c.inputs["Vector"])
@@ -1818,11 +1831,14 @@ def _procedural_cards():
             (wave("RINGS", "SPHERICAL", "TRI", Scale=1.0, Distortion=2.0, Detail=3.0), False),
             (noise_type("RIDGED_MULTIFRACTAL", Scale=3.0), False),
             (noise_type("HYBRID_MULTIFRACTAL", Scale=3.0, Detail=4.0), False),
-            (noise_type("MULTIFRACTAL", Scale=3.0, Detail=3.5), True)]
+            (noise_type("MULTIFRACTAL", Scale=3.0, Detail=3.5), True),
+            (brick("Fac", Scale=4.0, **{"Mortar Smooth": 0.4, "Mortar Size": 0.05}), False),
+            (brick("Color", Scale=2.0, offset=0.3, offset_frequency=3, squash=1.5, squash_frequency=2, Bias=0.3,
+                   Color1=(0.9, 0.3, 0.1, 1), Mortar=(0.8, 0.8, 0.8, 1)), False)]
 
 
 def test_procedural_textures_agree_with_cycles(bpy_mod, tmp_out):
-    """Noise, Voronoi, Wave, Checker and Gradient textures (on Generated, Object and UV coordinates, through
+    """Noise, Voronoi, Wave, Brick, Checker and Gradient textures (on Generated, Object and UV coordinates, through
     Mapping nodes and the colour and value nodes after them) emit what Cycles' do, pixel by
     pixel: the mean relative difference of each card within twice that of two GDMLT seeds
     (the pixel filter's jitter) plus 0.2%. Before, each was 'not evaluated': its input's
