@@ -1078,7 +1078,12 @@ mod tests {
         let c = |p: Vec3| Vec3::new(2.0 * p.y + 0.5, -p.x + 0.5, p.z);
         let e = 1e-3;
         let h = |p: Vec3| {
-            super::procedural::noise_texture(c(p), &super::procedural::NoiseParams::fbm(2.0, 0.5, 2.0, 0.0, true)).0
+            super::procedural::noise_texture(
+                c(p),
+                &super::procedural::NoiseParams::fbm(2.0, 0.5, 2.0, 0.0, true),
+                false,
+            )
+            .0
         };
         let g = Vec3::new(h(p + Vec3::X * e) - h(p - Vec3::X * e), h(p + Vec3::Y * e) - h(p - Vec3::Y * e), 0.0)
             / (2.0 * e);

@@ -330,7 +330,14 @@ fn perlin(p: Vec3) -> f32 {
 /// Signed noise in about [−1, 1], the coordinates wrapped every 10⁵ (half a cell further
 /// beyond 10⁶), as Cycles' `snoise_3d`.
 pub fn snoise(p: Vec3) -> f32 {
-    let wrap = |x: f32| x % 100000.0 + if x.abs() >= 1000000.0 { 0.5 } else { 0.0 };
+    // (fmod only where it changes something: below 10⁵ it returns x itself)
+    let wrap = |x: f32| {
+        if x.abs() < 100000.0 {
+            x
+        } else {
+            x % 100000.0 + if x.abs() >= 1000000.0 { 0.5 } else { 0.0 }
+        }
+    };
     0.9820 * perlin(Vec3::new(wrap(p.x), wrap(p.y), wrap(p.z)))
 }
 
@@ -483,8 +490,9 @@ fn mix(a: f32, b: f32, t: f32) -> f32 {
     (1.0 - t) * a + t * b
 }
 
-/// The Noise Texture node (3D) at `p` (already scaled): (Fac, Color).
-pub fn noise_texture(p: Vec3, n: &NoiseParams) -> (f32, Vec3) {
+/// The Noise Texture node (3D) at `p` (already scaled): its Fac, and with `color` its
+/// Color (two more noises; else the Fac in all three channels).
+pub fn noise_texture(p: Vec3, n: &NoiseParams, color: bool) -> (f32, Vec3) {
     let n = NoiseParams { detail: n.detail.clamp(0.0, 15.0), roughness: n.roughness.max(0.0), ..*n };
     let distortion = n.distortion;
     let mut p = p;
@@ -496,8 +504,10 @@ pub fn noise_texture(p: Vec3, n: &NoiseParams) -> (f32, Vec3) {
         );
     }
     let value = noise_select(p, &n);
-    let color = Vec3::new(value, noise_select(p + seed_offset(3.0), &n), noise_select(p + seed_offset(4.0), &n));
-    (value, color)
+    if !color {
+        return (value, Vec3::splat(value));
+    }
+    (value, Vec3::new(value, noise_select(p + seed_offset(3.0), &n), noise_select(p + seed_offset(4.0), &n)))
 }
 
 fn voronoi_distance(a: Vec3, b: Vec3, v: &VoronoiParams) -> f32 {
@@ -704,14 +714,7 @@ impl Procedural {
     /// The pattern's output at `p` in its own space.
     pub fn pattern_at(&self, p: Vec3) -> Vec3 {
         match self.pattern {
-            Pattern::Noise { noise, color } => {
-                let (value, c) = noise_texture(p, &noise);
-                if color {
-                    c
-                } else {
-                    Vec3::splat(value)
-                }
-            }
+            Pattern::Noise { noise, color } => noise_texture(p, &noise, color).1,
             Pattern::Voronoi { voronoi, color } => {
                 let (d, c) = voronoi_texture(p, &voronoi);
                 if color {
@@ -823,8 +826,12 @@ mod tests {
     #[test]
     fn distortion_moves_the_pattern_and_colour_channels_differ() {
         let p = Vec3::new(1.3, 0.4, 2.9);
-        let (v0, c0) = noise_texture(p, &NoiseParams::fbm(2.0, 0.5, 2.0, 0.0, true));
-        let (v1, _) = noise_texture(p, &NoiseParams::fbm(2.0, 0.5, 2.0, 1.0, true));
+        let (v0, c0) = noise_texture(p, &NoiseParams::fbm(2.0, 0.5, 2.0, 0.0, true), true);
+        let (v1, _) = noise_texture(p, &NoiseParams::fbm(2.0, 0.5, 2.0, 1.0, true), true);
+        assert_eq!(noise_texture(p, &NoiseParams::fbm(2.0, 0.5, 2.0, 0.0, true), false), (v0, Vec3::splat(v0)));
+        // the wrap every 10⁵ leaves smaller coordinates as they are
+        assert_eq!(snoise(Vec3::new(99999.5, 3.3, -7.7)), 0.9820 * perlin(Vec3::new(99999.5, 3.3, -7.7)));
+        assert_eq!(snoise(Vec3::new(100000.25, 3.3, 0.0)), 0.9820 * perlin(Vec3::new(0.25, 3.3, 0.0)));
         assert_eq!(c0.x, v0);
         assert!(v0 != v1 && c0.y != c0.x && c0.z != c0.y);
         // the seed offsets lie in [100, 200]
@@ -908,7 +915,7 @@ mod tests {
             gain: 1.5,
             ..NoiseParams::fbm(0.0, 0.5, 2.0, 0.0, true)
         };
-        let at = |kind| noise_texture(p, &with(kind)).0;
+        let at = |kind| noise_texture(p, &with(kind), false).0;
         assert!((at(NoiseKind::Multifractal) - (1.0 + n)).abs() < 1e-6);
         assert!((at(NoiseKind::RidgedMultifractal) - (0.8 - n.abs()).powi(2)).abs() < 1e-6);
         assert!((at(NoiseKind::HeteroTerrain) - (0.8 + n)).abs() < 1e-6);
