@@ -390,7 +390,7 @@ impl Accel {
 
     #[inline]
     pub fn closest(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> Option<TriHit> {
-        let (oa, da) = (Vec3A::from(o), Vec3A::from(d));
+        let (oa, da) = (Vec3A::from(o), Vec3A::from(positive_zeros(d)));
         let mut ray = Ray::new(oa, da, tmin, tmax);
         let (mut slot, mut b1, mut b2) = (usize::MAX, 0.0, 0.0);
         let mut state = self.bvh.new_traversal(da);
@@ -421,7 +421,7 @@ impl Accel {
 
     #[inline]
     pub fn occluded(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> bool {
-        let (oa, da) = (Vec3A::from(o), Vec3A::from(d));
+        let (oa, da) = (Vec3A::from(o), Vec3A::from(positive_zeros(d)));
         let ray = Ray::new(oa, da, tmin, tmax);
         let seg = Segment { o: oa, d: da, tmin, tmax };
         let mut state = self.bvh.new_traversal(da);
@@ -494,7 +494,7 @@ impl Accel {
         let mut soa = [[0.0f32; LANES]; 11];
         for i in 0..LANES {
             let j = if i < n { i } else { 0 };
-            let (o, d) = (rays.o[j], rays.d[j]);
+            let (o, d) = (rays.o[j], positive_zeros(rays.d[j]));
             for c in 0..3 {
                 (soa[c][i], soa[3 + c][i], soa[6 + c][i]) = (o[c], d[c], obvhs::ray::safe_inverse(d[c]));
             }
@@ -646,6 +646,14 @@ impl Accel {
     }
 }
 
+/// `d` with its negative zeros made positive (−0 + 0 = +0, the same direction): with −0
+/// components (1/−0 = −∞) the traversal missed every triangle of an axis-aligned ray — a
+/// flat floor seen straight down through `-Vec3::Z`, say (tested).
+#[inline]
+fn positive_zeros(d: Vec3) -> Vec3 {
+    d + Vec3::ZERO
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -715,6 +723,35 @@ mod tests {
             }
         }
         assert!(checked > 10_000);
+    }
+
+    /// Axis-aligned rays whose zero components are negative zeros (−Y = (−0, −1, −0), as
+    /// `-Vec3::Y` and many products give) find what the same rays with +0 find, single and
+    /// in packets, closest and any hit: a flat quad seen straight on from either side.
+    #[test]
+    fn negative_zero_direction_components_find_their_hits() {
+        let quad = [
+            [Vec3::new(-1.0, 2.0, -1.0), Vec3::new(1.0, 2.0, -1.0), Vec3::new(1.0, 2.0, 1.0)],
+            [Vec3::new(-1.0, 2.0, -1.0), Vec3::new(1.0, 2.0, 1.0), Vec3::new(-1.0, 2.0, 1.0)],
+        ];
+        let accel = Accel::build(&quad);
+        for (o, d) in [
+            (Vec3::new(0.1, 3.0, 0.05), Vec3::new(-0.0, -1.0, -0.0)),
+            (Vec3::new(0.1, 1.0, 0.05), Vec3::new(-0.0, 1.0, -0.0)),
+            (Vec3::new(0.3, 2.0, 3.0), Vec3::new(-0.0, -0.0, -1.0)),
+            (Vec3::new(-3.0, 2.0, 0.2), Vec3::new(1.0, -0.0, -0.0)),
+        ] {
+            let hit = accel.closest(o, d, 0.0, f32::INFINITY);
+            assert!(hit.is_some_and(|h| (o + d * h.t).y == 2.0) || d.y == 0.0 && hit.is_none(), "{o} {d}: {hit:?}");
+            if d.y != 0.0 {
+                assert!(accel.occluded(o, d, 0.0, f32::INFINITY), "{o} {d}");
+                let mut p = RayPacket { count: 3, ..Default::default() };
+                for k in 0..3 {
+                    (p.o[k], p.d[k], p.tmin[k], p.tmax[k]) = (o, d, 0.0, f32::INFINITY);
+                }
+                assert!(accel.closest_packet(&p)[..3].iter().all(|h| h.is_some()), "{o} {d}");
+            }
+        }
     }
 
     #[test]
