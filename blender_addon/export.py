@@ -29,11 +29,12 @@ RAY_VISIBILITY = (("camera", "visible_camera"), ("diffuse", "visible_diffuse"), 
 
 def _visibility_warnings(ob, what, warnings, light=False):
     """Warnings for the ray visibility, holdout and shadow catcher settings of `ob`, which
-    GDMLT does not render (each ray type sees it; it is rendered as an ordinary object). For
-    a light only its diffuse, glossy and transmission visibility mean something (its camera
-    visibility is rendered; Blender keeps holdout and shadow-catcher flags on lights that
-    Cycles ignores)."""
-    skip = ("camera", "shadow") if light else ()
+    GDMLT does not render (each ray type sees it; it is rendered as an ordinary object), but
+    for the camera and shadow visibility, which are (the mesh's `visible_camera` and
+    `visible_shadow`; a light's camera visibility too, and its shadow visibility means
+    nothing to Cycles). Blender keeps holdout and shadow-catcher flags on lights that Cycles
+    ignores."""
+    skip = ("camera", "shadow")
     off = [name for name, attr in RAY_VISIBILITY if name not in skip and not getattr(ob, attr, True)]
     if off:
         warnings.append(f"{what} '{ob.name}': ray visibility ({', '.join(off)} off) is not rendered; "
@@ -1307,6 +1308,9 @@ def export_scene(depsgraph, test_break=lambda: False, need_camera=True):
                                      None if colours is None else np.ascontiguousarray(colours)))
         for space, p in points.items():
             meshes[-1][space.lower()] = np.ascontiguousarray(p)
+        for key in ("visible_camera", "visible_shadow"):  # (Object › Visibility › Ray Visibility)
+            if not getattr(ob, key, True):
+                meshes[-1][key] = False
     world, world_texture, world_rotation = _world(scene, warnings, textures)
     if scene.render.use_motion_blur:
         warnings.append("motion blur is not rendered yet: the frame is rendered at its shutter's start")

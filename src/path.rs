@@ -286,7 +286,7 @@ pub fn trace_path<S: Sampler>(
 ) -> PathContribution {
     let lens = sampler.next_2d();
     let ray = scene.camera.generate_ray(raster, lens);
-    let hit = scene.intersect(ray.origin, ray.dir, ray.tmin, ray.tmax);
+    let hit = scene.intersect_camera(ray.origin, ray.dir, ray.tmin, ray.tmax);
     trace_path_from(scene, cfg, Primary { lens, ray, hit }, sampler, record)
 }
 
@@ -317,6 +317,8 @@ pub fn trace_path_from<S: Sampler>(
         // 1. the segment
         let hit = match pending_hit.take() {
             Some(h) => h,
+            // (what the camera sees through transparent surfaces, before any scattering)
+            None if st.depth == 0 => scene.intersect_camera(st.o, st.d, st.tmin, st.tmax),
             None => scene.intersect(st.o, st.d, st.tmin, st.tmax),
         };
         let t_surface = hit.map_or(st.tmax, |h| h.t);
@@ -722,7 +724,7 @@ pub fn camera_transparency(scene: &Scene, cam: &CameraRay, hit: Option<TriHit>, 
         if !(t.max_element() > 0.0) {
             return 0.0;
         }
-        hit = scene.intersect(si.spawn_origin(cam.dir), cam.dir, 0.0, f32::INFINITY);
+        hit = scene.intersect_camera(si.spawn_origin(cam.dir), cam.dir, 0.0, f32::INFINITY);
     }
     0.0 // past the transparent-bounce limit the path tracer stops too: opaque
 }

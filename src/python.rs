@@ -126,6 +126,8 @@ fn parse_mesh(d: &Bound<'_, PyDict>) -> PyResult<MeshDesc> {
     };
     let (corner_generated, corner_object) = (corners("generated")?, corners("object")?);
     let pass_index = get_or(d, "pass_index", 0, &ctx)?;
+    let camera_invisible = !get_or(d, "visible_camera", true, &ctx)?;
+    let shadow_invisible = !get_or(d, "visible_shadow", true, &ctx)?;
     Ok(MeshDesc {
         name,
         positions,
@@ -137,6 +139,8 @@ fn parse_mesh(d: &Bound<'_, PyDict>) -> PyResult<MeshDesc> {
         corner_generated,
         corner_object,
         pass_index,
+        camera_invisible,
+        shadow_invisible,
     })
 }
 

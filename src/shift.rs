@@ -120,12 +120,13 @@ fn diffuse(b: &Bsdf) -> bool {
 /// Visibility from a surface point to a point (or, at infinity, along a direction) on a
 /// side the path builder scatters and samples lights towards: on one side of both the
 /// geometric and the shading normal, and on the far side only where the surface transmits
-/// through a non-delta lobe (rough glass).
-fn visible(scene: &Scene, si: &SurfaceInteraction, z: Vec3, at_infinity: bool) -> bool {
+/// through a non-delta lobe (rough glass). A `shadow` ray (next-event estimation) passes
+/// objects that cast no shadow, as the base's did; a path segment does not.
+fn visible(scene: &Scene, si: &SurfaceInteraction, z: Vec3, at_infinity: bool, shadow: bool) -> bool {
     let dir = if at_infinity { z } else { z - si.p };
     let (cg, cs) = (dir.dot(si.ng), dir.dot(si.frame.n));
     let side = if cg > 0.0 { cs > 0.0 } else { cg < 0.0 && cs < 0.0 && scene.bsdf_at(si).transmits() };
-    side && scene.segment_clear(si, z, at_infinity)
+    side && if shadow { scene.shadow_clear(si, z, at_infinity) } else { scene.segment_clear(si, z, at_infinity) }
 }
 
 /// An offset vertex of its own (not yet joined to the base path).
@@ -208,7 +209,7 @@ impl<'a> Offset<'a> {
     fn new(scene: &'a Scene, base: &'a Path, offset_raster: Option<Vec2>) -> Offset<'a> {
         let primary = offset_raster.filter(|_| !base.vertices.is_empty()).map(|raster| {
             let ray = scene.camera.generate_ray(raster, base.lens);
-            (ray, scene.intersect(ray.origin, ray.dir, ray.tmin, ray.tmax))
+            (ray, scene.intersect_camera(ray.origin, ray.dir, ray.tmin, ray.tmax))
         });
         Offset::from_primary(scene, base, primary)
     }
@@ -417,7 +418,7 @@ fn half_vector_step(scene: &Scene, x: &Vertex, f: &Free) -> Option<Step> {
 
 /// Reconnection y_k → x_{k+1} (x_k, y_k, x_{k+1} diffuse).
 fn reconnect(scene: &Scene, xk: &Vertex, xn: &Vertex, f: &Free) -> Option<State> {
-    if !visible(scene, &f.y, xn.p, false) {
+    if !visible(scene, &f.y, xn.p, false, false) {
         return None;
     }
     let dir = (xn.p - f.y.p).normalize();
@@ -439,7 +440,7 @@ fn reconnect(scene: &Scene, xk: &Vertex, xn: &Vertex, f: &Free) -> Option<State>
 /// Re-evaluates light event `e` (leaving base vertex at `xk`) from the free offset vertex,
 /// reconnected to the same light point (or direction, for lights at infinity).
 fn reconnect_event(scene: &Scene, e: &Event, xk: Vec3, f: &Free) -> Option<(Spectrum, f32)> {
-    if !visible(scene, &f.y, e.z, e.at_infinity) {
+    if !visible(scene, &f.y, e.z, e.at_infinity, e.nee) {
         return None;
     }
     let dir = if e.at_infinity { e.z } else { (e.z - f.y.p).normalize() };

@@ -606,6 +606,28 @@ def procedural(bpy):
     return scene
 
 
+def ray_visibility(bpy):
+    """Object ray visibility as artists use it: a light card (an emissive quad facing the
+    room, between it and the camera) hidden from the camera, and a tall block that casts no
+    shadow (shadow visibility off) between a glowing ceiling panel and the floor, beside a
+    ball that does. Lit by emissive meshes alone, so Cycles without light sampling is the
+    naive rows' reference (NAIVE_REFERENCE: light reaches the floor behind the block only
+    through shadow rays)."""
+    scene, grey = _grey_room(bpy, smooth=False)
+    card = _mesh(bpy, scene, "Card", [(-0.5, -1.3, 0.4), (0.1, -1.3, 0.4), (0.1, -1.3, 1.0), (-0.5, -1.3, 1.0)],
+                 [(0, 3, 2, 1)], _emission(bpy, "Card light", 6.0), smooth=False)
+    card.visible_camera = False
+    _mesh(bpy, scene, "Panel", [(0.1, 0.1, 1.45), (0.7, 0.1, 1.45), (0.7, 0.7, 1.45), (0.1, 0.7, 1.45)],
+          [(0, 3, 2, 1)], _emission(bpy, "Panel light", 8.0), smooth=False)
+    v = [(x, y, z) for z in (0.0, 0.9) for y in (0.25, 0.45) for x in (0.3, 0.5)]
+    block = _mesh(bpy, scene, "Block", v, [(0, 2, 3, 1), (4, 5, 7, 6), (0, 1, 5, 4), (2, 6, 7, 3), (0, 4, 6, 2),
+                                          (1, 3, 7, 5)], _diffuse(bpy, "Blue", (0.2, 0.3, 0.7)), smooth=False)
+    block.visible_shadow = False
+    _uv_sphere(bpy, scene, "Ball", (-0.4, 0.3, 0.3), 0.3, 24, 12, grey, smooth=True)
+    _camera_and_world(bpy, scene)
+    return scene
+
+
 def checked_in(name, keep=None):
     """One of tests/scenes/*.blend (tools/make_test_scenes.py) at this module's size and
     bounce limit; `keep` names the lights left on."""
@@ -673,6 +695,7 @@ SCENES = {
     "vertex_colours": (vertex_colours, 512, 16),
     "normal_mapped_ball": (normal_mapped_ball, 512, 16),
     "procedural": (procedural, 512, 16),
+    "ray_visibility": (ray_visibility, 512, 16),
     "all_lights": (checked_in("lights", {"Area", "Point", "Spot", "Sun", "World"}), 512, 16),
     "specular": (checked_in("specular"), 1024, 32),
     "textures": (checked_in("textures"), 512, 16),
@@ -685,10 +708,11 @@ SCENES = {
 # sampled through rough glass, which Cycles evaluates on pairs of directions that no
 # microfacet connects (bsdf/dielectric.rs `eval_light`; +6% on the frosted bulb, +1% on the
 # rough one). GDMLT's NEE mode does the same; its naive mode, like Cycles without light
-# sampling, cannot. Their naive rows are compared with Cycles rendered without light sampling
-# of emitters and the world (its own naive estimate), the NEE rows with Cycles as it renders
-# by default.
-NAIVE_REFERENCE = {"bulb_rough", "bulb_frosted", "bulb_tinted"}
+# sampling, cannot. So too behind an object that casts no shadow (shadow visibility off):
+# only shadow rays pass it. Their naive rows are compared with Cycles rendered without light
+# sampling of emitters and the world (its own naive estimate), the NEE rows with Cycles as it
+# renders by default.
+NAIVE_REFERENCE = {"bulb_rough", "bulb_frosted", "bulb_tinted", "ray_visibility"}
 
 
 def samples(method, spp):

@@ -1002,7 +1002,7 @@ mod tests {
                     let raster = scene.camera.pixel_raster(x as f32, y as f32, smp.next_2d());
                     let lens = smp.next_2d();
                     let ray = scene.camera.generate_ray(raster, lens);
-                    let f = first_hit(&scene, &ray, scene.intersect(ray.origin, ray.dir, ray.tmin, ray.tmax));
+                    let f = first_hit(&scene, &ray, scene.intersect_camera(ray.origin, ray.dir, ray.tmin, ray.tmax));
                     let mut smp2 = super::super::pt::pixel_sampler(settings.seed ^ 0xD1, y * w + x, s);
                     smp2.next_2d(); // the raster sample
                     acc[0] += trace_path(&scene, &cut, raster, &mut smp2, None).radiance;

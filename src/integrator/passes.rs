@@ -33,7 +33,7 @@ pub fn data_passes(scene: &Scene, seed: u64) -> Vec<(String, Image)> {
             let mut s = pixel_sampler(seed, i, 0);
             let raster = scene.camera.pixel_raster(x as f32, y as f32, s.next_2d());
             let ray = scene.camera.generate_ray(raster, s.next_2d());
-            match scene.intersect(ray.origin, ray.dir, ray.tmin, ray.tmax) {
+            match scene.intersect_camera(ray.origin, ray.dir, ray.tmin, ray.tmax) {
                 Some(hit) => {
                     let p = ray.origin + ray.dir * hit.t;
                     let (ob, ma) = scene.pass_indices(hit.prim);

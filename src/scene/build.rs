@@ -67,7 +67,15 @@ pub(super) struct Triangles {
     pub tangents: Vec<[Vec4; 3]>,
     /// The Pass Index of each triangle's object; empty when every object's is 0.
     pub pass_index: Vec<u32>,
+    /// Each triangle's ray visibility (`RAY_CAMERA_INVISIBLE`, `RAY_SHADOW_INVISIBLE` bits);
+    /// empty when every object is seen by every ray.
+    pub ray_mask: Vec<u8>,
 }
+
+/// A `Triangles::ray_mask` bit: camera rays pass through the triangle.
+pub const RAY_CAMERA_INVISIBLE: u8 = 1;
+/// A `Triangles::ray_mask` bit: shadow rays pass through the triangle.
+pub const RAY_SHADOW_INVISIBLE: u8 = 2;
 
 impl Triangles {
     /// `normal_mapped[m]`: material m has a normal map (its meshes get MikkTSpace tangents).
@@ -88,7 +96,9 @@ impl Triangles {
             object: Vec::new(),
             tangents: Vec::new(),
             pass_index: Vec::new(),
+            ray_mask: Vec::new(),
         };
+        let masked = meshes.iter().any(|m| m.camera_invisible || m.shadow_invisible);
         let colors = meshes.iter().any(|m| !m.corner_colors.is_empty());
         let generated = meshes.iter().any(|m| !m.corner_generated.is_empty());
         let object = meshes.iter().any(|m| !m.corner_object.is_empty());
@@ -123,6 +133,11 @@ impl Triangles {
             }
             if pass_indices {
                 t.pass_index.resize(t.positions.len(), m.pass_index);
+            }
+            if masked {
+                let bits = if m.camera_invisible { RAY_CAMERA_INVISIBLE } else { 0 }
+                    | if m.shadow_invisible { RAY_SHADOW_INVISIBLE } else { 0 };
+                t.ray_mask.resize(t.positions.len(), bits);
             }
         }
         if report.degenerate_triangles > 0 {

@@ -20,6 +20,8 @@ fn quad(name: &str, p: [[f32; 3]; 4], mat: u32) -> MeshDesc {
         corner_colors: vec![],
         corner_generated: vec![],
         corner_object: vec![],
+        camera_invisible: false,
+        shadow_invisible: false,
         pass_index: 0,
     }
 }
@@ -357,6 +359,8 @@ fn flat_mesh(name: &str, positions: Vec<[f32; 3]>, indices: Vec<[u32; 3]>, mat: 
         corner_colors: vec![],
         corner_generated: vec![],
         corner_object: vec![],
+        camera_invisible: false,
+        shadow_invisible: false,
         pass_index: 0,
     }
 }

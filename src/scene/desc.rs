@@ -27,6 +27,10 @@ pub struct MeshDesc {
     pub corner_object: Vec<[f32; 3]>,
     /// The object's Pass Index (Blender's IndexOB pass).
     pub pass_index: u32,
+    /// Ray visibility off (Blender's Object › Visibility › Ray Visibility): camera rays pass
+    /// through the object; shadow rays pass through it (it casts no shadow).
+    pub camera_invisible: bool,
+    pub shadow_invisible: bool,
 }
 
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]

@@ -24,10 +24,13 @@ use crate::accel::{Accel, RayPacket, TriHit};
 use crate::bsdf::Bsdf;
 use crate::error::SceneError;
 use crate::math::{ray_epsilon, square_to_triangle, Frame, Spectrum};
-use build::{Lighting, Shading, Triangles};
+use build::{Lighting, Shading, Triangles, RAY_CAMERA_INVISIBLE, RAY_SHADOW_INVISIBLE};
 use environment::Environment;
 use glam::{Vec2, Vec3, Vec4};
 use procedural::Space;
+/// At most this many objects a ray does not see are skipped along one ray (camera rays past
+/// camera-invisible objects, shadow rays past shadow-invisible ones).
+const MAX_INVISIBLE_CROSSINGS: u32 = 64;
 pub use texture::TexCoord;
 
 /// A surface point found by a ray.
@@ -97,6 +100,12 @@ pub struct Scene {
     /// (the IndexOB and IndexMA passes).
     tri_pass_index: Vec<u32>,
     material_pass_index: Vec<u32>,
+    /// Per triangle, the rays that pass through it (`build::RAY_CAMERA_INVISIBLE`,
+    /// `RAY_SHADOW_INVISIBLE`); empty when every object is seen by every ray.
+    ray_mask: Vec<u8>,
+    /// Some object's shadow visibility is off (shadow rays then look for the first surface
+    /// that casts one, instead of an any-hit test).
+    has_shadow_invisible: bool,
     pub materials: Vec<Material>,
     pub textures: Vec<Texture>,
     pub lights: Vec<Light>,
@@ -159,6 +168,8 @@ impl Scene {
             tri_material: tris.material,
             tri_pass_index: tris.pass_index,
             material_pass_index: Vec::new(),
+            has_shadow_invisible: tris.ray_mask.iter().any(|m| m & RAY_SHADOW_INVISIBLE != 0),
+            ray_mask: tris.ray_mask,
             materials: Vec::new(),
             textures: Vec::new(),
             has_transparency: false,
@@ -199,6 +210,7 @@ impl Scene {
             object: Vec::new(),
             tangents: Vec::new(),
             pass_index: Vec::new(),
+            ray_mask: Vec::new(),
         };
         let lighting = match tris.material.iter().max() {
             Some(&m) if m as usize >= shading.materials.len() => Err(SceneError::Mesh {
@@ -247,13 +259,47 @@ impl Scene {
         self.accel.as_ref().map_or([None; 8], |a| a.closest_packet(rays))
     }
 
-    /// The first hits of up to eight camera rays (of neighbouring samples), traced together.
+    /// The first hits of up to eight camera rays (of neighbouring samples), traced together
+    /// (past objects the camera does not see, as `intersect_camera`).
     pub fn intersect_camera_rays(&self, rays: &[CameraRay]) -> [Option<TriHit>; 8] {
         let mut p = RayPacket { count: rays.len().min(8), ..Default::default() };
         for (k, r) in rays.iter().take(8).enumerate() {
             (p.o[k], p.d[k], p.tmin[k], p.tmax[k]) = (r.origin, r.dir, r.tmin, r.tmax);
         }
-        self.intersect_packet(&p)
+        let mut hits = self.intersect_packet(&p);
+        if !self.ray_mask.is_empty() {
+            for (k, h) in hits.iter_mut().enumerate().take(p.count) {
+                if h.is_some_and(|h| self.masked(h.prim, RAY_CAMERA_INVISIBLE)) {
+                    *h = self.intersect_camera(p.o[k], p.d[k], p.tmin[k], p.tmax[k]);
+                }
+            }
+        }
+        hits
+    }
+
+    /// The closest hit of a ray the camera sees along (a camera ray, and its continuation
+    /// through transparent surfaces before any scattering): objects whose camera visibility
+    /// is off let it pass, as Cycles' visibility flags do.
+    pub fn intersect_camera(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> Option<TriHit> {
+        let mut hit = self.intersect(o, d, tmin, tmax);
+        if self.ray_mask.is_empty() {
+            return hit;
+        }
+        for _ in 0..MAX_INVISIBLE_CROSSINGS {
+            match hit {
+                Some(h) if self.masked(h.prim, RAY_CAMERA_INVISIBLE) => {
+                    hit = self.intersect(o, d, h.t + ray_epsilon(o + d * h.t), tmax);
+                }
+                _ => return hit,
+            }
+        }
+        None
+    }
+
+    /// Triangle `prim` lets the rays of `bit` (a `RAY_*_INVISIBLE`) through.
+    #[inline]
+    fn masked(&self, prim: u32, bit: u8) -> bool {
+        self.ray_mask.get(prim as usize).is_some_and(|m| m & bit != 0)
     }
 
     /// True when any surface lies along the ray in (tmin, tmax). Lights never occlude.
@@ -290,10 +336,31 @@ impl Scene {
         }
     }
 
+    /// A shadow ray from a surface point to `target` (as `segment_clear`) meets no surface
+    /// that casts shadows: objects whose shadow visibility is off let it pass.
+    pub fn shadow_clear(&self, si: &SurfaceInteraction, target: Vec3, at_infinity: bool) -> bool {
+        if !self.has_shadow_invisible {
+            return self.segment_clear(si, target, at_infinity);
+        }
+        let mut from = *si;
+        for _ in 0..MAX_INVISIBLE_CROSSINGS {
+            let Some((o, d, tmax)) = self.shadow_ray(&from, target, at_infinity) else { return false };
+            if tmax <= 0.0 {
+                return true;
+            }
+            match self.intersect(o, d, 0.0, tmax) {
+                None => return true,
+                Some(hit) if self.masked(hit.prim, RAY_SHADOW_INVISIBLE) => from = self.interaction(&hit, d),
+                Some(_) => return false,
+            }
+        }
+        false
+    }
+
     /// Visibility between a surface point and a light sample.
     pub fn visible(&self, si: &SurfaceInteraction, ls: &LightSample) -> bool {
         let at_infinity = !ls.dist.is_finite();
-        self.segment_clear(si, if at_infinity { ls.wi } else { ls.p }, at_infinity)
+        self.shadow_clear(si, if at_infinity { ls.wi } else { ls.p }, at_infinity)
     }
 
     /// Transmittance from a surface point to a light sample (transparent shadows, as Cycles):
@@ -308,7 +375,8 @@ impl Scene {
         let target = if at_infinity { ls.wi } else { ls.p };
         let mut t = Spectrum::ONE;
         let mut from = *si;
-        for crossed in 0..=crate::path::MAX_TRANSPARENT_BOUNCES {
+        let (mut crossed, mut invisible) = (0, 0);
+        while crossed <= crate::path::MAX_TRANSPARENT_BOUNCES && invisible < MAX_INVISIBLE_CROSSINGS {
             let Some((o, d, tmax)) = self.shadow_ray(&from, target, at_infinity) else {
                 return Some((t, crossed > 0));
             };
@@ -318,11 +386,16 @@ impl Scene {
             let Some(hit) = self.intersect(o, d, 0.0, tmax) else {
                 return Some((t, crossed > 0));
             };
+            from = self.interaction(&hit, d);
+            if self.masked(hit.prim, RAY_SHADOW_INVISIBLE) {
+                invisible += 1; // (casts no shadow: not a crossing of a transparent surface)
+                continue;
+            }
+            crossed += 1;
             let m = &self.materials[self.tri_material[hit.prim as usize] as usize];
             if !m.is_transparent() {
                 return None;
             }
-            from = self.interaction(&hit, d);
             let tau = self.transparency(m, from.tex);
             if tau <= 0.0 {
                 return None;
@@ -1090,5 +1163,57 @@ mod tests {
         let want = (Vec3::Z - g * 0.1).normalize();
         assert!((n - want).length() < 0.02 * (1.0 + g.length()), "{n} vs {want}");
         assert!(g.length() > 0.1);
+    }
+
+    /// Ray visibility: camera rays pass an object the camera does not see (and the path's
+    /// continuation from the camera through it too), other rays hit it; shadow rays pass an
+    /// object that casts no shadow, while a path segment is blocked by it.
+    #[test]
+    fn camera_and_shadow_rays_pass_objects_they_do_not_see() {
+        let quad = |name: &str, y: f32, camera_invisible, shadow_invisible| MeshDesc {
+            name: name.into(),
+            positions: vec![[-1.0, y, -1.0], [1.0, y, -1.0], [1.0, y, 1.0], [-1.0, y, 1.0]],
+            indices: vec![[0, 1, 2], [0, 2, 3]],
+            camera_invisible,
+            shadow_invisible,
+            ..Default::default()
+        };
+        let desc = SceneDesc {
+            meshes: vec![
+                quad("Front", 0.0, true, false),
+                quad("Middle", 1.0, false, true),
+                quad("Back", 2.0, false, false),
+            ],
+            materials: vec![MaterialDesc::default()],
+            camera: camera_looking_along_y([0.0, -3.0, 0.0], 35.0, 4, 4),
+            ..Default::default()
+        };
+        let scene = Scene::build(&desc).unwrap();
+        let (o, d) = (Vec3::new(0.1, -3.0, 0.05), Vec3::Y);
+        let y = |h: Option<TriHit>| h.map(|h| (o + d * h.t).y);
+        assert_eq!(y(scene.intersect(o, d, 0.0, f32::INFINITY)), Some(0.0));
+        assert_eq!(y(scene.intersect_camera(o, d, 0.0, f32::INFINITY)), Some(1.0));
+        let rays = [scene.camera.generate_ray(Vec2::new(2.0, 2.0), Vec2::splat(0.5)); 3];
+        let hits = scene.intersect_camera_rays(&rays);
+        let first = |r: &CameraRay, h: Option<TriHit>| h.map(|h| (r.origin + r.dir * h.t).y);
+        assert!(hits[..3].iter().all(|&h| (first(&rays[0], h).unwrap() - 1.0).abs() < 1e-4), "{hits:?}");
+        // from the back quad towards a light behind the front one: the middle quad casts no
+        // shadow, the front one does
+        let si = scene
+            .interaction(&scene.intersect(Vec3::new(0.1, 3.0, 0.05), -Vec3::Y, 0.0, f32::INFINITY).unwrap(), -Vec3::Y);
+        let light = |y: f32| LightSample {
+            p: Vec3::new(0.1, y, 0.05),
+            n: Vec3::Y,
+            wi: -Vec3::Y,
+            dist: 2.0 - y,
+            radiance: Vec3::ONE,
+            pdf: 1.0,
+            is_delta: true,
+        };
+        assert!(scene.visible(&si, &light(0.5)));
+        assert_eq!(scene.transmittance(&si, &light(0.5)), Some((Spectrum::ONE, false)));
+        assert!(!scene.visible(&si, &light(-0.5)));
+        assert!(scene.transmittance(&si, &light(-0.5)).is_none());
+        assert!(!scene.segment_clear(&si, Vec3::new(0.1, 0.5, 0.05), false)); // a path segment is blocked
     }
 }

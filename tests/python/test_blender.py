@@ -130,8 +130,9 @@ def test_what_gdmlt_leaves_out_is_named_and_kept_in_the_last_render_panel(bpy_mo
     nt.links.new(vol.outputs[0], nt.get_output_node("CYCLES").inputs["Volume"])
     scene.render.use_motion_blur = True
     # Object › Visibility › Ray Visibility, holdout, and a light's ray visibility
-    bpy.data.objects["TallBlock"].visible_shadow = False
-    bpy.data.objects["ShortBlock"].visible_camera = False
+    bpy.data.objects["TallBlock"].visible_diffuse = False
+    bpy.data.objects["ShortBlock"].visible_transmission = False
+    bpy.data.objects["ShortBlock"].visible_camera = False  # (rendered: no warning)
     bpy.data.objects["ShortBlock"].is_holdout = True
     lamp = bpy.data.objects.new("Lamp", bpy.data.lights.new("Lamp", "POINT"))
     lamp.visible_glossy = False
@@ -144,11 +145,12 @@ def test_what_gdmlt_leaves_out_is_named_and_kept_in_the_last_render_panel(bpy_mo
     render_to_exr(bpy, scene, tmp_out / "dropped.exr")
     text = "\n".join(engine.last_warnings)
     for needle in ("object 'Hair': hair curves", "object 'Cloud': point clouds", "object 'Smoke': volumes",
-                   "material 'Red': its Volume output", "motion blur", "object 'TallBlock': ray visibility (shadow off)",
-                   "object 'ShortBlock': ray visibility (camera off)", "object 'ShortBlock': holdout",
+                   "material 'Red': its Volume output", "motion blur", "object 'TallBlock': ray visibility (diffuse off)",
+                   "object 'ShortBlock': ray visibility (transmission off)", "object 'ShortBlock': holdout",
                    "light 'Lamp': ray visibility (glossy off)", "light 'Fill': Cast Shadow off",
                    "light 'Fill': light linking"):
         assert needle in text, (needle, engine.last_warnings)
+    assert "camera off" not in text and "shadow off" not in text  # (rendered)
     assert ui.GDMLT_PT_last_render.poll(bpy.context)
     lines = [line for w in engine.last_warnings for line in ui.wrapped(w)]
     assert all(len(line) <= 72 for line in lines) and " ".join(lines).split() == text.split()
