@@ -2190,7 +2190,7 @@ def test_grouped_materials_and_worlds_export_as_their_flat_trees(bpy_mod):
 
 
 def test_texture_graphs_warn_on_what_they_cannot_evaluate_and_follow_edits(bpy_mod):
-    """A node outside the evaluator's set (a Brick Texture) is named in a warning and the
+    """A node outside the evaluator's set (a Magic Texture) is named in a warning and the
     input keeps its unlinked value; a graph of values alone is a constant; an edit to a
     graph (a Color Ramp stop) or to an image's pixels gives a new texture — evaluated graphs
     are cached across exports, and a stale one would render the old material."""
@@ -2204,8 +2204,8 @@ def test_texture_graphs_warn_on_what_they_cannot_evaluate_and_follow_edits(bpy_m
     mat, nt, out = empty_material(bpy, "Graph")
     bsdf = nt.nodes.new("ShaderNodeBsdfPrincipled")
     nt.links.new(bsdf.outputs[0], out.inputs["Surface"])
-    brick = nt.nodes.new("ShaderNodeTexBrick")
-    nt.links.new(brick.outputs["Color"], bsdf.inputs["Base Color"])
+    magic = nt.nodes.new("ShaderNodeTexMagic")
+    nt.links.new(magic.outputs["Color"], bsdf.inputs["Base Color"])
     bsdf.inputs["Base Color"].default_value = (0.2, 0.4, 0.6, 1.0)
     half = nt.nodes.new("ShaderNodeMath")
     half.operation, half.inputs[0].default_value, half.inputs[1].default_value = "MULTIPLY", 0.5, 0.8
@@ -2224,7 +2224,7 @@ def test_texture_graphs_warn_on_what_they_cannot_evaluate_and_follow_edits(bpy_m
         return params, warnings, np.array(textures.items[params["roughness_texture"]]["pixels"])
 
     params, warnings, first = export_once()
-    assert len(warnings) == 1 and "Brick Texture" in warnings[0] and "Base Color" in warnings[0], warnings
+    assert len(warnings) == 1 and "Magic Texture" in warnings[0] and "Base Color" in warnings[0], warnings
     assert params["base_color"] == pytest.approx((0.2, 0.4, 0.6))
     assert params["metallic"] == pytest.approx(0.4) and "metallic_texture" not in params
     assert np.allclose(first, 0.3)  # the default ramp (black → white) at 0.3
