@@ -44,8 +44,6 @@ def _visibility_warnings(ob, what, warnings, light=False):
         warnings.append(f"{what} '{ob.name}': light linking is not rendered; it lights, and is blocked by, "
                         "every object")
     if light:
-        if not getattr(ob.data, "use_shadow", True):
-            warnings.append(f"{what} '{ob.name}': Cast Shadow off is not rendered; the light casts shadows")
         return
     for attr, label in (("is_holdout", "holdout"), ("is_shadow_catcher", "shadow catcher")):
         if getattr(ob, attr, False):
@@ -1251,6 +1249,8 @@ def export_scene(depsgraph, test_break=lambda: False, need_camera=True):
             _visibility_warnings(ob, "light", warnings, light=True)
             l = _light(ob, _matrix(inst.matrix_world), warnings)
             if l is not None:
+                if not getattr(ob.data, "use_shadow", True):  # (Light › Cast Shadow off)
+                    l["cast_shadow"] = False
                 lights.append(l)
             continue
         if ob.type not in GEOMETRY_TYPES:

@@ -652,7 +652,9 @@ fn next_event(
     if !(f.max_element() > 0.0 && ls.wi.dot(si.ng) * wi.z > 0.0) {
         return None;
     }
-    let (tr, crossed_transparent) = scene.transmittance(si, &ls)?;
+    // (a light whose Cast Shadow is off reaches every point it faces)
+    let (tr, crossed_transparent) =
+        if scene.casts_shadow(li) { scene.transmittance(si, &ls)? } else { (Spectrum::ONE, false) };
     let radiance = ls.radiance * tr;
     let weight = if ls.is_delta { 1.0 } else { power_heuristic(ls.pdf, pdf_b) };
     let at_infinity = !ls.dist.is_finite();

@@ -360,6 +360,7 @@ fn parse_light(d: &Bound<'_, PyDict>) -> PyResult<LightDesc> {
     let ctx = format!("light '{name}'");
     let kind: String = get_or(d, "type", String::new(), &ctx)?;
     let visible_camera: bool = get_or(d, "visible_camera", false, &ctx)?;
+    let cast_shadow: bool = get_or(d, "cast_shadow", true, &ctx)?;
     let power = rgb(d, "power", [0.0; 3], &ctx)?;
     Ok(match kind.to_ascii_uppercase().as_str() {
         "POINT" => LightDesc::Point {
@@ -368,6 +369,7 @@ fn parse_light(d: &Bound<'_, PyDict>) -> PyResult<LightDesc> {
             soft_falloff: get_or(d, "soft_falloff", true, &ctx)?,
             power,
             visible_camera,
+            cast_shadow,
             name,
         },
         "SPOT" => LightDesc::Spot {
@@ -383,6 +385,7 @@ fn parse_light(d: &Bound<'_, PyDict>) -> PyResult<LightDesc> {
             },
             power,
             visible_camera,
+            cast_shadow,
             name,
         },
         "AREA" => {
@@ -404,6 +407,7 @@ fn parse_light(d: &Bound<'_, PyDict>) -> PyResult<LightDesc> {
                 normalize: get_or(d, "normalize", true, &ctx)?,
                 spread: get_or(d, "spread", std::f32::consts::PI, &ctx)?,
                 visible_camera,
+                cast_shadow,
                 name,
             }
         }
@@ -412,6 +416,7 @@ fn parse_light(d: &Bound<'_, PyDict>) -> PyResult<LightDesc> {
             irradiance: rgb(d, "irradiance", [1.0; 3], &ctx)?,
             angle: get_or(d, "angle", 0.0, &ctx)?,
             visible_camera,
+            cast_shadow,
             name,
         },
         other => return Err(verr(format!("{ctx}: unknown light type '{other}' (POINT, SPOT, AREA or SUN)"))),

@@ -120,13 +120,26 @@ fn diffuse(b: &Bsdf) -> bool {
 /// Visibility from a surface point to a point (or, at infinity, along a direction) on a
 /// side the path builder scatters and samples lights towards: on one side of both the
 /// geometric and the shading normal, and on the far side only where the surface transmits
-/// through a non-delta lobe (rough glass). A `shadow` ray (next-event estimation) passes
-/// objects that cast no shadow, as the base's did; a path segment does not.
-fn visible(scene: &Scene, si: &SurfaceInteraction, z: Vec3, at_infinity: bool, shadow: bool) -> bool {
+/// through a non-delta lobe (rough glass); and nothing in the way, as `blocking` says.
+fn visible(scene: &Scene, si: &SurfaceInteraction, z: Vec3, at_infinity: bool, blocking: Blocking) -> bool {
     let dir = if at_infinity { z } else { z - si.p };
     let (cg, cs) = (dir.dot(si.ng), dir.dot(si.frame.n));
     let side = if cg > 0.0 { cs > 0.0 } else { cg < 0.0 && cs < 0.0 && scene.bsdf_at(si).transmits() };
-    side && if shadow { scene.shadow_clear(si, z, at_infinity) } else { scene.segment_clear(si, z, at_infinity) }
+    side && match blocking {
+        Blocking::Path => scene.segment_clear(si, z, at_infinity),
+        Blocking::Shadow => scene.shadow_clear(si, z, at_infinity),
+        Blocking::Nothing => true,
+    }
+}
+
+/// What blocks a segment the offset re-traces: any surface (a path segment); a surface that
+/// casts shadows (a shadow ray, next-event estimation, as the base's was); nothing (the
+/// shadow ray of a light whose Cast Shadow is off).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Blocking {
+    Path,
+    Shadow,
+    Nothing,
 }
 
 /// An offset vertex of its own (not yet joined to the base path).
@@ -418,7 +431,7 @@ fn half_vector_step(scene: &Scene, x: &Vertex, f: &Free) -> Option<Step> {
 
 /// Reconnection y_k → x_{k+1} (x_k, y_k, x_{k+1} diffuse).
 fn reconnect(scene: &Scene, xk: &Vertex, xn: &Vertex, f: &Free) -> Option<State> {
-    if !visible(scene, &f.y, xn.p, false, false) {
+    if !visible(scene, &f.y, xn.p, false, Blocking::Path) {
         return None;
     }
     let dir = (xn.p - f.y.p).normalize();
@@ -440,7 +453,12 @@ fn reconnect(scene: &Scene, xk: &Vertex, xn: &Vertex, f: &Free) -> Option<State>
 /// Re-evaluates light event `e` (leaving base vertex at `xk`) from the free offset vertex,
 /// reconnected to the same light point (or direction, for lights at infinity).
 fn reconnect_event(scene: &Scene, e: &Event, xk: Vec3, f: &Free) -> Option<(Spectrum, f32)> {
-    if !visible(scene, &f.y, e.z, e.at_infinity, e.nee) {
+    let blocking = match (e.nee, scene.casts_shadow(e.light)) {
+        (false, _) => Blocking::Path,
+        (true, true) => Blocking::Shadow,
+        (true, false) => Blocking::Nothing,
+    };
+    if !visible(scene, &f.y, e.z, e.at_infinity, blocking) {
         return None;
     }
     let dir = if e.at_infinity { e.z } else { (e.z - f.y.p).normalize() };

@@ -628,6 +628,21 @@ def ray_visibility(bpy):
     return scene
 
 
+def shadowless_lamp(bpy):
+    """A fill light as artists set one: an area lamp with Cast Shadow off over a ball and a
+    block (they leave no shadow of it), beside a point lamp that casts shadows."""
+    scene, grey = _grey_room(bpy, smooth=False)
+    _uv_sphere(bpy, scene, "Ball", (-0.3, 0.2, 0.3), 0.3, 24, 12, grey, smooth=True)
+    v = [(x, y, z) for z in (0.0, 0.7) for y in (0.0, 0.3) for x in (0.3, 0.6)]
+    _mesh(bpy, scene, "Block", v, [(0, 2, 3, 1), (4, 5, 7, 6), (0, 1, 5, 4), (2, 6, 7, 3), (0, 4, 6, 2),
+                                   (1, 3, 7, 5)], _diffuse(bpy, "Blue", (0.2, 0.3, 0.7)), smooth=False)
+    fill = _lamp(bpy, scene, "Fill", "AREA", 60.0, (0.0, 0.1, 1.2), 0.6)
+    fill.data.use_shadow = False
+    _lamp(bpy, scene, "Key", "POINT", 15.0, (0.7, -0.5, 0.9), 0.05)
+    _camera_and_world(bpy, scene)
+    return scene
+
+
 def checked_in(name, keep=None):
     """One of tests/scenes/*.blend (tools/make_test_scenes.py) at this module's size and
     bounce limit; `keep` names the lights left on."""
@@ -696,6 +711,7 @@ SCENES = {
     "normal_mapped_ball": (normal_mapped_ball, 512, 16),
     "procedural": (procedural, 512, 16),
     "ray_visibility": (ray_visibility, 512, 16),
+    "shadowless_lamp": (shadowless_lamp, 512, 16),
     "all_lights": (checked_in("lights", {"Area", "Point", "Spot", "Sun", "World"}), 512, 16),
     "specular": (checked_in("specular"), 1024, 32),
     "textures": (checked_in("textures"), 512, 16),
@@ -713,6 +729,12 @@ SCENES = {
 # sampling of emitters and the world (its own naive estimate), the NEE rows with Cycles as it
 # renders by default.
 NAIVE_REFERENCE = {"bulb_rough", "bulb_frosted", "bulb_tinted", "ray_visibility"}
+
+# Scenes that only next-event estimation renders as Cycles does: a lamp whose Cast Shadow is
+# off lights what its shadow rays reach, through everything; a path that finds the lamp by
+# scattering is blocked as any path is. Cycles cannot switch a lamp's light sampling off, so
+# there is no naive Cycles image to compare the naive rows with; they are not rendered.
+NEE_ONLY = {"shadowless_lamp"}
 
 
 def samples(method, spp):
@@ -754,6 +776,8 @@ def compare(bpy, name, tmp, scale=1, methods=METHODS):
     import gdmlt_blender.export as export
 
     build, cycles_spp, spp = SCENES[name]
+    if name in NEE_ONLY:
+        methods = [m for m in methods if m[1]]
     scene = build(bpy)
     desc, warnings = export.export_scene(bpy.context.evaluated_depsgraph_get())
     if warnings:

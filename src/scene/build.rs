@@ -307,6 +307,7 @@ impl Lighting {
                     shape: LightShape::Triangle { prim: t as u32 },
                     emission: mat.emission,
                     visible_camera: true,
+                    cast_shadow: true,
                 });
                 emissive_triangles += 1;
             }

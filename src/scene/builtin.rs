@@ -226,6 +226,7 @@ pub fn cornell_mixed_lights(width: u32, height: u32) -> SceneDesc {
             normalize: true,
             spread: std::f32::consts::PI,
             visible_camera: false,
+            cast_shadow: true,
         },
         LightDesc::Point {
             name: "Lamp".into(),
@@ -234,6 +235,7 @@ pub fn cornell_mixed_lights(width: u32, height: u32) -> SceneDesc {
             power: [15.0, 10.0, 5.0],
             soft_falloff: true,
             visible_camera: false,
+            cast_shadow: true,
         },
         LightDesc::Spot {
             name: "Spot".into(),
@@ -245,6 +247,7 @@ pub fn cornell_mixed_lights(width: u32, height: u32) -> SceneDesc {
             spot_blend: 0.2,
             soft_falloff: true,
             visible_camera: false,
+            cast_shadow: true,
             matrix: None,
         },
         LightDesc::Sun {
@@ -253,6 +256,7 @@ pub fn cornell_mixed_lights(width: u32, height: u32) -> SceneDesc {
             irradiance: [2.0, 1.8, 1.5],
             angle: 5f32.to_radians(),
             visible_camera: false,
+            cast_shadow: true,
         },
     ];
     d.world = [0.1, 0.12, 0.15];

@@ -221,7 +221,15 @@ pub enum AreaShape {
 pub enum LightDesc {
     /// Point light: `power` = Power [W] × colour; soft sphere of `radius` (0 = delta).
     /// `soft_falloff` is Blender's "Soft Falloff" (on by default, see scene/light.rs).
-    Point { name: String, position: [f32; 3], radius: f32, power: [f32; 3], soft_falloff: bool, visible_camera: bool },
+    Point {
+        name: String,
+        position: [f32; 3],
+        radius: f32,
+        power: [f32; 3],
+        soft_falloff: bool,
+        visible_camera: bool,
+        cast_shadow: bool,
+    },
     /// Spot light: a point light with a cone around `direction` (Blender: local −Z).
     Spot {
         name: String,
@@ -233,6 +241,7 @@ pub enum LightDesc {
         spot_blend: f32,
         soft_falloff: bool,
         visible_camera: bool,
+        cast_shadow: bool,
         /// The light object's matrix (row-major 4×4), when its scale is to shape the cone:
         /// as in Cycles, the cone is evaluated in the object's scaled frame, so a scale of
         /// (2, 1, 1) widens it along the object's x (an elliptical spot). None: a round cone
@@ -252,10 +261,11 @@ pub enum LightDesc {
         normalize: bool,
         spread: f32,
         visible_camera: bool,
+        cast_shadow: bool,
     },
     /// Sun: `direction` points from the scene towards the sun; `irradiance` = Strength × colour
     /// [W/m²]; `angle` = angular diameter [rad] (0 = delta).
-    Sun { name: String, direction: [f32; 3], irradiance: [f32; 3], angle: f32, visible_camera: bool },
+    Sun { name: String, direction: [f32; 3], irradiance: [f32; 3], angle: f32, visible_camera: bool, cast_shadow: bool },
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -365,4 +375,17 @@ pub struct SceneDesc {
     /// any-hit shadow rays; single-lobe materials: that lobe alone). Off by default; the
     /// benchmark `skipbench` turns it on to measure what the shortcuts save.
     pub general_paths: bool,
+}
+
+impl LightDesc {
+    /// The light's Cast Shadow (Blender's Light › Cast Shadow): off, its shadow rays reach it
+    /// through every surface.
+    pub fn cast_shadow(&self) -> bool {
+        match self {
+            LightDesc::Point { cast_shadow, .. }
+            | LightDesc::Spot { cast_shadow, .. }
+            | LightDesc::Area { cast_shadow, .. }
+            | LightDesc::Sun { cast_shadow, .. } => *cast_shadow,
+        }
+    }
 }

@@ -174,6 +174,8 @@ pub struct Light {
     /// sun the irradiance [W/m²].
     pub emission: Spectrum,
     pub visible_camera: bool,
+    /// Its shadow rays are blocked by surfaces (Blender's Cast Shadow; off for fill lights).
+    pub cast_shadow: bool,
 }
 
 /// A point chosen on a light for next-event estimation.
@@ -194,6 +196,11 @@ pub struct LightSample {
 
 impl Light {
     pub fn from_desc(d: &LightDesc) -> Result<Light, SceneError> {
+        Ok(Light { cast_shadow: d.cast_shadow(), ..Self::shape_from_desc(d)? })
+    }
+
+    /// The light of `d`, checked, before its Cast Shadow setting.
+    fn shape_from_desc(d: &LightDesc) -> Result<Light, SceneError> {
         let v = |a: [f32; 3]| Vec3::from_array(a);
         let check = |name: &str, ok: bool, what: &str| {
             if ok {
@@ -218,7 +225,7 @@ impl Light {
             "power too large for single precision (an infinite strength in Blender is stored as 3.4e38)",
         )?;
         match d {
-            LightDesc::Point { name, position, radius, power, soft_falloff, visible_camera } => {
+            LightDesc::Point { name, position, radius, power, soft_falloff, visible_camera, .. } => {
                 check(
                     name,
                     finite3(position) && finite3(power) && radius.is_finite(),
@@ -237,6 +244,7 @@ impl Light {
                 soft_falloff,
                 visible_camera,
                 matrix,
+                ..
             } => {
                 check(
                     name,
@@ -255,7 +263,9 @@ impl Light {
                 let spot = Spot::new(v(*direction).normalize(), *spot_size, *spot_blend, m);
                 Ok(Self::sphere(name, v(*position), *radius, v(*power), Some(spot), *soft_falloff, *visible_camera))
             }
-            LightDesc::Area { name, to_world, shape, size_x, size_y, power, normalize, spread, visible_camera } => {
+            LightDesc::Area {
+                name, to_world, shape, size_x, size_y, power, normalize, spread, visible_camera, ..
+            } => {
                 check(
                     name,
                     to_world.iter().flatten().all(|x| x.is_finite()) && finite3(power),
@@ -290,9 +300,10 @@ impl Light {
                     },
                     emission: radiance,
                     visible_camera: *visible_camera,
+                    cast_shadow: true,
                 })
             }
-            LightDesc::Sun { name, direction, irradiance, angle, visible_camera } => {
+            LightDesc::Sun { name, direction, irradiance, angle, visible_camera, .. } => {
                 check(
                     name,
                     finite3(direction) && finite3(irradiance) && angle.is_finite(),
@@ -313,6 +324,7 @@ impl Light {
                     },
                     emission,
                     visible_camera: *visible_camera,
+                    cast_shadow: true,
                 })
             }
         }
@@ -335,6 +347,7 @@ impl Light {
             shape: LightShape::Sphere { center, radius, spot, soft_falloff },
             emission,
             visible_camera,
+            cast_shadow: true,
         }
     }
 
@@ -593,6 +606,7 @@ mod tests {
             normalize: true,
             spread: std::f32::consts::PI,
             visible_camera: false,
+            cast_shadow: true,
         };
         let e = Light::from_desc(&area).expect_err("refused").to_string();
         assert!(e.contains("Lamp.001") && e.contains("negative"), "{e}");
@@ -602,6 +616,7 @@ mod tests {
             irradiance: [0.0, -1.0, 0.0],
             angle: 0.01,
             visible_camera: false,
+            cast_shadow: true,
         };
         assert!(Light::from_desc(&sun).is_err());
         let spot = LightDesc::Spot {
@@ -614,6 +629,7 @@ mod tests {
             spot_blend: 0.1,
             soft_falloff: true,
             visible_camera: false,
+            cast_shadow: true,
             matrix: None,
         };
         assert!(Light::from_desc(&spot).err().unwrap().to_string().contains("spot size"));
@@ -631,6 +647,7 @@ mod tests {
             normalize: true,
             spread: std::f32::consts::PI,
             visible_camera: false,
+            cast_shadow: true,
         };
         let l = Light::from_desc(&d).unwrap();
         // world area = (1·2)·(0.5·1) = 1
@@ -678,6 +695,7 @@ mod tests {
             normalize: true,
             spread: 60f32.to_radians(),
             visible_camera: false,
+            cast_shadow: true,
         };
         let l = Light::from_desc(&d).unwrap();
         let mut s = crate::sampler::IndependentSampler::new(5, 0);

@@ -452,6 +452,7 @@ mod tests {
                     spot_blend: 0.2,
                     soft_falloff: true,
                     visible_camera: false,
+                    cast_shadow: true,
                     matrix: None,
                 }
             } else {
@@ -462,6 +463,7 @@ mod tests {
                     power,
                     soft_falloff: true,
                     visible_camera: false,
+                    cast_shadow: true,
                 }
             });
         }

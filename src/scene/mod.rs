@@ -736,6 +736,12 @@ impl Scene {
         self.lights.len() as u32
     }
 
+    /// Light `li`'s shadow rays are blocked by surfaces (its Cast Shadow; the world's always).
+    #[inline]
+    pub fn casts_shadow(&self, li: u32) -> bool {
+        self.lights.get(li as usize).is_none_or(|l| l.cast_shadow)
+    }
+
     /// Background radiance arriving from direction `d` and the NEE pdf from shading point
     /// `from` (solid angle, selection included; 0 when the world is not sampled).
     #[inline]
@@ -1215,5 +1221,26 @@ mod tests {
         assert!(!scene.visible(&si, &light(-0.5)));
         assert!(scene.transmittance(&si, &light(-0.5)).is_none());
         assert!(!scene.segment_clear(&si, Vec3::new(0.1, 0.5, 0.05), false)); // a path segment is blocked
+    }
+
+    /// A light's Cast Shadow reaches the scene; the world (index past the lights) always
+    /// casts shadows.
+    #[test]
+    fn lights_say_whether_they_cast_shadows() {
+        let mut desc = crate::scene::builtin::cornell_box(8, 8);
+        desc.lights.push(LightDesc::Point {
+            name: "Fill".into(),
+            position: [0.0, 0.5, 0.5],
+            radius: 0.0,
+            power: [1.0; 3],
+            soft_falloff: true,
+            visible_camera: false,
+            cast_shadow: false,
+        });
+        let scene = Scene::build(&desc).unwrap();
+        let fill = scene.lights.iter().position(|l| l.name == "Fill").unwrap() as u32;
+        assert!(!scene.casts_shadow(fill));
+        assert!((0..scene.lights.len() as u32).filter(|&i| i != fill).all(|i| scene.casts_shadow(i)));
+        assert!(scene.casts_shadow(scene.env_light()));
     }
 }
