@@ -85,6 +85,13 @@ def _uv_sphere(bpy, scene, name, centre, radius, segments, rings, mat, smooth):
     return _mesh(bpy, scene, name, verts, faces, mat, smooth)
 
 
+def _block(bpy, scene, name, lo, hi, mat):
+    """An axis-aligned box from corner `lo` to corner `hi`, flat-shaded, faces outwards."""
+    v = [(x, y, z) for z in (lo[2], hi[2]) for y in (lo[1], hi[1]) for x in (lo[0], hi[0])]
+    faces = [(0, 2, 3, 1), (4, 5, 7, 6), (0, 1, 5, 4), (2, 6, 7, 3), (0, 4, 6, 2), (1, 3, 7, 5)]
+    return _mesh(bpy, scene, name, v, faces, mat, smooth=False)
+
+
 def _room(bpy, scene, mat, smooth, ceiling=True):
     """A 2 × 2 × 1.5 m room open towards the camera (−Y): floor, three walls and the
     ceiling as ONE mesh whose faces share the corner vertices, so with smooth shading each
@@ -619,9 +626,7 @@ def ray_visibility(bpy):
     card.visible_camera = False
     _mesh(bpy, scene, "Panel", [(0.1, 0.1, 1.45), (0.7, 0.1, 1.45), (0.7, 0.7, 1.45), (0.1, 0.7, 1.45)],
           [(0, 3, 2, 1)], _emission(bpy, "Panel light", 8.0), smooth=False)
-    v = [(x, y, z) for z in (0.0, 0.9) for y in (0.25, 0.45) for x in (0.3, 0.5)]
-    block = _mesh(bpy, scene, "Block", v, [(0, 2, 3, 1), (4, 5, 7, 6), (0, 1, 5, 4), (2, 6, 7, 3), (0, 4, 6, 2),
-                                          (1, 3, 7, 5)], _diffuse(bpy, "Blue", (0.2, 0.3, 0.7)), smooth=False)
+    block = _block(bpy, scene, "Block", (0.3, 0.25, 0.0), (0.5, 0.45, 0.9), _diffuse(bpy, "Blue", (0.2, 0.3, 0.7)))
     block.visible_shadow = False
     _uv_sphere(bpy, scene, "Ball", (-0.4, 0.3, 0.3), 0.3, 24, 12, grey, smooth=True)
     _camera_and_world(bpy, scene)
@@ -633,9 +638,7 @@ def shadowless_lamp(bpy):
     block (they leave no shadow of it), beside a point lamp that casts shadows."""
     scene, grey = _grey_room(bpy, smooth=False)
     _uv_sphere(bpy, scene, "Ball", (-0.3, 0.2, 0.3), 0.3, 24, 12, grey, smooth=True)
-    v = [(x, y, z) for z in (0.0, 0.7) for y in (0.0, 0.3) for x in (0.3, 0.6)]
-    _mesh(bpy, scene, "Block", v, [(0, 2, 3, 1), (4, 5, 7, 6), (0, 1, 5, 4), (2, 6, 7, 3), (0, 4, 6, 2),
-                                   (1, 3, 7, 5)], _diffuse(bpy, "Blue", (0.2, 0.3, 0.7)), smooth=False)
+    _block(bpy, scene, "Block", (0.3, 0.0, 0.0), (0.6, 0.3, 0.7), _diffuse(bpy, "Blue", (0.2, 0.3, 0.7)))
     fill = _lamp(bpy, scene, "Fill", "AREA", 60.0, (0.0, 0.1, 1.2), 0.6)
     fill.data.use_shadow = False
     _lamp(bpy, scene, "Key", "POINT", 15.0, (0.7, -0.5, 0.9), 0.05)
