@@ -98,6 +98,7 @@ class Textures:
         self.index = {}
         self.pixels = {}  # image name → its RGBA pixels, for node graphs (read once per export)
         self.spaces = {}  # procedural texture index → the coordinates it reads ('GENERATED', 'OBJECT', 'UV')
+        self.graphs = {}  # (material, node, socket) → add_graph's result: a graph is evaluated once
 
     def add(self, node, warnings, what, alpha=False):
         """Index of the texture of an Image (or Environment) Texture node, or None (with a
@@ -168,7 +169,14 @@ class Textures:
         """The linked input `sock` through a graph of colour and value nodes over image
         textures (texture_graph.py): ('texture', index) of the evaluated texture,
         ('constant', value) when no image feeds it, or None (warned) when the graph has a
-        node the evaluator does not render."""
+        node the evaluator does not render. Evaluated once per material, node and socket."""
+        key = (what, sock.node.name, sock.identifier)
+        if key not in self.graphs:
+            self.graphs[key] = self._evaluate_graph(sock, warnings, what)
+        return self.graphs[key]
+
+    def _evaluate_graph(self, sock, warnings, what):
+        """`add_graph`, evaluated."""
         from . import texture_graph
 
         uv_keys = {}
@@ -485,22 +493,84 @@ def material_params(mat, warnings, textures=None):
         return out
     displaced = _displacement_bump(mat, node_out, textures, warnings, what)
     node = surface.links[0].from_node
-    leaves = []
-    _shader_leaves(node, 1.0, leaves, textures, warnings, what)
-    if node.type in ("MIX_SHADER", "ADD_SHADER") or any("pass" in p for _, p in leaves):
-        if any(p.get("vertex_color") for _, p in leaves):
-            warnings.append(f"{what}: a colour attribute inside a Mix/Add Shader is not rendered (its factor "
-                            f"is taken as white)")
-        out.update(_combine(leaves, warnings, what))
+    blend = _textured_mix(node, textures, what)
+    if blend is None:
+        leaves = []
+        _shader_leaves(node, 1.0, leaves, textures, warnings, what)
+        out.update(_leaves_material(leaves, node.type in ("MIX_SHADER", "ADD_SHADER"), warnings, what))
     else:
-        out.update(leaves[0][1])  # one shader node, opaque: its own parameters
-        out.pop("bsdf", None)
+        out.update(_blend_material(node, blend, textures, warnings, what))
     if displaced and "bump_texture" in out:
         warnings.append(f"{what}: its displacement and a Bump node both bump the normal; only the Bump node's "
                         f"is rendered")
     elif displaced:
         out.update(displaced)
     return out
+
+
+def _leaves_material(leaves, mixed, warnings, what):
+    """The material parameters of weighted shader leaves: one opaque leaf's own, else their
+    combination (`_combine`) — a Mix/Add Shader tree (`mixed`) or a leaf with pass-through."""
+    if not mixed and len(leaves) == 1 and leaves[0][0] == 1.0 and "pass" not in leaves[0][1]:
+        p = dict(leaves[0][1])  # one shader node, opaque: its own parameters
+        p.pop("bsdf", None)
+        return p
+    if any(p.get("vertex_color") for _, p in leaves):
+        warnings.append(f"{what}: a colour attribute inside a Mix/Add Shader is not rendered (its factor "
+                        f"is taken as white)")
+    return _combine(leaves, warnings, what)
+
+
+def _textured_mix(node, textures, what):
+    """The first Mix Shader of the shader tree under `node` (depth first) whose Fac is an
+    image or procedural texture (or colour and value nodes over one): (its name, the factor's
+    texture index); None without one."""
+    if textures is None:
+        return None
+    stack, seen = [node], set()
+    while stack:
+        n = stack.pop()
+        if n.name in seen:
+            continue
+        seen.add(n.name)
+        if n.type == "MIX_SHADER":
+            fac = n.inputs[0]
+            if fac.is_linked:
+                tex = _socket_texture(fac, textures, [], what)
+                if tex is not None and tex is not False:
+                    return n.name, tex
+        if n.type in ("MIX_SHADER", "ADD_SHADER"):
+            stack.extend(s.links[0].from_node for s in reversed(n.inputs[-2:]) if s.is_linked)
+    return None
+
+
+def _blend_material(node, blend, textures, warnings, what):
+    """A shader tree whose Mix Shader `blend` = (name, texture) takes its factor f from a
+    texture: the material at f = 0 blending into the one at f = 1 by the texture (the
+    core's `MaterialDesc::blend`, mixed lobe by lobe per point). Every leaf's weight is
+    affine in f, so the two ends' mixtures blended by f are the tree's mixture at f. What
+    the core reads once per point — emission, normal and bump maps — comes from the f = 0
+    end (warned where the ends differ)."""
+    name, texture = blend
+    ends = []
+    for f in (0.0, 1.0):
+        leaves, said = [], []
+        _shader_leaves(node, 1.0, leaves, textures, said, what, fixed={name: f})
+        warnings.extend(w for w in said if w not in warnings)
+        ends.append(_leaves_material(leaves, False, warnings, what)
+                    if leaves else {"base_color": (0.0, 0.0, 0.0)})
+    a, b = ends
+    for keys, label in ((("emission", "emission_texture"), "emission"), (NORMAL_KEYS, "normal and bump maps")):
+        if any(a.get(k) != b.get(k) for k in keys):
+            warnings.append(f"{what}: Mix Shader '{name}' mixes {label} by a texture; GDMLT renders those of "
+                            f"its first shader's side only")
+    if b.get("vertex_color") and not a.get("vertex_color"):
+        warnings.append(f"{what}: a colour attribute under Mix Shader '{name}''s second shader is not rendered")
+        b.pop("vertex_color", None)
+    b.pop("vertex_color_layer", None)
+    for k in ("emission", "emission_texture", "pass_index", *NORMAL_KEYS):
+        b.pop(k, None)
+    return dict(a, blend=b, blend_texture=texture)
 
 
 def _displacement_bump(mat, node_out, textures, warnings, what):
@@ -733,16 +803,18 @@ def _specular_tint(node, out, warnings, what):
                         f"glass reflects untinted)")
 
 
-def _shader_leaves(node, weight, leaves, textures, warnings, what, branch=()):
+def _shader_leaves(node, weight, leaves, textures, warnings, what, branch=(), fixed=None):
     """Walks a Mix/Add Shader tree: appends (weight, leaf parameters) for every shader node.
     `branch`: the Mix/Add nodes above this one; a node met again on its own branch is a loop
-    (Blender's editor refuses those, a script need not), refused naming material and node."""
+    (Blender's editor refuses those, a script need not), refused naming material and node.
+    `fixed`: Mix Shader name → the factor taken for it (`_blend_material`'s two ends)."""
     if weight <= 0.0:
         return
     if node.name in branch:
         raise ValueError(f"{what}: its shader nodes form a loop through '{node.name}'")
     if node.type == "MIX_SHADER":
-        fac = min(max(_input_value(node, "Fac", warnings, what, 0.5), 0.0), 1.0)
+        fac = fixed[node.name] if fixed and node.name in fixed else _input_value(node, "Fac", warnings, what, 0.5)
+        fac = min(max(fac, 0.0), 1.0)
         pairs = ((node.inputs[1], weight * (1.0 - fac)), (node.inputs[2], weight * fac))
     elif node.type == "ADD_SHADER":
         pairs = ((node.inputs[0], weight), (node.inputs[1], weight))
@@ -755,7 +827,7 @@ def _shader_leaves(node, weight, leaves, textures, warnings, what, branch=()):
         return
     for sock, w in pairs:
         if sock.is_linked:  # an unconnected shader socket adds nothing, as in Cycles
-            _shader_leaves(sock.links[0].from_node, w, leaves, textures, warnings, what, branch + (node.name,))
+            _shader_leaves(sock.links[0].from_node, w, leaves, textures, warnings, what, branch + (node.name,), fixed)
 
 
 @dataclass
@@ -1050,8 +1122,9 @@ def _colour_layer(ob, layers, warnings):
 def _mesh_coordinates(params, textures):
     """The mesh coordinates (Generated, Object) the procedural textures of a material's
     `params` read."""
-    return {textures.spaces[v] for k, v in params.items()
-            if k.endswith("_texture") and textures.spaces.get(v) in ("GENERATED", "OBJECT")}
+    spaces = {textures.spaces[v] for k, v in params.items()
+              if k.endswith("_texture") and textures.spaces.get(v) in ("GENERATED", "OBJECT")}
+    return spaces | (_mesh_coordinates(params["blend"], textures) if "blend" in params else set())
 
 
 def _light(ob, matrix, warnings):

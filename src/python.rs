@@ -144,6 +144,79 @@ fn parse_mesh(d: &Bound<'_, PyDict>) -> PyResult<MeshDesc> {
     })
 }
 
+/// A material description as the dict `parse_material` reads.
+fn material_dict<'py>(py: Python<'py>, m: &MaterialDesc) -> PyResult<Bound<'py, PyDict>> {
+    let md = PyDict::new(py);
+    md.set_item("name", &m.name)?;
+    for (key, c) in [
+        ("base_color", m.base_color),
+        ("emission", m.emission),
+        ("transparent_color", m.transparent_color),
+        ("coat_tint", m.coat_tint),
+        ("specular_tint", m.specular_tint),
+    ] {
+        md.set_item(key, c)?;
+    }
+    for (key, v) in [
+        ("roughness", m.roughness),
+        ("diffuse_roughness", m.diffuse_roughness),
+        ("metallic", m.metallic),
+        ("transmission", m.transmission),
+        ("ior", m.ior),
+        ("specular_ior", m.specular_ior),
+        ("specular", m.specular),
+        ("transparency", m.transparency),
+        ("normal_strength", m.normal_strength),
+        ("bump_distance", m.bump_distance),
+        ("bump_strength", m.bump_strength),
+        ("coat", m.coat),
+        ("coat_roughness", m.coat_roughness),
+        ("coat_ior", m.coat_ior),
+        ("translucency", m.translucency),
+    ] {
+        md.set_item(key, v)?;
+    }
+    md.set_item("glass_sqrt_tint", m.glass_sqrt_tint)?;
+    md.set_item("metal_constant_fresnel", m.metal_constant_fresnel)?;
+    md.set_item("multiscatter", m.multiscatter)?;
+    md.set_item("vertex_color", m.vertex_color)?;
+    md.set_item("bump_map_correction", m.bump_map_correction)?;
+    md.set_item("pass_index", m.pass_index)?;
+    for (key, value) in [
+        ("base_color_texture", m.base_color_texture),
+        ("roughness_texture", m.roughness_texture),
+        ("metallic_texture", m.metallic_texture),
+        ("alpha_texture", m.alpha_texture),
+        ("normal_texture", m.normal_texture),
+        ("emission_texture", m.emission_texture),
+        ("bump_texture", m.bump_texture),
+    ] {
+        if let Some(t) = value {
+            md.set_item(key, t)?;
+        }
+    }
+    for (key, value) in [
+        ("metal_color", m.metal_color),
+        ("glass_color", m.glass_color),
+        ("glass_reflection_tint", m.glass_reflection_tint),
+        ("translucent_color", m.translucent_color),
+    ] {
+        if let Some(c) = value {
+            md.set_item(key, c)?;
+        }
+    }
+    for (key, value) in [("metal_roughness", m.metal_roughness), ("glass_roughness", m.glass_roughness)] {
+        if let Some(r) = value {
+            md.set_item(key, r)?;
+        }
+    }
+    if let (Some(b), Some(t)) = (&m.blend, m.blend_texture) {
+        md.set_item("blend", material_dict(py, b)?)?;
+        md.set_item("blend_texture", t)?;
+    }
+    Ok(md)
+}
+
 fn parse_material(d: &Bound<'_, PyDict>) -> PyResult<MaterialDesc> {
     let name: String = get_or(d, "name", "material".to_string(), "material")?;
     let ctx = format!("material '{name}'");
@@ -188,6 +261,13 @@ fn parse_material(d: &Bound<'_, PyDict>) -> PyResult<MaterialDesc> {
         transparency: get_or(d, "transparency", def.transparency, &ctx)?,
         transparent_color: rgb(d, "transparent_color", def.transparent_color, &ctx)?,
         pass_index: get_or(d, "pass_index", 0, &ctx)?,
+        blend: match item(d, "blend")? {
+            Some(b) if !b.is_none() => Some(Box::new(parse_material(
+                b.cast::<PyDict>().map_err(|_| verr(format!("{ctx}: blend must be a material dict")))?,
+            )?)),
+            _ => None,
+        },
+        blend_texture: get_or(d, "blend_texture", None, &ctx)?,
         name,
     })
 }
@@ -969,71 +1049,7 @@ fn builtin_scene<'py>(py: Python<'py>, name: &str, width: u32, height: u32) -> P
     out.set_item("meshes", meshes)?;
     let mats = PyList::empty(py);
     for m in &d.materials {
-        let md = PyDict::new(py);
-        md.set_item("name", &m.name)?;
-        for (key, c) in [
-            ("base_color", m.base_color),
-            ("emission", m.emission),
-            ("transparent_color", m.transparent_color),
-            ("coat_tint", m.coat_tint),
-            ("specular_tint", m.specular_tint),
-        ] {
-            md.set_item(key, c)?;
-        }
-        for (key, v) in [
-            ("roughness", m.roughness),
-            ("diffuse_roughness", m.diffuse_roughness),
-            ("metallic", m.metallic),
-            ("transmission", m.transmission),
-            ("ior", m.ior),
-            ("specular_ior", m.specular_ior),
-            ("specular", m.specular),
-            ("transparency", m.transparency),
-            ("normal_strength", m.normal_strength),
-            ("bump_distance", m.bump_distance),
-            ("bump_strength", m.bump_strength),
-            ("coat", m.coat),
-            ("coat_roughness", m.coat_roughness),
-            ("coat_ior", m.coat_ior),
-            ("translucency", m.translucency),
-        ] {
-            md.set_item(key, v)?;
-        }
-        md.set_item("glass_sqrt_tint", m.glass_sqrt_tint)?;
-        md.set_item("metal_constant_fresnel", m.metal_constant_fresnel)?;
-        md.set_item("multiscatter", m.multiscatter)?;
-        md.set_item("vertex_color", m.vertex_color)?;
-        md.set_item("bump_map_correction", m.bump_map_correction)?;
-        md.set_item("pass_index", m.pass_index)?;
-        for (key, value) in [
-            ("base_color_texture", m.base_color_texture),
-            ("roughness_texture", m.roughness_texture),
-            ("metallic_texture", m.metallic_texture),
-            ("alpha_texture", m.alpha_texture),
-            ("normal_texture", m.normal_texture),
-            ("emission_texture", m.emission_texture),
-            ("bump_texture", m.bump_texture),
-        ] {
-            if let Some(t) = value {
-                md.set_item(key, t)?;
-            }
-        }
-        for (key, value) in [
-            ("metal_color", m.metal_color),
-            ("glass_color", m.glass_color),
-            ("glass_reflection_tint", m.glass_reflection_tint),
-            ("translucent_color", m.translucent_color),
-        ] {
-            if let Some(c) = value {
-                md.set_item(key, c)?;
-            }
-        }
-        for (key, value) in [("metal_roughness", m.metal_roughness), ("glass_roughness", m.glass_roughness)] {
-            if let Some(r) = value {
-                md.set_item(key, r)?;
-            }
-        }
-        mats.append(md)?;
+        mats.append(material_dict(py, m)?)?;
     }
     out.set_item("materials", mats)?;
     let textures = PyList::empty(py);

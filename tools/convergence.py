@@ -646,6 +646,65 @@ def shadowless_lamp(bpy):
     return scene
 
 
+def _masked_mix(bpy, name, first, second, factor):
+    """A material Mix Shader of shader nodes `first` and `second` ((node type, inputs)) whose
+    factor is `factor(node_tree)`: a socket, as artists mask one material into another."""
+    mat = bpy.data.materials.new(name)
+    mat.use_nodes = True
+    nt = mat.node_tree
+    nt.nodes.clear()
+    out, mix = nt.nodes.new("ShaderNodeOutputMaterial"), nt.nodes.new("ShaderNodeMixShader")
+    for i, (kind, inputs) in ((1, first), (2, second)):
+        node = nt.nodes.new(kind)
+        for key, value in inputs.items():
+            node.inputs[key].default_value = value
+        nt.links.new(node.outputs[0], mix.inputs[i])
+    nt.links.new(factor(nt), mix.inputs["Fac"])
+    nt.links.new(mix.outputs[0], out.inputs["Surface"])
+    return mat
+
+
+def textured_mix(bpy):
+    """Mix Shaders whose factor is a texture: a ball of paint masked into gold by a ramped
+    Noise, a cut-out card (Transparent into a Diffuse by a Checker) before the back wall,
+    and a block of red Diffuse banded with a Glossy by a Wave; lit by an area and a point
+    light."""
+    def noise(nt):
+        n, ramp = nt.nodes.new("ShaderNodeTexNoise"), nt.nodes.new("ShaderNodeValToRGB")
+        n.inputs["Scale"].default_value = 5.0
+        ramp.color_ramp.elements[0].position, ramp.color_ramp.elements[1].position = 0.42, 0.58
+        nt.links.new(n.outputs["Fac"], ramp.inputs["Fac"])
+        return ramp.outputs["Color"]
+
+    def checker(nt):
+        c = nt.nodes.new("ShaderNodeTexChecker")
+        c.inputs["Scale"].default_value = 5.0
+        c.inputs["Color1"].default_value, c.inputs["Color2"].default_value = (1, 1, 1, 1), (0, 0, 0, 1)
+        return c.outputs["Fac"]
+
+    def wave(nt):
+        w = nt.nodes.new("ShaderNodeTexWave")
+        w.inputs["Scale"].default_value = 2.0
+        return w.outputs["Fac"]
+
+    scene, grey = _grey_room(bpy, smooth=False)
+    paint = ("ShaderNodeBsdfPrincipled", {"Base Color": (0.8, 0.8, 0.75, 1.0), "Roughness": 0.5})
+    gold = ("ShaderNodeBsdfPrincipled", {"Base Color": (1.0, 0.7, 0.25, 1.0), "Metallic": 1.0, "Roughness": 0.3})
+    _uv_sphere(bpy, scene, "Ball", (-0.35, 0.1, 0.3), 0.3, 32, 16, _masked_mix(bpy, "PaintGold", paint, gold, noise),
+               smooth=True)
+    cut = _masked_mix(bpy, "CutOut", ("ShaderNodeBsdfTransparent", {}),
+                      ("ShaderNodeBsdfDiffuse", {"Color": (0.2, 0.4, 0.7, 1.0)}), checker)
+    _mesh(bpy, scene, "Card", [(-0.7, 0.6, 0.05), (0.5, 0.6, 0.05), (0.5, 0.6, 1.0), (-0.7, 0.6, 1.0)],
+          [(0, 1, 2, 3)], cut, smooth=False)
+    banded = _masked_mix(bpy, "RedGloss", ("ShaderNodeBsdfDiffuse", {"Color": (0.8, 0.1, 0.1, 1.0)}),
+                         ("ShaderNodeBsdfGlossy", {"Roughness": 0.2}), wave)
+    _block(bpy, scene, "Block", (0.25, -0.1, 0.0), (0.6, 0.25, 0.5), banded)
+    _lamp(bpy, scene, "Area", "AREA", 80.0, (-0.6, -0.4, 1.2), 0.5, (math.radians(-25.0), 0.0, 0.0))
+    _lamp(bpy, scene, "Lamp", "POINT", 15.0, (0.7, -0.5, 0.8), 0.05)
+    _camera_and_world(bpy, scene)
+    return scene
+
+
 def checked_in(name, keep=None):
     """One of tests/scenes/*.blend (tools/make_test_scenes.py) at this module's size and
     bounce limit; `keep` names the lights left on."""
@@ -715,6 +774,7 @@ SCENES = {
     "procedural": (procedural, 512, 16),
     "ray_visibility": (ray_visibility, 512, 16),
     "shadowless_lamp": (shadowless_lamp, 512, 16),
+    "textured_mix": (textured_mix, 512, 16),
     "all_lights": (checked_in("lights", {"Area", "Point", "Spot", "Sun", "World"}), 512, 16),
     "specular": (checked_in("specular"), 1024, 32),
     "textures": (checked_in("textures"), 512, 16),

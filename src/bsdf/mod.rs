@@ -6,6 +6,7 @@
 pub mod albedo;
 #[allow(dead_code)] // its entries are computed by build.rs; the crate uses its integrals and tests the rest
 mod albedo_tables;
+mod blend;
 mod bump_shadowing;
 mod coat;
 mod conductor;

@@ -36,7 +36,12 @@ impl Shading {
         // skipbench benchmark, which measures what these decisions save).
         let shortcuts = !desc.general_paths;
         if !shortcuts {
-            materials.iter_mut().for_each(|m| m.general = true);
+            materials.iter_mut().for_each(|m| {
+                m.general = true;
+                if let Some(b) = &mut m.blend {
+                    b.general = true;
+                }
+            });
         }
         let has_transparency = !shortcuts || materials.iter().any(|m| m.is_transparent());
         let has_perturbed_normals = materials.iter().any(|m| m.normal_texture.is_some() || m.bump_texture.is_some());

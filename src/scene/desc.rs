@@ -158,6 +158,12 @@ pub struct MaterialDesc {
     pub transparent_color: [f32; 3],
     /// The material's Pass Index (Blender's IndexMA pass).
     pub pass_index: u32,
+    /// A second material this one blends into by the luminance f of `blend_texture` at each
+    /// point (a Mix Shader whose factor is a texture): the BSDF there is (1 − f)·this + f·that,
+    /// lobe by lobe (`bsdf/blend.rs`). The blend's own emission, normal and bump maps and
+    /// pass index are not read (this material's are); it may not blend further.
+    pub blend: Option<Box<MaterialDesc>>,
+    pub blend_texture: Option<u32>,
 }
 
 impl Default for MaterialDesc {
@@ -198,6 +204,8 @@ impl Default for MaterialDesc {
             coat_tint: [1.0; 3],
             specular_tint: [1.0; 3],
             metal_constant_fresnel: false,
+            blend: None,
+            blend_texture: None,
             translucency: 0.0,
             translucent_color: None,
             transparency: 0.0,

@@ -61,6 +61,10 @@ pub struct Material {
     /// Always the full Principled mixture, even for a single lobe (benchmarks of the
     /// shortcuts only; set by `Scene::build`).
     pub general: bool,
+    /// The material this one blends into by the luminance of texture `blend_texture`
+    /// (`MaterialDesc::blend`; `Scene::bsdf` mixes their BSDFs lobe by lobe).
+    pub blend: Option<Box<Material>>,
+    pub blend_texture: Option<u32>,
 }
 
 /// The largest emission (and light power) accepted: beyond it a path's throughput × emission
@@ -79,7 +83,16 @@ impl Material {
             d.emission_texture,
             d.bump_texture,
         ];
-        for t in used.into_iter().flatten() {
+        let blend = match (&d.blend, d.blend_texture) {
+            (None, None) => None,
+            (Some(b), Some(_)) if b.blend.is_some() => return Err(bad("its blend material blends again (one level)")),
+            (Some(b), Some(_)) => Some(Box::new(Material::from_desc(b, textures).map_err(|e| match e {
+                SceneError::Material { what, .. } => bad(&format!("its blend material: {what}")),
+                other => other,
+            })?)),
+            _ => return Err(bad("blend and blend_texture come together")),
+        };
+        for t in used.into_iter().chain([d.blend_texture]).flatten() {
             if t as usize >= textures {
                 return Err(bad(&format!("uses texture {t} but the scene has {textures}")));
             }
@@ -182,6 +195,8 @@ impl Material {
             transparency: d.transparency.clamp(0.0, 1.0),
             transparent_color: Vec3::from_array(d.transparent_color).clamp(Vec3::ZERO, Vec3::ONE),
             general: false,
+            blend,
+            blend_texture: d.blend_texture,
         })
     }
 
@@ -199,13 +214,30 @@ impl Material {
     /// May the surface let light straight through (a transparency, constant or textured)?
     #[inline]
     pub fn is_transparent(&self) -> bool {
-        self.transparency > 0.0 || self.alpha_texture.is_some()
+        self.transparency > 0.0
+            || self.alpha_texture.is_some()
+            || self.blend.as_ref().is_some_and(|b| b.is_transparent())
     }
 
     /// The BSDF with base colour, roughness, metallic and transparency τ given (where
     /// textures replace them).
     #[inline]
     pub fn bsdf_with(&self, front: bool, base_color: Spectrum, roughness: f32, metallic: f32, tau: f32) -> Bsdf {
+        self.lobes(front, base_color, roughness, metallic, tau, self.general)
+    }
+
+    /// `bsdf_with`, always as the full Principled mixture when `general` (what a blend of
+    /// two materials mixes: `Bsdf::blend`).
+    #[inline]
+    pub fn lobes(
+        &self,
+        front: bool,
+        base_color: Spectrum,
+        roughness: f32,
+        metallic: f32,
+        tau: f32,
+        general: bool,
+    ) -> Bsdf {
         let (m, t, tl) = (metallic, self.transmission, self.translucency);
         let rest = (1.0 - tau) * (1.0 - tl);
         let w = [(1.0 - m) * (1.0 - t) * rest, m * rest, (1.0 - m) * t * rest];
@@ -249,7 +281,7 @@ impl Material {
             multiscatter: self.multiscatter,
         };
         let coat = self.coat;
-        if tau > 0.0 || self.general || coat.is_some() || translucent.is_some() {
+        if tau > 0.0 || general || coat.is_some() || translucent.is_some() {
             Bsdf::Principled {
                 diffuse,
                 metal,
@@ -338,5 +370,31 @@ mod tests {
             let (albedo, _) = crate::bsdf::testing::white_furnace(&b, wo, 50_000, 3);
             assert!(albedo <= 1.0 + 0.01, "{albedo}");
         }
+    }
+
+    /// A blend needs its factor texture, that texture must exist, and the blended material
+    /// may not blend again; each refusal names the material.
+    #[test]
+    fn bad_blends_are_refused_naming_the_material() {
+        let other = MaterialDesc { name: "rust".into(), ..Default::default() };
+        let with = |blend: Option<MaterialDesc>, tex: Option<u32>| MaterialDesc {
+            name: "paint".into(),
+            blend: blend.map(Box::new),
+            blend_texture: tex,
+            ..Default::default()
+        };
+        let nested = with(Some(with(Some(other.clone()), Some(0))), Some(0));
+        let bad_inner = with(Some(MaterialDesc { roughness: f32::NAN, ..other.clone() }), Some(0));
+        for (d, what) in [
+            (with(Some(other.clone()), None), "come together"),
+            (with(None, Some(0)), "come together"),
+            (with(Some(other.clone()), Some(3)), "uses texture 3"),
+            (nested, "blends again"),
+            (bad_inner, "its blend material: NaN"),
+        ] {
+            let e = Material::from_desc(&d, 1).unwrap_err().to_string();
+            assert!(e.contains("paint") && e.contains(what), "{e}");
+        }
+        assert!(Material::from_desc(&with(Some(other), Some(0)), 1).unwrap().blend.is_some());
     }
 }

@@ -396,11 +396,11 @@ impl Scene {
             if !m.is_transparent() {
                 return None;
             }
-            let tau = self.transparency(m, from.tex);
-            if tau <= 0.0 {
+            let pass = self.pass_through(m, from.tex);
+            if pass.max_element() <= 0.0 {
                 return None;
             }
-            t *= m.transparent_color * tau;
+            t *= pass;
         }
         None
     }
@@ -582,17 +582,42 @@ impl Scene {
         }
     }
 
-    /// `bsdf` before the bump shadowing of its diffuse lobe.
+    /// `bsdf` before the bump shadowing of its diffuse lobe: a material that blends into
+    /// another by a texture (a Mix Shader's textured factor) mixes the two BSDFs lobe by lobe.
     #[inline]
     fn unbumped_bsdf(&self, material: u32, front: bool, tc: TexCoord, color: Spectrum) -> Bsdf {
         let m = &self.materials[material as usize];
+        let (Some(b), Some(t)) = (&m.blend, m.blend_texture) else {
+            return self.material_bsdf(m, front, tc, color, m.general);
+        };
+        match self.blend_factor(t, tc) {
+            f if f <= 0.0 => self.material_bsdf(m, front, tc, color, m.general),
+            f if f >= 1.0 => self.material_bsdf(b, front, tc, color, b.general),
+            f => Bsdf::blend(
+                &self.material_bsdf(m, front, tc, color, true),
+                &self.material_bsdf(b, front, tc, color, true),
+                f,
+            ),
+        }
+    }
+
+    /// The factor of a blend at `tc`: its texture's luminance in [0, 1] (Cycles clamps a Mix
+    /// Shader's factor so).
+    #[inline]
+    fn blend_factor(&self, texture: u32, tc: TexCoord) -> f32 {
+        crate::math::luminance(self.textures[texture as usize].at(tc)).clamp(0.0, 1.0)
+    }
+
+    /// The BSDF of one material (no blend) at `tc`, the full Principled mixture when `general`.
+    #[inline]
+    fn material_bsdf(&self, m: &Material, front: bool, tc: TexCoord, color: Spectrum, general: bool) -> Bsdf {
         if m.base_color_texture.is_none()
             && m.roughness_texture.is_none()
             && m.metallic_texture.is_none()
             && m.alpha_texture.is_none()
             && !m.vertex_color
         {
-            return m.bsdf(front);
+            return m.lobes(front, m.base_color, m.roughness, m.metallic, m.transparency, general);
         }
         let mut base = m.base_color_texture.map_or(m.base_color, |t| self.textures[t as usize].at(tc));
         if m.vertex_color {
@@ -603,7 +628,7 @@ impl Scene {
             t.map_or(constant, |t| crate::math::luminance(self.textures[t as usize].at(tc)).clamp(0.0, 1.0))
         };
         let (rough, metallic) = (grey(m.roughness_texture, m.roughness), grey(m.metallic_texture, m.metallic));
-        m.bsdf_with(front, base, rough, metallic, self.transparency(m, tc))
+        m.lobes(front, base, rough, metallic, self.transparency(m, tc), general)
     }
 
     /// Transparency τ of a material at `tc`: 1 − alpha from its alpha texture, else its constant.
@@ -611,6 +636,20 @@ impl Scene {
     fn transparency(&self, m: &Material, tc: TexCoord) -> f32 {
         m.alpha_texture
             .map_or(m.transparency, |t| 1.0 - crate::math::luminance(self.textures[t as usize].at(tc)).clamp(0.0, 1.0))
+    }
+
+    /// What a shadow ray carries on through material `m` at `tc`: τ × the transparent tint
+    /// (of each side of a blend, mixed by its factor).
+    #[inline]
+    fn pass_through(&self, m: &Material, tc: TexCoord) -> Spectrum {
+        let own = |m: &Material| m.transparent_color * self.transparency(m, tc);
+        match (&m.blend, m.blend_texture) {
+            (Some(b), Some(t)) => {
+                let f = self.blend_factor(t, tc);
+                own(m) * (1.0 - f) + own(b) * f
+            }
+            _ => own(m),
+        }
     }
 
     /// The BSDF at a surface point.
