@@ -540,7 +540,9 @@ def _textured_mix(node, textures, what):
                 if tex is not None and tex is not False:
                     return n.name, tex
         if n.type in ("MIX_SHADER", "ADD_SHADER"):
-            stack.extend(s.links[0].from_node for s in reversed(n.inputs[-2:]) if s.is_linked)
+            first = 1 if n.type == "MIX_SHADER" else 0
+            shaders = (n.inputs[first + 1], n.inputs[first])  # (the first shader on top of the stack)
+            stack.extend(s.links[0].from_node for s in shaders if s.is_linked)
     return None
 
 
@@ -548,9 +550,9 @@ def _blend_material(node, blend, textures, warnings, what):
     """A shader tree whose Mix Shader `blend` = (name, texture) takes its factor f from a
     texture: the material at f = 0 blending into the one at f = 1 by the texture (the
     core's `MaterialDesc::blend`, mixed lobe by lobe per point). Every leaf's weight is
-    affine in f, so the two ends' mixtures blended by f are the tree's mixture at f. What
-    the core reads once per point — emission, normal and bump maps — comes from the f = 0
-    end (warned where the ends differ)."""
+    affine in f, so the two ends' mixtures blended by f are the tree's mixture at f (their
+    emission too). The shading normal is one per point: normal and bump maps come from the
+    f = 0 end (warned where the ends differ)."""
     name, texture = blend
     ends = []
     for f in (0.0, 1.0):
@@ -560,15 +562,14 @@ def _blend_material(node, blend, textures, warnings, what):
         ends.append(_leaves_material(leaves, False, warnings, what)
                     if leaves else {"base_color": (0.0, 0.0, 0.0)})
     a, b = ends
-    for keys, label in ((("emission", "emission_texture"), "emission"), (NORMAL_KEYS, "normal and bump maps")):
-        if any(a.get(k) != b.get(k) for k in keys):
-            warnings.append(f"{what}: Mix Shader '{name}' mixes {label} by a texture; GDMLT renders those of "
-                            f"its first shader's side only")
+    if any(a.get(k) != b.get(k) for k in NORMAL_KEYS):
+        warnings.append(f"{what}: Mix Shader '{name}' mixes normal or bump maps by a texture; GDMLT renders "
+                        f"those of its first shader's side only")
     if b.get("vertex_color") and not a.get("vertex_color"):
         warnings.append(f"{what}: a colour attribute under Mix Shader '{name}''s second shader is not rendered")
         b.pop("vertex_color", None)
     b.pop("vertex_color_layer", None)
-    for k in ("emission", "emission_texture", "pass_index", *NORMAL_KEYS):
+    for k in ("pass_index", *NORMAL_KEYS):
         b.pop(k, None)
     return dict(a, blend=b, blend_texture=texture)
 

@@ -6,6 +6,7 @@
 use super::environment::Environment;
 use super::{light_select, Light, LightShape, Material, MaterialDesc, MeshDesc, SceneDesc, SceneReport, Texture};
 use crate::error::SceneError;
+use crate::math::Spectrum;
 use glam::{Vec2, Vec3, Vec4};
 use rayon::prelude::*;
 
@@ -303,14 +304,30 @@ impl Lighting {
         let mut lights: Vec<Light> = desc.lights.iter().map(Light::from_desc).collect::<Result<_, _>>()?;
         let mut tri_light = vec![u32::MAX; tris.positions.len()];
         let mut emissive_triangles = 0;
+        // a material that blends into another by a texture: its emission estimated with the
+        // textures' means (the radiance itself is evaluated per point, `Scene::emission_at`)
+        let emission: Vec<Spectrum> = materials
+            .iter()
+            .map(|m| match (&m.blend, m.blend_texture) {
+                (Some(b), Some(t)) => {
+                    let f = crate::math::luminance(textures[t as usize].mean()).clamp(0.0, 1.0);
+                    let own = |m: &Material| {
+                        m.emission
+                            * m.emission_texture.map_or(1.0, |t| crate::math::luminance(textures[t as usize].mean()))
+                    };
+                    (own(m) * (1.0 - f) + own(b) * f).max(Spectrum::splat(1e-6))
+                }
+                _ => m.emission,
+            })
+            .collect();
         for (t, &m) in tris.material.iter().enumerate() {
             let mat = &materials[m as usize];
-            if mat.is_emissive() {
+            if mat.is_emissive() || mat.blend.as_ref().is_some_and(|b| b.is_emissive()) {
                 tri_light[t] = lights.len() as u32;
                 lights.push(Light {
                     name: mat.name.clone(),
                     shape: LightShape::Triangle { prim: t as u32 },
-                    emission: mat.emission,
+                    emission: emission[m as usize],
                     visible_camera: true,
                     cast_shadow: true,
                 });
@@ -322,7 +339,10 @@ impl Lighting {
         // mean of each emission image once, not once per emissive triangle)
         let emission_scale: Vec<f32> = materials
             .iter()
-            .map(|m| m.emission_texture.map_or(1.0, |t| crate::math::luminance(textures[t as usize].mean()).max(1e-6)))
+            .map(|m| match m.emission_texture {
+                Some(t) if m.blend.is_none() => crate::math::luminance(textures[t as usize].mean()).max(1e-6),
+                _ => 1.0, // (a blend's textures are in its emission estimate)
+            })
             .collect();
         // the world: π × its mean radiance, the irradiance it gives an open surface. A world
         // of one colour is not light-sampled at all: BSDF sampling alone finds it with less

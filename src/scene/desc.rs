@@ -160,8 +160,9 @@ pub struct MaterialDesc {
     pub pass_index: u32,
     /// A second material this one blends into by the luminance f of `blend_texture` at each
     /// point (a Mix Shader whose factor is a texture): the BSDF there is (1 − f)·this + f·that,
-    /// lobe by lobe (`bsdf/blend.rs`). The blend's own emission, normal and bump maps and
-    /// pass index are not read (this material's are); it may not blend further.
+    /// lobe by lobe (`bsdf/blend.rs`), and the emission is (1 − f)·this + f·that. The blend's
+    /// own normal and bump maps and pass index are not read (this material's are); it may not
+    /// blend further.
     pub blend: Option<Box<MaterialDesc>>,
     pub blend_texture: Option<u32>,
 }

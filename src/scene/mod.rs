@@ -460,10 +460,25 @@ impl Scene {
     }
 
     /// Emitted radiance of emissive triangle `t` (factor `emission`) at texture coordinates
-    /// `tc`: the factor, times the material's emission texture where it has one.
+    /// `tc`: the factor, times the material's emission texture where it has one. A material
+    /// that blends into another by a texture emits the blend of the two sides' own emission
+    /// (the light's factor is then only its selection estimate, `Lighting::build`).
     #[inline]
     fn emission_at(&self, t: usize, emission: Spectrum, tc: TexCoord) -> Spectrum {
-        match self.materials[self.tri_material[t] as usize].emission_texture {
+        let m = &self.materials[self.tri_material[t] as usize];
+        match (&m.blend, m.blend_texture) {
+            (Some(b), Some(tex)) => {
+                let f = self.blend_factor(tex, tc);
+                self.own_emission(m, m.emission, tc) * (1.0 - f) + self.own_emission(b, b.emission, tc) * f
+            }
+            _ => self.own_emission(m, emission, tc),
+        }
+    }
+
+    /// `emission` times material `m`'s emission texture at `tc` (if it has one).
+    #[inline]
+    fn own_emission(&self, m: &Material, emission: Spectrum, tc: TexCoord) -> Spectrum {
+        match m.emission_texture {
             Some(tex) => emission * self.textures[tex as usize].at(tc),
             None => emission,
         }
@@ -472,7 +487,8 @@ impl Scene {
     /// The same at barycentric coordinates (b1, b2) of the triangle.
     #[inline]
     fn triangle_radiance(&self, t: usize, emission: Spectrum, b1: f32, b2: f32) -> Spectrum {
-        if self.materials[self.tri_material[t] as usize].emission_texture.is_none() {
+        let m = &self.materials[self.tri_material[t] as usize];
+        if m.emission_texture.is_none() && m.blend.is_none() {
             return emission;
         }
         self.emission_at(t, emission, self.tex_coord(t, 1.0 - b1 - b2, b1, b2))

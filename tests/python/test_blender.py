@@ -1946,7 +1946,8 @@ def _textured_mixes(bpy):
     """Materials whose Mix Shader takes its factor from a texture, as artists mask one
     material into another: painted floor into gold by a ramped Noise, red Diffuse into a
     Glossy by a Wave, a cut-out ball (Transparent into blue Principled by a Checker), a glass
-    into green Principled by a Noise; each on its own object."""
+    into green Principled by a Noise, a grey block glowing orange in a Checker's squares;
+    each on its own object."""
     def mix(name, first, second, factor):
         mat = bpy.data.materials.new(name)
         mat.use_nodes = True
@@ -2008,12 +2009,15 @@ def _textured_mixes(bpy):
         mix("CutOut", shader("ShaderNodeBsdfTransparent", (1, 1, 1)), principled((0.1, 0.2, 0.8)), checker),
         mix("GlassGreen", principled((1, 1, 1), **{"Transmission Weight": 1.0, "Roughness": 0.0}),
             principled((0.2, 0.7, 0.2)), noise(4.0)),
+        mix("Sign", shader("ShaderNodeBsdfDiffuse", (0.5, 0.5, 0.5)),
+            shader("ShaderNodeEmission", (1.0, 0.5, 0.2), Strength=3.0), checker),
     ]
 
 
 def test_textured_mix_shaders_agree_with_cycles(bpy_mod, tmp_out):
     """Mix Shaders whose factor is a texture (`_textured_mixes`: metal masked into paint,
-    Diffuse into Glossy, a cut-out, glass into a plastic) on a floor and three balls, lit by
+    Diffuse into Glossy, a cut-out, glass into a plastic, a glowing pattern) on a block, a
+    floor and three balls, lit by
     a sun and a dim world: the 4×4 block means differ from Cycles' by no more than Cycles'
     own two seeds do (×1.5, + 0.2%). Before, each factor was taken at its unlinked value
     (0.5), with a warning."""
@@ -2026,7 +2030,8 @@ def test_textured_mix_shaders_agree_with_cycles(bpy_mod, tmp_out):
         for x in (-1.3, 0.0, 1.3):
             bpy.ops.mesh.primitive_uv_sphere_add(radius=0.6, location=(x, 0, 0.6), segments=32, ring_count=16)
             bpy.ops.object.shade_smooth()
-        for ob, mat in zip(sorted(scene.objects, key=lambda o: o.name), _textured_mixes(bpy)):
+        bpy.ops.mesh.primitive_cube_add(size=0.8, location=(0.4, 2.0, 0.4))
+        for ob, mat in zip(sorted(scene.objects, key=lambda o: (o.name == "Cube", o.name)), _textured_mixes(bpy)):
             ob.data.materials.append(mat)
         sun = bpy.data.objects.new("Sun", bpy.data.lights.new("Sun", "SUN"))
         sun.data.energy, sun.data.angle, sun.rotation_euler = 3.0, 0.05, (0.6, 0.2, 0.4)
