@@ -2,7 +2,7 @@
 scenes built the way artists build them in Blender, with Cycles rendered in the same test:
 a smooth-shaded low-poly room, an area light narrowed by Spread, a room of rough diffuse clay, a scaled spot and a spot of some radius, coated paint and varnish, a translucent leaf and lampshade, a bulb in smooth, rough, frosted and orange glass, every Blender light type
 with a coloured world, mirror / glass / layered plastic, image textures (sRGB and Non-Color,
-alpha), Mix and Add shaders, texture graphs, bump maps, colour attributes through a node group, normal-mapped smooth balls, procedural textures (and a procedural bump), a light card hidden from the camera and a block that casts no shadow, a fill lamp with Cast Shadow off (its NEE rows only: `convergence.NEE_ONLY`), and an HDRI world alone, as it is and turned by a Mapping node (tools/convergence.py builds and
+alpha), Mix and Add shaders, texture graphs, bump maps, colour attributes through a node group, normal-mapped smooth balls, procedural textures (and a procedural bump), a light card hidden from the camera and a block that casts no shadow, a fill lamp with Cast Shadow off (its NEE rows only: `convergence.NEE_ONLY`), Mix Shaders whose factor is a texture, and an HDRI world alone, as it is and turned by a Mapping node (tools/convergence.py builds and
 compares them; `python tools/convergence.py` regenerates docs/convergence.md the same way).
 Tolerances come from the noise measured in the same test: the seed-to-seed spread of each
 renderer's block means, and of GDMLT's image means (six seeds).
