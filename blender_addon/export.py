@@ -493,7 +493,7 @@ def material_params(mat, warnings, textures=None):
         return out
     displaced = _displacement_bump(mat, node_out, textures, warnings, what)
     node = surface.links[0].from_node
-    blend = _textured_mix(node, textures, what)
+    blend = _factored_mix(node, textures, warnings, what)
     if blend is None:
         leaves = []
         _shader_leaves(node, 1.0, leaves, textures, warnings, what)
@@ -521,24 +521,22 @@ def _leaves_material(leaves, mixed, warnings, what):
     return _combine(leaves, warnings, what)
 
 
-def _textured_mix(node, textures, what):
-    """The first Mix Shader of the shader tree under `node` (depth first) whose Fac is an
-    image or procedural texture (or colour and value nodes over one): (its name, the factor's
-    texture index); None without one."""
-    if textures is None:
-        return None
+def _factored_mix(node, textures, warnings, what):
+    """The first Mix Shader of the shader tree under `node` (depth first, first shaders
+    first) whose Fac the core computes per point: (its name, the material keys of the
+    factor) — `blend_texture` for an image or procedural texture (or colour and value nodes
+    over one), `blend_view` for a Fresnel or Layer Weight node (their Normal unlinked);
+    None without one."""
     stack, seen = [node], set()
     while stack:
         n = stack.pop()
         if n.name in seen:
             continue
         seen.add(n.name)
-        if n.type == "MIX_SHADER":
-            fac = n.inputs[0]
-            if fac.is_linked:
-                tex = _socket_texture(fac, textures, [], what)
-                if tex is not None and tex is not False:
-                    return n.name, tex
+        if n.type == "MIX_SHADER" and n.inputs[0].is_linked:
+            keys = _mix_factor(n.inputs[0], textures, warnings, what)
+            if keys is not None:
+                return n.name, keys
         if n.type in ("MIX_SHADER", "ADD_SHADER"):
             first = 1 if n.type == "MIX_SHADER" else 0
             shaders = (n.inputs[first + 1], n.inputs[first])  # (the first shader on top of the stack)
@@ -546,14 +544,35 @@ def _textured_mix(node, textures, what):
     return None
 
 
+def _mix_factor(fac, textures, warnings, what):
+    """The material keys of a linked Mix Shader factor the core computes per point, or None
+    (then the factor keeps its unlinked value, warned by `_shader_leaves`)."""
+    link = fac.links[0]
+    src, out = link.from_node, link.from_socket.identifier
+    view = {("FRESNEL", "Fac"): ("FRESNEL", "IOR", 1.45), ("LAYER_WEIGHT", "Fresnel"): ("LAYER_FRESNEL", "Blend", 0.5),
+            ("LAYER_WEIGHT", "Facing"): ("LAYER_FACING", "Blend", 0.5)}.get((src.type, out))
+    if view is not None:
+        kind, name, default = view
+        if src.inputs["Normal"].is_linked:
+            warnings.append(f"{what}: the Normal input of '{src.name}' is not read (the surface normal is used)")
+        value = src.inputs[name]
+        if value.is_linked:
+            return None
+        return {"blend_view": (kind, float(_socket_value(value, warnings, what, default)))}
+    if textures is None:
+        return None
+    tex = _socket_texture(fac, textures, [], what)
+    return {"blend_texture": tex} if tex is not None and tex is not False else None
+
+
 def _blend_material(node, blend, textures, warnings, what):
-    """A shader tree whose Mix Shader `blend` = (name, texture) takes its factor f from a
-    texture: the material at f = 0 blending into the one at f = 1 by the texture (the
-    core's `MaterialDesc::blend`, mixed lobe by lobe per point). Every leaf's weight is
+    """A shader tree whose Mix Shader `blend` = (name, factor keys) takes its factor f from a
+    texture or the view (`_mix_factor`): the material at f = 0 blending into the one at
+    f = 1 by that factor (the core's `MaterialDesc::blend`, mixed lobe by lobe per point). Every leaf's weight is
     affine in f, so the two ends' mixtures blended by f are the tree's mixture at f (their
     emission too). The shading normal is one per point: normal and bump maps come from the
     f = 0 end (warned where the ends differ)."""
-    name, texture = blend
+    name, factor = blend
     ends = []
     for f in (0.0, 1.0):
         leaves, said = [], []
@@ -569,9 +588,16 @@ def _blend_material(node, blend, textures, warnings, what):
         warnings.append(f"{what}: a colour attribute under Mix Shader '{name}''s second shader is not rendered")
         b.pop("vertex_color", None)
     b.pop("vertex_color_layer", None)
-    for k in ("pass_index", *NORMAL_KEYS):
+    drop = ["pass_index", *NORMAL_KEYS]
+    if "blend_view" in factor:  # (the core blends emission by a texture only)
+        drop += ["emission", "emission_texture"]
+        if any(a.get(k) != b.get(k) for k in ("emission", "emission_texture")) and any(
+                max(p.get("emission", (0, 0, 0))) > 0 for p in (a, b)):
+            warnings.append(f"{what}: Mix Shader '{name}' mixes emission by the view; GDMLT renders its first "
+                            f"shader's emission only")
+    for k in drop:
         b.pop(k, None)
-    return dict(a, blend=b, blend_texture=texture)
+    return dict(a, blend=b, **factor)
 
 
 def _displacement_bump(mat, node_out, textures, warnings, what):

@@ -210,9 +210,20 @@ fn material_dict<'py>(py: Python<'py>, m: &MaterialDesc) -> PyResult<Bound<'py, 
             md.set_item(key, r)?;
         }
     }
-    if let (Some(b), Some(t)) = (&m.blend, m.blend_texture) {
+    if let Some(b) = &m.blend {
         md.set_item("blend", material_dict(py, b)?)?;
-        md.set_item("blend_texture", t)?;
+        if let Some(t) = m.blend_texture {
+            md.set_item("blend_texture", t)?;
+        }
+        if let Some(v) = m.blend_view {
+            use scene::desc::ViewFactor;
+            let (kind, x) = match v {
+                ViewFactor::Fresnel(x) => ("FRESNEL", x),
+                ViewFactor::LayerFresnel(x) => ("LAYER_FRESNEL", x),
+                ViewFactor::LayerFacing(x) => ("LAYER_FACING", x),
+            };
+            md.set_item("blend_view", (kind, x))?;
+        }
     }
     Ok(md)
 }
@@ -268,6 +279,19 @@ fn parse_material(d: &Bound<'_, PyDict>) -> PyResult<MaterialDesc> {
             _ => None,
         },
         blend_texture: get_or(d, "blend_texture", None, &ctx)?,
+        blend_view: match get_or::<Option<(String, f32)>>(d, "blend_view", None, &ctx)? {
+            None => None,
+            Some((kind, x)) => Some(match kind.to_ascii_uppercase().as_str() {
+                "FRESNEL" => scene::desc::ViewFactor::Fresnel(x),
+                "LAYER_FRESNEL" => scene::desc::ViewFactor::LayerFresnel(x),
+                "LAYER_FACING" => scene::desc::ViewFactor::LayerFacing(x),
+                other => {
+                    return Err(verr(format!(
+                        "{ctx}: unknown blend_view '{other}' (FRESNEL, LAYER_FRESNEL or LAYER_FACING)"
+                    )))
+                }
+            }),
+        },
         name,
     })
 }

@@ -168,12 +168,12 @@ fn a_textured_emitter_agrees_between_nee_and_naive() {
 
 /// Materials that blend into others by a texture (a Mix Shader's textured factor): the light
 /// blends from white into dim blue emission, the red wall into a rough gold metal, each by
-/// a two-texel factor. Light sampling evaluates the blended emission where it lands and the
+/// a two-texel factor; and by the view (Layer Weight, Fresnel): the blocks. Light sampling evaluates the blended emission where it lands and the
 /// light's selection weight uses an estimate; the wall's BSDF is the lobe-by-lobe blend —
 /// NEE and naive must agree, and gdpt's gradients must match the path-traced image's.
 #[test]
 fn blended_materials_agree_between_nee_and_naive() {
-    use gdmlt::scene::desc::{MaterialDesc, TextureDesc};
+    use gdmlt::scene::desc::{MaterialDesc, TextureDesc, ViewFactor};
     let mut desc = cornell_box(32, 32);
     desc.textures.push(TextureDesc {
         name: "mask".into(),
@@ -196,9 +196,23 @@ fn blended_materials_agree_between_nee_and_naive() {
         roughness: 0.3,
         ..Default::default()
     };
-    for (name, other) in [("Light", blue), ("Red", gold)] {
+    for (name, other) in [("Light", blue), ("Red", gold.clone())] {
         let m = desc.materials.iter_mut().find(|m| m.name == name).unwrap();
         (m.blend, m.blend_texture) = (Some(Box::new(other)), Some(0));
+    }
+    // the tall block: a paint that turns to gold towards grazing views (Layer Weight › Facing),
+    // the short one by a Fresnel of IOR 1.8 — the gradient-domain offsets joined to the base
+    // path must see these BSDFs from their own directions
+    for (block, view) in [("TallBlock", ViewFactor::LayerFacing(0.3)), ("ShortBlock", ViewFactor::Fresnel(1.8))] {
+        desc.materials.push(MaterialDesc {
+            name: block.into(),
+            base_color: [0.7, 0.7, 0.6],
+            blend: Some(Box::new(MaterialDesc { roughness: 0.15, ..gold.clone() })),
+            blend_view: Some(view),
+            ..Default::default()
+        });
+        let id = desc.materials.len() as u32 - 1;
+        desc.meshes.iter_mut().find(|m| m.name == block).unwrap().material_ids.iter_mut().for_each(|m| *m = id);
     }
     let uv = [[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]];
     for mesh in desc.meshes.iter_mut().filter(|m| m.name == "Light" || m.name == "LeftWall") {

@@ -322,7 +322,7 @@ impl Lighting {
             .collect();
         for (t, &m) in tris.material.iter().enumerate() {
             let mat = &materials[m as usize];
-            if mat.is_emissive() || mat.blend.as_ref().is_some_and(|b| b.is_emissive()) {
+            if mat.emits() {
                 tri_light[t] = lights.len() as u32;
                 lights.push(Light {
                     name: mat.name.clone(),

@@ -165,6 +165,22 @@ pub struct MaterialDesc {
     /// blend further.
     pub blend: Option<Box<MaterialDesc>>,
     pub blend_texture: Option<u32>,
+    /// The blend's factor from the view instead (a Fresnel or Layer Weight node into the Mix
+    /// Shader's factor: `ViewFactor::at`); one of it and `blend_texture` goes with `blend`.
+    /// Such a blend's emission is this material's alone.
+    pub blend_view: Option<ViewFactor>,
+}
+
+/// A Mix Shader factor computed from the viewing direction at the shading point, as Cycles'
+/// nodes compute it (`Material`'s `ViewFactor::at`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum ViewFactor {
+    /// Fresnel node: the dielectric Fresnel reflectance of this IOR.
+    Fresnel(f32),
+    /// Layer Weight's Fresnel output: the Fresnel reflectance of IOR 1/(1 − blend).
+    LayerFresnel(f32),
+    /// Layer Weight's Facing output: 1 − |cos θ|^k, k remapped from the blend (0.5: k = 1).
+    LayerFacing(f32),
 }
 
 impl Default for MaterialDesc {
@@ -207,6 +223,7 @@ impl Default for MaterialDesc {
             metal_constant_fresnel: false,
             blend: None,
             blend_texture: None,
+            blend_view: None,
             translucency: 0.0,
             translucent_color: None,
             transparency: 0.0,

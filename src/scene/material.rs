@@ -3,7 +3,7 @@
 //! or rough GGX glass (transmission), mixed by their Principled weights, and a pass-through
 //! lobe (Transparent BSDF, alpha as coverage) that takes probability τ from all of them.
 
-use super::desc::MaterialDesc;
+use super::desc::{MaterialDesc, ViewFactor};
 use crate::bsdf::{Bsdf, Coat, Conductor, Dielectric, Lambert, Layered, Translucent};
 use crate::error::SceneError;
 use crate::math::Spectrum;
@@ -65,6 +65,7 @@ pub struct Material {
     /// (`MaterialDesc::blend`; `Scene::bsdf` mixes their BSDFs lobe by lobe).
     pub blend: Option<Box<Material>>,
     pub blend_texture: Option<u32>,
+    pub blend_view: Option<ViewFactor>,
 }
 
 /// The largest emission (and light power) accepted: beyond it a path's throughput × emission
@@ -83,15 +84,24 @@ impl Material {
             d.emission_texture,
             d.bump_texture,
         ];
-        let blend = match (&d.blend, d.blend_texture) {
-            (None, None) => None,
-            (Some(b), Some(_)) if b.blend.is_some() => return Err(bad("its blend material blends again (one level)")),
-            (Some(b), Some(_)) => Some(Box::new(Material::from_desc(b, textures).map_err(|e| match e {
+        let factors = d.blend_texture.is_some() as u32 + d.blend_view.is_some() as u32;
+        let blend = match &d.blend {
+            None if factors == 0 => None,
+            Some(_) if factors != 1 => {
+                return Err(bad("a blend takes one factor: blend_texture or blend_view"));
+            }
+            Some(b) if b.blend.is_some() => return Err(bad("its blend material blends again (one level)")),
+            Some(b) => Some(Box::new(Material::from_desc(b, textures).map_err(|e| match e {
                 SceneError::Material { what, .. } => bad(&format!("its blend material: {what}")),
                 other => other,
             })?)),
-            _ => return Err(bad("blend and blend_texture come together")),
+            None => return Err(bad("blend_texture or blend_view without a blend material")),
         };
+        if let Some(ViewFactor::Fresnel(x) | ViewFactor::LayerFresnel(x) | ViewFactor::LayerFacing(x)) = d.blend_view {
+            if !x.is_finite() {
+                return Err(bad("NaN or Inf blend_view"));
+            }
+        }
         for t in used.into_iter().chain([d.blend_texture]).flatten() {
             if t as usize >= textures {
                 return Err(bad(&format!("uses texture {t} but the scene has {textures}")));
@@ -197,11 +207,18 @@ impl Material {
             general: false,
             blend,
             blend_texture: d.blend_texture,
+            blend_view: d.blend_view,
         })
     }
 
     pub fn is_emissive(&self) -> bool {
         self.emission.max_element() > 0.0
+    }
+
+    /// Does the surface emit: this material, or the one it blends into by a texture (a
+    /// blend by the view emits this material's emission only)?
+    pub fn emits(&self) -> bool {
+        self.is_emissive() || (self.blend_texture.is_some() && self.blend.as_ref().is_some_and(|b| b.is_emissive()))
     }
 
     /// The BSDF at a surface point; `front` is true when the ray arrives on the side the
@@ -315,6 +332,34 @@ impl Material {
     }
 }
 
+impl ViewFactor {
+    /// The factor where the viewer's direction makes cosine `cos` with the shading normal
+    /// (before normal and bump maps, on the viewer's side), the ray arriving on the front
+    /// (`front`) or the back of the surface — Cycles' Fresnel and Layer Weight nodes.
+    #[inline]
+    pub fn at(&self, cos: f32, front: bool) -> f32 {
+        use crate::bsdf::microfacet::fresnel_dielectric;
+        match *self {
+            ViewFactor::Fresnel(ior) => {
+                let eta = ior.max(1e-5);
+                fresnel_dielectric(cos, if front { eta } else { 1.0 / eta })
+            }
+            ViewFactor::LayerFresnel(blend) => {
+                let eta = (1.0 - blend).max(1e-5);
+                fresnel_dielectric(cos, if front { 1.0 / eta } else { eta })
+            }
+            ViewFactor::LayerFacing(blend) => {
+                let mut f = cos.abs();
+                if blend != 0.5 {
+                    let b = blend.clamp(0.0, 1.0 - 1e-5);
+                    f = f.powf(if b < 0.5 { 2.0 * b } else { 0.5 / (1.0 - b) });
+                }
+                1.0 - f
+            }
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -385,9 +430,14 @@ mod tests {
         };
         let nested = with(Some(with(Some(other.clone()), Some(0))), Some(0));
         let bad_inner = with(Some(MaterialDesc { roughness: f32::NAN, ..other.clone() }), Some(0));
+        let two = MaterialDesc { blend_view: Some(ViewFactor::Fresnel(1.45)), ..with(Some(other.clone()), Some(0)) };
+        let nan_view =
+            MaterialDesc { blend_view: Some(ViewFactor::LayerFacing(f32::NAN)), ..with(Some(other.clone()), None) };
         for (d, what) in [
-            (with(Some(other.clone()), None), "come together"),
-            (with(None, Some(0)), "come together"),
+            (with(Some(other.clone()), None), "one factor"),
+            (two, "one factor"),
+            (nan_view, "NaN or Inf blend_view"),
+            (with(None, Some(0)), "without a blend material"),
             (with(Some(other.clone()), Some(3)), "uses texture 3"),
             (nested, "blends again"),
             (bad_inner, "its blend material: NaN"),
@@ -396,5 +446,25 @@ mod tests {
             assert!(e.contains("paint") && e.contains(what), "{e}");
         }
         assert!(Material::from_desc(&with(Some(other), Some(0)), 1).unwrap().blend.is_some());
+    }
+
+    /// The view factors against their definitions: Fresnel at normal incidence is F0 of the
+    /// IOR (inverted from the back), reaching 1 at grazing; Layer Weight's Fresnel is the
+    /// Fresnel of IOR 1/(1 − blend); Facing at blend 0.5 is 1 − |cos|, and its exponent
+    /// follows the blend (0.25 → |cos|^0.5, 0.75 → |cos|^2).
+    #[test]
+    fn view_factors_follow_cycles_nodes() {
+        let f0 = |eta: f32| ((eta - 1.0) / (eta + 1.0)).powi(2);
+        let near = |a: f32, b: f32| (a - b).abs() < 1e-5;
+        assert!(near(ViewFactor::Fresnel(1.5).at(1.0, true), f0(1.5)));
+        assert!(near(ViewFactor::Fresnel(1.5).at(1.0, false), f0(1.0 / 1.5)));
+        assert!(ViewFactor::Fresnel(1.5).at(1e-4, true) > 0.99);
+        assert!(near(ViewFactor::LayerFresnel(0.2).at(1.0, true), f0(1.0 / 0.8)));
+        assert!(near(ViewFactor::LayerFresnel(0.2).at(0.6, true), ViewFactor::Fresnel(1.25).at(0.6, true)));
+        for (blend, k) in [(0.5f32, 1.0f32), (0.25, 0.5), (0.75, 2.0)] {
+            for cos in [0.1f32, 0.5, 0.9] {
+                assert!(near(ViewFactor::LayerFacing(blend).at(cos, true), 1.0 - cos.powf(k)), "{blend} {cos}");
+            }
+        }
     }
 }

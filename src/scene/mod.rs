@@ -54,6 +54,8 @@ pub struct SurfaceInteraction {
     /// The shading normal before normal and bump mapping, in the shading frame (+Z where the
     /// material maps none): what bump-shadows its diffuse lobe.
     pub unmapped: Vec3,
+    /// The direction back along the ray that arrived, in the shading frame.
+    pub wo: Vec3,
 }
 
 impl SurfaceInteraction {
@@ -396,7 +398,7 @@ impl Scene {
             if !m.is_transparent() {
                 return None;
             }
-            let pass = self.pass_through(m, from.tex);
+            let pass = self.pass_through(m, &from);
             if pass.max_element() <= 0.0 {
                 return None;
             }
@@ -446,6 +448,7 @@ impl Scene {
             tex,
             color,
             unmapped,
+            wo: frame.to_local(-d),
         }
     }
 
@@ -467,6 +470,7 @@ impl Scene {
     fn emission_at(&self, t: usize, emission: Spectrum, tc: TexCoord) -> Spectrum {
         let m = &self.materials[self.tri_material[t] as usize];
         match (&m.blend, m.blend_texture) {
+            // (a blend by the view emits this material's emission alone)
             (Some(b), Some(tex)) => {
                 let f = self.blend_factor(tex, tc);
                 self.own_emission(m, m.emission, tc) * (1.0 - f) + self.own_emission(b, b.emission, tc) * f
@@ -587,10 +591,11 @@ impl Scene {
     /// The BSDF of `material` at texture coordinates `tc` and vertex colour `color` (textures
     /// replace the base colour and the roughness where the material links them; the vertex
     /// colour multiplies the base colour where the material reads it), its diffuse lobe
-    /// bump-shadowed where the surface's own normal is `unmapped` (shading frame; +Z: none).
+    /// bump-shadowed where the surface's own normal is `unmapped` (shading frame; +Z: none),
+    /// seen from direction `wo` (shading frame: what a blend by the view reads).
     #[inline]
-    pub fn bsdf(&self, material: u32, front: bool, tc: TexCoord, color: Spectrum, unmapped: Vec3) -> Bsdf {
-        let bsdf = self.unbumped_bsdf(material, front, tc, color);
+    pub fn bsdf(&self, material: u32, front: bool, tc: TexCoord, color: Spectrum, unmapped: Vec3, wo: Vec3) -> Bsdf {
+        let bsdf = self.unbumped_bsdf(material, front, tc, color, wo.dot(unmapped));
         if unmapped == Vec3::Z || !self.materials[material as usize].bump_map_correction {
             bsdf
         } else {
@@ -599,14 +604,15 @@ impl Scene {
     }
 
     /// `bsdf` before the bump shadowing of its diffuse lobe: a material that blends into
-    /// another by a texture (a Mix Shader's textured factor) mixes the two BSDFs lobe by lobe.
+    /// another by a texture or by the view (a Mix Shader's factor) mixes the two BSDFs lobe by
+    /// lobe; `cos`: the view's cosine with the unmapped shading normal.
     #[inline]
-    fn unbumped_bsdf(&self, material: u32, front: bool, tc: TexCoord, color: Spectrum) -> Bsdf {
+    fn unbumped_bsdf(&self, material: u32, front: bool, tc: TexCoord, color: Spectrum, cos: f32) -> Bsdf {
         let m = &self.materials[material as usize];
-        let (Some(b), Some(t)) = (&m.blend, m.blend_texture) else {
+        let Some(b) = &m.blend else {
             return self.material_bsdf(m, front, tc, color, m.general);
         };
-        match self.blend_factor(t, tc) {
+        match self.blend_at(m, tc, cos, front) {
             f if f <= 0.0 => self.material_bsdf(m, front, tc, color, m.general),
             f if f >= 1.0 => self.material_bsdf(b, front, tc, color, b.general),
             f => Bsdf::blend(
@@ -622,6 +628,17 @@ impl Scene {
     #[inline]
     fn blend_factor(&self, texture: u32, tc: TexCoord) -> f32 {
         crate::math::luminance(self.textures[texture as usize].at(tc)).clamp(0.0, 1.0)
+    }
+
+    /// The factor of material `m`'s blend at `tc`, seen at cosine `cos` with the unmapped
+    /// shading normal from the `front` or back.
+    #[inline]
+    fn blend_at(&self, m: &Material, tc: TexCoord, cos: f32, front: bool) -> f32 {
+        match (m.blend_texture, m.blend_view) {
+            (Some(t), _) => self.blend_factor(t, tc),
+            (None, Some(v)) => v.at(cos, front).clamp(0.0, 1.0),
+            (None, None) => 0.0,
+        }
     }
 
     /// The BSDF of one material (no blend) at `tc`, the full Principled mixture when `general`.
@@ -654,24 +671,24 @@ impl Scene {
             .map_or(m.transparency, |t| 1.0 - crate::math::luminance(self.textures[t as usize].at(tc)).clamp(0.0, 1.0))
     }
 
-    /// What a shadow ray carries on through material `m` at `tc`: τ × the transparent tint
-    /// (of each side of a blend, mixed by its factor).
+    /// What a shadow ray carries on through surface `si` of material `m`: τ × the
+    /// transparent tint (of each side of a blend, mixed by its factor).
     #[inline]
-    fn pass_through(&self, m: &Material, tc: TexCoord) -> Spectrum {
-        let own = |m: &Material| m.transparent_color * self.transparency(m, tc);
-        match (&m.blend, m.blend_texture) {
-            (Some(b), Some(t)) => {
-                let f = self.blend_factor(t, tc);
+    fn pass_through(&self, m: &Material, si: &SurfaceInteraction) -> Spectrum {
+        let own = |m: &Material| m.transparent_color * self.transparency(m, si.tex);
+        match &m.blend {
+            Some(b) => {
+                let f = self.blend_at(m, si.tex, si.wo.dot(si.unmapped), si.front);
                 own(m) * (1.0 - f) + own(b) * f
             }
-            _ => own(m),
+            None => own(m),
         }
     }
 
     /// The BSDF at a surface point.
     #[inline]
     pub fn bsdf_at(&self, si: &SurfaceInteraction) -> Bsdf {
-        self.bsdf(si.material, si.front, si.tex, si.color, si.unmapped)
+        self.bsdf(si.material, si.front, si.tex, si.color, si.unmapped, si.wo)
     }
 
     #[inline]

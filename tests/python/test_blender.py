@@ -1947,7 +1947,9 @@ def _textured_mixes(bpy):
     material into another: painted floor into gold by a ramped Noise, red Diffuse into a
     Glossy by a Wave, a cut-out ball (Transparent into blue Principled by a Checker), a glass
     into green Principled by a Noise, a grey block glowing orange in a Checker's squares;
-    each on its own object."""
+    and by the view: a car paint (Diffuse into Glossy by Layer Weight › Fresnel), a metal
+    rim on a rough Principled (Fresnel node), a fabric-like Facing mix; each on its own
+    object."""
     def mix(name, first, second, factor):
         mat = bpy.data.materials.new(name)
         mat.use_nodes = True
@@ -1995,6 +1997,20 @@ def _textured_mixes(bpy):
         w.inputs["Scale"].default_value = 3.0
         return w.outputs["Fac"]
 
+    def layer_weight(output, blend):
+        def make(nt):
+            w = nt.nodes.new("ShaderNodeLayerWeight")
+            w.inputs["Blend"].default_value = blend
+            return w.outputs[output]
+        return make
+
+    def fresnel(ior):
+        def make(nt):
+            f = nt.nodes.new("ShaderNodeFresnel")
+            f.inputs["IOR"].default_value = ior
+            return f.outputs["Fac"]
+        return make
+
     def checker(nt):
         c = nt.nodes.new("ShaderNodeTexChecker")
         c.inputs["Scale"].default_value = 4.0
@@ -2011,6 +2027,12 @@ def _textured_mixes(bpy):
             principled((0.2, 0.7, 0.2)), noise(4.0)),
         mix("Sign", shader("ShaderNodeBsdfDiffuse", (0.5, 0.5, 0.5)),
             shader("ShaderNodeEmission", (1.0, 0.5, 0.2), Strength=3.0), checker),
+        mix("CarPaint", shader("ShaderNodeBsdfDiffuse", (0.1, 0.2, 0.7)),
+            shader("ShaderNodeBsdfGlossy", (1.0, 1.0, 1.0), Roughness=0.1), layer_weight("Fresnel", 0.3)),
+        mix("Rim", principled((0.6, 0.3, 0.1), Roughness=0.6),
+            principled((0.9, 0.9, 0.9), Metallic=1.0, Roughness=0.2), fresnel(1.6)),
+        mix("Sheen", shader("ShaderNodeBsdfDiffuse", (0.5, 0.1, 0.3)),
+            shader("ShaderNodeBsdfDiffuse", (0.9, 0.8, 0.9)), layer_weight("Facing", 0.7)),
     ]
 
 
@@ -2031,7 +2053,11 @@ def test_textured_mix_shaders_agree_with_cycles(bpy_mod, tmp_out):
             bpy.ops.mesh.primitive_uv_sphere_add(radius=0.6, location=(x, 0, 0.6), segments=32, ring_count=16)
             bpy.ops.object.shade_smooth()
         bpy.ops.mesh.primitive_cube_add(size=0.8, location=(0.4, 2.0, 0.4))
-        for ob, mat in zip(sorted(scene.objects, key=lambda o: (o.name == "Cube", o.name)), _textured_mixes(bpy)):
+        for i, (x, y) in enumerate(((-1.1, -1.7), (0.0, -1.8), (1.1, -1.7))):
+            bpy.ops.mesh.primitive_uv_sphere_add(radius=0.3, location=(x, y, 0.3), segments=32, ring_count=16)
+            bpy.ops.object.shade_smooth()
+            bpy.context.active_object.name = f"Viewed{i}"
+        for ob, mat in zip(sorted(scene.objects, key=lambda o: (o.name.startswith("Viewed"), o.name == "Cube", o.name)), _textured_mixes(bpy)):
             ob.data.materials.append(mat)
         sun = bpy.data.objects.new("Sun", bpy.data.lights.new("Sun", "SUN"))
         sun.data.energy, sun.data.angle, sun.rotation_euler = 3.0, 0.05, (0.6, 0.2, 0.4)
