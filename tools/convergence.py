@@ -667,8 +667,9 @@ def _masked_mix(bpy, name, first, second, factor):
 def textured_mix(bpy):
     """Mix Shaders whose factor is a texture: a ball of paint masked into gold by a ramped
     Noise, a cut-out card (Transparent into a Diffuse by a Checker) before the back wall,
-    and a block of red Diffuse banded with a Glossy by a Wave; lit by an area and a point
-    light."""
+    a block of red Diffuse banded with a Glossy by a Wave, and a small ball of car paint (a
+    Diffuse into a Glossy by Layer Weight › Fresnel: a factor from the view); lit by an area
+    and a point light."""
     def noise(nt):
         n, ramp = nt.nodes.new("ShaderNodeTexNoise"), nt.nodes.new("ShaderNodeValToRGB")
         n.inputs["Scale"].default_value = 5.0
@@ -699,6 +700,15 @@ def textured_mix(bpy):
     banded = _masked_mix(bpy, "RedGloss", ("ShaderNodeBsdfDiffuse", {"Color": (0.8, 0.1, 0.1, 1.0)}),
                          ("ShaderNodeBsdfGlossy", {"Roughness": 0.2}), wave)
     _block(bpy, scene, "Block", (0.25, -0.1, 0.0), (0.6, 0.25, 0.5), banded)
+
+    def layer_weight(nt):
+        w = nt.nodes.new("ShaderNodeLayerWeight")
+        w.inputs["Blend"].default_value = 0.3
+        return w.outputs["Fresnel"]
+
+    car_paint = _masked_mix(bpy, "CarPaint", ("ShaderNodeBsdfDiffuse", {"Color": (0.1, 0.5, 0.2, 1.0)}),
+                            ("ShaderNodeBsdfGlossy", {"Roughness": 0.15}), layer_weight)
+    _uv_sphere(bpy, scene, "Paint", (0.1, -0.45, 0.18), 0.18, 32, 16, car_paint, smooth=True)
     _lamp(bpy, scene, "Area", "AREA", 80.0, (-0.6, -0.4, 1.2), 0.5, (math.radians(-25.0), 0.0, 0.0))
     _lamp(bpy, scene, "Lamp", "POINT", 15.0, (0.7, -0.5, 0.8), 0.05)
     _camera_and_world(bpy, scene)
