@@ -391,6 +391,36 @@ def test_bad_procedural_textures_are_refused_naming_them():
         gdmlt.Scene(d)
 
 
+def test_bad_material_blends_are_refused_naming_the_material():
+    """A material blend (a Mix Shader whose factor is a texture or the view) that is not a
+    material dict, has no factor or two, an unknown or NaN view factor, or a factor texture
+    the scene lacks is a message naming the material; a good one renders finite pixels."""
+    import numpy as np
+
+    d = gdmlt.builtin_scene("cornell", 8, 8)
+    mat = d["materials"][0]
+    name = mat["name"]
+    gold = {"name": "Gold", "base_color": (1.0, 0.7, 0.25), "metallic": 1.0, "roughness": 0.3}
+    d["textures"] = [{"name": "Mask", "width": 2, "height": 1, "channels": 3,
+                      "pixels": np.array([[1, 1, 1], [0, 0, 0]], np.float32)}]
+    for good in ({"blend": gold, "blend_texture": 0}, {"blend": gold, "blend_view": ("LAYER_FACING", 0.3)}):
+        mat.update(good)
+        res = gdmlt.render(gdmlt.Scene(d), spp=2, seed=1)
+        assert np.isfinite(res["layers"]["Combined"]).all()
+        for k in good:
+            del mat[k]
+    for bad, message in [({"blend": "gold", "blend_texture": 0}, "blend must be a material dict"),
+                         ({"blend": gold}, "one factor"),
+                         ({"blend": gold, "blend_texture": 0, "blend_view": ("FRESNEL", 1.5)}, "one factor"),
+                         ({"blend": gold, "blend_view": ("MOOD", 0.5)}, "unknown blend_view 'MOOD'"),
+                         ({"blend": gold, "blend_view": ("FRESNEL", float("nan"))}, "NaN or Inf blend_view"),
+                         ({"blend": gold, "blend_texture": 4}, "uses texture 4"),
+                         ({"blend": {**gold, "roughness": float("inf")}, "blend_texture": 0},
+                          "its blend material: NaN or Inf")]:
+        with pytest.raises(ValueError, match=f"{name}.*{message}"):
+            gdmlt.Scene(dict(d, materials=[{**mat, **bad}, *d["materials"][1:]]))
+
+
 def test_bad_corner_colours_are_refused_naming_the_mesh():
     """Corner colours (vertex colours) of the wrong count or with a NaN are a message naming
     the mesh, not a panic or NaN pixels."""
