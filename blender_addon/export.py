@@ -525,8 +525,8 @@ def _factored_mix(node, textures, warnings, what):
     """The first Mix Shader of the shader tree under `node` (depth first, first shaders
     first) whose Fac the core computes per point: (its name, the material keys of the
     factor) — `blend_texture` for an image or procedural texture (or colour and value nodes
-    over one), `blend_view` for a Fresnel or Layer Weight node (their Normal unlinked);
-    None without one."""
+    over one), `blend_ray` for a Fresnel or Layer Weight node (their Normal unlinked) or a
+    Light Path's Is Shadow Ray; None without one."""
     stack, seen = [node], set()
     while stack:
         n = stack.pop()
@@ -549,6 +549,8 @@ def _mix_factor(fac, textures, warnings, what):
     (then the factor keeps its unlinked value, warned by `_shader_leaves`)."""
     link = fac.links[0]
     src, out = link.from_node, link.from_socket.identifier
+    if (src.type, out) == ("LIGHT_PATH", "Is Shadow Ray"):
+        return {"blend_ray": ("SHADOW_RAY", 0.0)}
     view = {("FRESNEL", "Fac"): ("FRESNEL", "IOR", 1.45), ("LAYER_WEIGHT", "Fresnel"): ("LAYER_FRESNEL", "Blend", 0.5),
             ("LAYER_WEIGHT", "Facing"): ("LAYER_FACING", "Blend", 0.5)}.get((src.type, out))
     if view is not None:
@@ -558,7 +560,7 @@ def _mix_factor(fac, textures, warnings, what):
         value = src.inputs[name]
         if value.is_linked:
             return None
-        return {"blend_view": (kind, float(_socket_value(value, warnings, what, default)))}
+        return {"blend_ray": (kind, float(_socket_value(value, warnings, what, default)))}
     if textures is None:
         return None
     tex = _socket_texture(fac, textures, [], what)
@@ -589,11 +591,11 @@ def _blend_material(node, blend, textures, warnings, what):
         b.pop("vertex_color", None)
     b.pop("vertex_color_layer", None)
     drop = ["pass_index", *NORMAL_KEYS]
-    if "blend_view" in factor:  # (the core blends emission by a texture only)
+    if "blend_ray" in factor:  # (the core blends emission by a texture only)
         drop += ["emission", "emission_texture"]
         if any(a.get(k) != b.get(k) for k in ("emission", "emission_texture")) and any(
                 max(p.get("emission", (0, 0, 0))) > 0 for p in (a, b)):
-            warnings.append(f"{what}: Mix Shader '{name}' mixes emission by the view; GDMLT renders its first "
+            warnings.append(f"{what}: Mix Shader '{name}' mixes emission by the ray (its direction or kind); GDMLT renders its first "
                             f"shader's emission only")
     for k in drop:
         b.pop(k, None)

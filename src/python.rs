@@ -215,14 +215,15 @@ fn material_dict<'py>(py: Python<'py>, m: &MaterialDesc) -> PyResult<Bound<'py, 
         if let Some(t) = m.blend_texture {
             md.set_item("blend_texture", t)?;
         }
-        if let Some(v) = m.blend_view {
-            use scene::desc::ViewFactor;
+        if let Some(v) = m.blend_ray {
+            use scene::desc::RayFactor;
             let (kind, x) = match v {
-                ViewFactor::Fresnel(x) => ("FRESNEL", x),
-                ViewFactor::LayerFresnel(x) => ("LAYER_FRESNEL", x),
-                ViewFactor::LayerFacing(x) => ("LAYER_FACING", x),
+                RayFactor::Fresnel(x) => ("FRESNEL", x),
+                RayFactor::LayerFresnel(x) => ("LAYER_FRESNEL", x),
+                RayFactor::LayerFacing(x) => ("LAYER_FACING", x),
+                RayFactor::ShadowRay => ("SHADOW_RAY", 0.0),
             };
-            md.set_item("blend_view", (kind, x))?;
+            md.set_item("blend_ray", (kind, x))?;
         }
     }
     Ok(md)
@@ -279,15 +280,16 @@ fn parse_material(d: &Bound<'_, PyDict>) -> PyResult<MaterialDesc> {
             _ => None,
         },
         blend_texture: get_or(d, "blend_texture", None, &ctx)?,
-        blend_view: match get_or::<Option<(String, f32)>>(d, "blend_view", None, &ctx)? {
+        blend_ray: match get_or::<Option<(String, f32)>>(d, "blend_ray", None, &ctx)? {
             None => None,
             Some((kind, x)) => Some(match kind.to_ascii_uppercase().as_str() {
-                "FRESNEL" => scene::desc::ViewFactor::Fresnel(x),
-                "LAYER_FRESNEL" => scene::desc::ViewFactor::LayerFresnel(x),
-                "LAYER_FACING" => scene::desc::ViewFactor::LayerFacing(x),
+                "FRESNEL" => scene::desc::RayFactor::Fresnel(x),
+                "LAYER_FRESNEL" => scene::desc::RayFactor::LayerFresnel(x),
+                "LAYER_FACING" => scene::desc::RayFactor::LayerFacing(x),
+                "SHADOW_RAY" => scene::desc::RayFactor::ShadowRay,
                 other => {
                     return Err(verr(format!(
-                        "{ctx}: unknown blend_view '{other}' (FRESNEL, LAYER_FRESNEL or LAYER_FACING)"
+                        "{ctx}: unknown blend_ray '{other}' (FRESNEL, LAYER_FRESNEL, LAYER_FACING or SHADOW_RAY)"
                     )))
                 }
             }),

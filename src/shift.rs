@@ -891,11 +891,11 @@ mod tests {
     /// A box whose white surfaces turn to rough gold towards grazing views (a Mix Shader by
     /// Layer Weight › Facing, exponent 5: strongly view-dependent).
     fn box_seen_from_the_view(size: u32) -> crate::scene::desc::SceneDesc {
-        use crate::scene::desc::{MaterialDesc, ViewFactor};
+        use crate::scene::desc::{MaterialDesc, RayFactor};
         let mut d = crate::scene::builtin::cornell_box(size, size);
         for m in d.materials.iter_mut().filter(|m| m.name == "White") {
             let gold = MaterialDesc { base_color: [1.0, 0.7, 0.25], metallic: 1.0, roughness: 0.25, ..m.clone() };
-            (m.blend, m.blend_view) = (Some(Box::new(gold)), Some(ViewFactor::LayerFacing(0.9)));
+            (m.blend, m.blend_ray) = (Some(Box::new(gold)), Some(RayFactor::LayerFacing(0.9)));
         }
         d
     }

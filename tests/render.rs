@@ -173,7 +173,7 @@ fn a_textured_emitter_agrees_between_nee_and_naive() {
 /// NEE and naive must agree, and gdpt's gradients must match the path-traced image's.
 #[test]
 fn blended_materials_agree_between_nee_and_naive() {
-    use gdmlt::scene::desc::{MaterialDesc, TextureDesc, ViewFactor};
+    use gdmlt::scene::desc::{MaterialDesc, RayFactor, TextureDesc};
     let mut desc = cornell_box(32, 32);
     desc.textures.push(TextureDesc {
         name: "mask".into(),
@@ -203,12 +203,12 @@ fn blended_materials_agree_between_nee_and_naive() {
     // the tall block: a paint that turns to gold towards grazing views (Layer Weight › Facing),
     // the short one by a Fresnel of IOR 1.8 — the gradient-domain offsets joined to the base
     // path must see these BSDFs from their own directions
-    for (block, view) in [("TallBlock", ViewFactor::LayerFacing(0.3)), ("ShortBlock", ViewFactor::Fresnel(1.8))] {
+    for (block, view) in [("TallBlock", RayFactor::LayerFacing(0.3)), ("ShortBlock", RayFactor::Fresnel(1.8))] {
         desc.materials.push(MaterialDesc {
             name: block.into(),
             base_color: [0.7, 0.7, 0.6],
             blend: Some(Box::new(MaterialDesc { roughness: 0.15, ..gold.clone() })),
-            blend_view: Some(view),
+            blend_ray: Some(view),
             ..Default::default()
         });
         let id = desc.materials.len() as u32 - 1;

@@ -165,22 +165,25 @@ pub struct MaterialDesc {
     /// blend further.
     pub blend: Option<Box<MaterialDesc>>,
     pub blend_texture: Option<u32>,
-    /// The blend's factor from the view instead (a Fresnel or Layer Weight node into the Mix
-    /// Shader's factor: `ViewFactor::at`); one of it and `blend_texture` goes with `blend`.
-    /// Such a blend's emission is this material's alone.
-    pub blend_view: Option<ViewFactor>,
+    /// The blend's factor from the ray that arrives instead (a Fresnel, Layer Weight or
+    /// Light Path › Is Shadow Ray node into the Mix Shader's factor: `RayFactor`); one of it
+    /// and `blend_texture` goes with `blend`. Such a blend's emission is this material's alone.
+    pub blend_ray: Option<RayFactor>,
 }
 
-/// A Mix Shader factor computed from the viewing direction at the shading point, as Cycles'
-/// nodes compute it (`Material`'s `ViewFactor::at`).
+/// A Mix Shader factor computed from the ray arriving at the shading point, as Cycles' nodes
+/// compute it: from its direction (`RayFactor::at`) or its kind.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub enum ViewFactor {
+pub enum RayFactor {
     /// Fresnel node: the dielectric Fresnel reflectance of this IOR.
     Fresnel(f32),
     /// Layer Weight's Fresnel output: the Fresnel reflectance of IOR 1/(1 − blend).
     LayerFresnel(f32),
     /// Layer Weight's Facing output: 1 − |cos θ|^k, k remapped from the blend (0.5: k = 1).
     LayerFacing(f32),
+    /// Light Path › Is Shadow Ray: 1 for the shadow rays of light sampling (what they pass
+    /// through), 0 for every ray a path scatters from or is seen by.
+    ShadowRay,
 }
 
 impl Default for MaterialDesc {
@@ -223,7 +226,7 @@ impl Default for MaterialDesc {
             metal_constant_fresnel: false,
             blend: None,
             blend_texture: None,
-            blend_view: None,
+            blend_ray: None,
             translucency: 0.0,
             translucent_color: None,
             transparency: 0.0,

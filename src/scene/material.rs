@@ -3,7 +3,7 @@
 //! or rough GGX glass (transmission), mixed by their Principled weights, and a pass-through
 //! lobe (Transparent BSDF, alpha as coverage) that takes probability τ from all of them.
 
-use super::desc::{MaterialDesc, ViewFactor};
+use super::desc::{MaterialDesc, RayFactor};
 use crate::bsdf::{Bsdf, Coat, Conductor, Dielectric, Lambert, Layered, Translucent};
 use crate::error::SceneError;
 use crate::math::Spectrum;
@@ -65,7 +65,7 @@ pub struct Material {
     /// (`MaterialDesc::blend`; `Scene::bsdf` mixes their BSDFs lobe by lobe).
     pub blend: Option<Box<Material>>,
     pub blend_texture: Option<u32>,
-    pub blend_view: Option<ViewFactor>,
+    pub blend_ray: Option<RayFactor>,
 }
 
 /// The largest emission (and light power) accepted: beyond it a path's throughput × emission
@@ -84,22 +84,22 @@ impl Material {
             d.emission_texture,
             d.bump_texture,
         ];
-        let factors = d.blend_texture.is_some() as u32 + d.blend_view.is_some() as u32;
+        let factors = d.blend_texture.is_some() as u32 + d.blend_ray.is_some() as u32;
         let blend = match &d.blend {
             None if factors == 0 => None,
             Some(_) if factors != 1 => {
-                return Err(bad("a blend takes one factor: blend_texture or blend_view"));
+                return Err(bad("a blend takes one factor: blend_texture or blend_ray"));
             }
             Some(b) if b.blend.is_some() => return Err(bad("its blend material blends again (one level)")),
             Some(b) => Some(Box::new(Material::from_desc(b, textures).map_err(|e| match e {
                 SceneError::Material { what, .. } => bad(&format!("its blend material: {what}")),
                 other => other,
             })?)),
-            None => return Err(bad("blend_texture or blend_view without a blend material")),
+            None => return Err(bad("blend_texture or blend_ray without a blend material")),
         };
-        if let Some(ViewFactor::Fresnel(x) | ViewFactor::LayerFresnel(x) | ViewFactor::LayerFacing(x)) = d.blend_view {
+        if let Some(RayFactor::Fresnel(x) | RayFactor::LayerFresnel(x) | RayFactor::LayerFacing(x)) = d.blend_ray {
             if !x.is_finite() {
-                return Err(bad("NaN or Inf blend_view"));
+                return Err(bad("NaN or Inf blend_ray"));
             }
         }
         for t in used.into_iter().chain([d.blend_texture]).flatten() {
@@ -207,7 +207,7 @@ impl Material {
             general: false,
             blend,
             blend_texture: d.blend_texture,
-            blend_view: d.blend_view,
+            blend_ray: d.blend_ray,
         })
     }
 
@@ -332,23 +332,23 @@ impl Material {
     }
 }
 
-impl ViewFactor {
-    /// The factor where the viewer's direction makes cosine `cos` with the shading normal
-    /// (before normal and bump maps, on the viewer's side), the ray arriving on the front
-    /// (`front`) or the back of the surface — Cycles' Fresnel and Layer Weight nodes.
+impl RayFactor {
+    /// The factor for a ray that is not a shadow ray, whose direction makes cosine `cos` with
+    /// the shading normal (before normal and bump maps, on the viewer's side), arriving on the
+    /// front (`front`) or the back of the surface — Cycles' Fresnel and Layer Weight nodes.
     #[inline]
     pub fn at(&self, cos: f32, front: bool) -> f32 {
         use crate::bsdf::microfacet::fresnel_dielectric;
         match *self {
-            ViewFactor::Fresnel(ior) => {
+            RayFactor::Fresnel(ior) => {
                 let eta = ior.max(1e-5);
                 fresnel_dielectric(cos, if front { eta } else { 1.0 / eta })
             }
-            ViewFactor::LayerFresnel(blend) => {
+            RayFactor::LayerFresnel(blend) => {
                 let eta = (1.0 - blend).max(1e-5);
                 fresnel_dielectric(cos, if front { 1.0 / eta } else { eta })
             }
-            ViewFactor::LayerFacing(blend) => {
+            RayFactor::LayerFacing(blend) => {
                 let mut f = cos.abs();
                 if blend != 0.5 {
                     let b = blend.clamp(0.0, 1.0 - 1e-5);
@@ -356,6 +356,16 @@ impl ViewFactor {
                 }
                 1.0 - f
             }
+            RayFactor::ShadowRay => 0.0,
+        }
+    }
+
+    /// The factor for a shadow ray: as `at`, but 1 for Is Shadow Ray.
+    #[inline]
+    pub fn at_shadow(&self, cos: f32, front: bool) -> f32 {
+        match self {
+            RayFactor::ShadowRay => 1.0,
+            other => other.at(cos, front),
         }
     }
 }
@@ -430,13 +440,13 @@ mod tests {
         };
         let nested = with(Some(with(Some(other.clone()), Some(0))), Some(0));
         let bad_inner = with(Some(MaterialDesc { roughness: f32::NAN, ..other.clone() }), Some(0));
-        let two = MaterialDesc { blend_view: Some(ViewFactor::Fresnel(1.45)), ..with(Some(other.clone()), Some(0)) };
+        let two = MaterialDesc { blend_ray: Some(RayFactor::Fresnel(1.45)), ..with(Some(other.clone()), Some(0)) };
         let nan_view =
-            MaterialDesc { blend_view: Some(ViewFactor::LayerFacing(f32::NAN)), ..with(Some(other.clone()), None) };
+            MaterialDesc { blend_ray: Some(RayFactor::LayerFacing(f32::NAN)), ..with(Some(other.clone()), None) };
         for (d, what) in [
             (with(Some(other.clone()), None), "one factor"),
             (two, "one factor"),
-            (nan_view, "NaN or Inf blend_view"),
+            (nan_view, "NaN or Inf blend_ray"),
             (with(None, Some(0)), "without a blend material"),
             (with(Some(other.clone()), Some(3)), "uses texture 3"),
             (nested, "blends again"),
@@ -453,17 +463,19 @@ mod tests {
     /// Fresnel of IOR 1/(1 − blend); Facing at blend 0.5 is 1 − |cos|, and its exponent
     /// follows the blend (0.25 → |cos|^0.5, 0.75 → |cos|^2).
     #[test]
-    fn view_factors_follow_cycles_nodes() {
+    fn ray_factors_follow_cycles_nodes() {
         let f0 = |eta: f32| ((eta - 1.0) / (eta + 1.0)).powi(2);
         let near = |a: f32, b: f32| (a - b).abs() < 1e-5;
-        assert!(near(ViewFactor::Fresnel(1.5).at(1.0, true), f0(1.5)));
-        assert!(near(ViewFactor::Fresnel(1.5).at(1.0, false), f0(1.0 / 1.5)));
-        assert!(ViewFactor::Fresnel(1.5).at(1e-4, true) > 0.99);
-        assert!(near(ViewFactor::LayerFresnel(0.2).at(1.0, true), f0(1.0 / 0.8)));
-        assert!(near(ViewFactor::LayerFresnel(0.2).at(0.6, true), ViewFactor::Fresnel(1.25).at(0.6, true)));
+        assert!(near(RayFactor::Fresnel(1.5).at(1.0, true), f0(1.5)));
+        assert!(near(RayFactor::Fresnel(1.5).at(1.0, false), f0(1.0 / 1.5)));
+        assert!(RayFactor::Fresnel(1.5).at(1e-4, true) > 0.99);
+        assert!(near(RayFactor::LayerFresnel(0.2).at(1.0, true), f0(1.0 / 0.8)));
+        assert!(near(RayFactor::LayerFresnel(0.2).at(0.6, true), RayFactor::Fresnel(1.25).at(0.6, true)));
+        assert_eq!((RayFactor::ShadowRay.at(0.3, true), RayFactor::ShadowRay.at_shadow(0.3, true)), (0.0, 1.0));
+        assert_eq!(RayFactor::Fresnel(1.5).at_shadow(0.3, false), RayFactor::Fresnel(1.5).at(0.3, false));
         for (blend, k) in [(0.5f32, 1.0f32), (0.25, 0.5), (0.75, 2.0)] {
             for cos in [0.1f32, 0.5, 0.9] {
-                assert!(near(ViewFactor::LayerFacing(blend).at(cos, true), 1.0 - cos.powf(k)), "{blend} {cos}");
+                assert!(near(RayFactor::LayerFacing(blend).at(cos, true), 1.0 - cos.powf(k)), "{blend} {cos}");
             }
         }
     }

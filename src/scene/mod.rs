@@ -612,7 +612,7 @@ impl Scene {
         let Some(b) = &m.blend else {
             return self.material_bsdf(m, front, tc, color, m.general);
         };
-        match self.blend_at(m, tc, cos, front) {
+        match self.blend_at(m, tc, cos, front, false) {
             f if f <= 0.0 => self.material_bsdf(m, front, tc, color, m.general),
             f if f >= 1.0 => self.material_bsdf(b, front, tc, color, b.general),
             f => Bsdf::blend(
@@ -631,11 +631,12 @@ impl Scene {
     }
 
     /// The factor of material `m`'s blend at `tc`, seen at cosine `cos` with the unmapped
-    /// shading normal from the `front` or back.
+    /// shading normal from the `front` or back, by a `shadow` ray or another.
     #[inline]
-    fn blend_at(&self, m: &Material, tc: TexCoord, cos: f32, front: bool) -> f32 {
-        match (m.blend_texture, m.blend_view) {
+    fn blend_at(&self, m: &Material, tc: TexCoord, cos: f32, front: bool, shadow: bool) -> f32 {
+        match (m.blend_texture, m.blend_ray) {
             (Some(t), _) => self.blend_factor(t, tc),
+            (None, Some(v)) if shadow => v.at_shadow(cos, front).clamp(0.0, 1.0),
             (None, Some(v)) => v.at(cos, front).clamp(0.0, 1.0),
             (None, None) => 0.0,
         }
@@ -678,7 +679,7 @@ impl Scene {
         let own = |m: &Material| m.transparent_color * self.transparency(m, si.tex);
         match &m.blend {
             Some(b) => {
-                let f = self.blend_at(m, si.tex, si.wo.dot(si.unmapped), si.front);
+                let f = self.blend_at(m, si.tex, si.wo.dot(si.unmapped), si.front, true);
                 own(m) * (1.0 - f) + own(b) * f
             }
             None => own(m),

@@ -403,7 +403,7 @@ def test_bad_material_blends_are_refused_naming_the_material():
     gold = {"name": "Gold", "base_color": (1.0, 0.7, 0.25), "metallic": 1.0, "roughness": 0.3}
     d["textures"] = [{"name": "Mask", "width": 2, "height": 1, "channels": 3,
                       "pixels": np.array([[1, 1, 1], [0, 0, 0]], np.float32)}]
-    for good in ({"blend": gold, "blend_texture": 0}, {"blend": gold, "blend_view": ("LAYER_FACING", 0.3)}):
+    for good in ({"blend": gold, "blend_texture": 0}, {"blend": gold, "blend_ray": ("LAYER_FACING", 0.3)}):
         mat.update(good)
         res = gdmlt.render(gdmlt.Scene(d), spp=2, seed=1)
         assert np.isfinite(res["layers"]["Combined"]).all()
@@ -411,9 +411,9 @@ def test_bad_material_blends_are_refused_naming_the_material():
             del mat[k]
     for bad, message in [({"blend": "gold", "blend_texture": 0}, "blend must be a material dict"),
                          ({"blend": gold}, "one factor"),
-                         ({"blend": gold, "blend_texture": 0, "blend_view": ("FRESNEL", 1.5)}, "one factor"),
-                         ({"blend": gold, "blend_view": ("MOOD", 0.5)}, "unknown blend_view 'MOOD'"),
-                         ({"blend": gold, "blend_view": ("FRESNEL", float("nan"))}, "NaN or Inf blend_view"),
+                         ({"blend": gold, "blend_texture": 0, "blend_ray": ("FRESNEL", 1.5)}, "one factor"),
+                         ({"blend": gold, "blend_ray": ("MOOD", 0.5)}, "unknown blend_ray 'MOOD'"),
+                         ({"blend": gold, "blend_ray": ("FRESNEL", float("nan"))}, "NaN or Inf blend_ray"),
                          ({"blend": gold, "blend_texture": 4}, "uses texture 4"),
                          ({"blend": {**gold, "roughness": float("inf")}, "blend_texture": 0},
                           "its blend material: NaN or Inf")]:
