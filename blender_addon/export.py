@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from gdmlt import scenedict  # the scene dict's one builder (the add-on registers only once gdmlt imports)
-from gdmlt.scenedict import DEFAULT_MATERIAL
+from gdmlt.scenedict import DEFAULT_MATERIAL, DEFAULT_SURFACE
 
 from .node_view import NodeView
 
@@ -474,7 +474,7 @@ def material_params(mat, warnings, textures=None):
     Roughness are added to it. Mix Shader and Add Shader trees of supported nodes are
     flattened into one weighted set of lobes (see _combine)."""
     if mat is None:
-        return dict(DEFAULT_MATERIAL)
+        return dict(DEFAULT_SURFACE)
     what = f"material '{mat.name}'"
     out = dict(DEFAULT_MATERIAL, name=mat.name)
     if mat.pass_index:
@@ -1230,33 +1230,80 @@ def _world_rotation(node, warnings, what):
 
 def _world(scene, warnings, textures):
     """(colour × strength, or strength alone with an environment texture; texture index or
-    None; the texture's rotation or None)."""
+    None; the texture's rotation or None; the camera's backdrop colour or None). A Mix
+    Shader by Light Path › Is Camera Ray (lighting by one background, the camera seeing
+    another) gives the lighting world and, for a constant camera background, the backdrop."""
     world = scene.world
     black = ((0.0, 0.0, 0.0), None, None)
     if world is None:
-        return black
+        return (*black, None)
     what = f"world '{world.name}'"
     node_out = _output_node(world.node_tree, warnings, what)
     if node_out is None:
-        return tuple(world.color[:3]), None, None
+        return tuple(world.color[:3]), None, None, None
     _warn_unrendered_outputs(node_out, warnings, what)
     surface = node_out.inputs.get("Surface")
     if surface is None or not surface.is_linked:
-        return black
+        return (*black, None)
     node = surface.links[0].from_node
-    if node.type != "BACKGROUND":
-        warnings.append(f"{what}: node '{node.name}' ({node.type}) is not supported; world is black")
+    backdrop = None
+    if node.type == "MIX_SHADER" and _light_path_output(node.inputs[0]) == "Is Camera Ray":
+        lighting, camera = (s.links[0].from_node if s.is_linked else None for s in (node.inputs[1], node.inputs[2]))
+        seen = _background(camera, warnings, what, textures)
+        if seen[1] is None:
+            backdrop = seen[0]
+        else:
+            warnings.append(f"{what}: a textured background for camera rays (Mix Shader '{node.name}' by Is Camera "
+                            f"Ray) is not rendered; the camera sees the world that lights the scene")
+        node = lighting
+    return (*_background(node, warnings, what, textures), backdrop)
+
+
+def _light_path_output(sock):
+    """The Light Path output (its identifier) linked into `sock`, or None."""
+    if not sock.is_linked:
+        return None
+    link = sock.links[0]
+    return link.from_socket.identifier if link.from_node.type == "LIGHT_PATH" else None
+
+
+def _background(node, warnings, what, textures):
+    """(colour × strength or the strength of a texture; texture index or None; rotation or
+    None) of a world shader node: a Background, or Mix (constant factor) and Add Shaders of
+    Backgrounds of constant colour; None (an unconnected socket) is black. A mix with an
+    environment texture keeps the texture side, weighted (warned)."""
+    black = ((0.0, 0.0, 0.0), None, None)
+    if node is None:
         return black
-    strength = _input_value(node, "Strength", warnings, what, 1.0)
-    color_in = node.inputs["Color"]
-    if color_in.is_linked and color_in.links[0].from_node.type == "TEX_ENVIRONMENT" \
-            and color_in.links[0].from_socket.name == "Color":
-        env = color_in.links[0].from_node
-        tex = textures.add(env, warnings, what)
-        if tex is not None:
-            return (strength, strength, strength), tex, _world_rotation(env, warnings, what)
-    col = _input_value(node, "Color", warnings, what, (0.05, 0.05, 0.05, 1))[:3]
-    return tuple(c * strength for c in col), None, None
+    if node.type == "BACKGROUND":
+        strength = _input_value(node, "Strength", warnings, what, 1.0)
+        color_in = node.inputs["Color"]
+        if color_in.is_linked and color_in.links[0].from_node.type == "TEX_ENVIRONMENT" \
+                and color_in.links[0].from_socket.name == "Color":
+            env = color_in.links[0].from_node
+            tex = textures.add(env, warnings, what)
+            if tex is not None:
+                return (strength, strength, strength), tex, _world_rotation(env, warnings, what)
+        col = _input_value(node, "Color", warnings, what, (0.05, 0.05, 0.05, 1))[:3]
+        return tuple(c * strength for c in col), None, None
+    if node.type in ("MIX_SHADER", "ADD_SHADER"):
+        if node.type == "MIX_SHADER":
+            fac = min(max(float(_input_value(node, "Fac", warnings, what, 0.5)), 0.0), 1.0)
+            parts = ((node.inputs[1], 1.0 - fac), (node.inputs[2], fac))
+        else:
+            parts = ((node.inputs[0], 1.0), (node.inputs[1], 1.0))
+        sides = [(_background(s.links[0].from_node if s.is_linked else None, warnings, what, textures), w)
+                 for s, w in parts]
+        textured = [(b, w) for b, w in sides if b[1] is not None and w > 0]
+        if textured:
+            (strength, tex, rot), w = max(textured, key=lambda t: t[1])
+            if len(textured) > 1 or any(b[1] is None and w > 0 and max(b[0]) > 0 for b, w in sides):
+                warnings.append(f"{what}: Shader '{node.name}' mixes an environment texture with another "
+                                f"background; only the texture is rendered (weighted {w:.2f})")
+            return tuple(c * w for c in strength), tex, rot
+        return tuple(sum(b[0][k] * w for b, w in sides) for k in range(3)), None, None
+    warnings.append(f"{what}: node '{node.name}' ({node.type}) is not supported; world is black")
+    return black
 
 
 def _warn_unrendered_outputs(node_out, warnings, what, skip=()):
@@ -1336,7 +1383,7 @@ def export_scene(depsgraph, test_break=lambda: False, need_camera=True):
     warnings = []
     if scene.camera is None and need_camera:
         raise ValueError("the scene has no active camera")
-    materials = [dict(DEFAULT_MATERIAL)]
+    materials = [dict(DEFAULT_SURFACE)]  # (objects without a material, empty slots)
     textures = Textures()
     mat_index = {}
     colour_layers = {}  # material index → the colour attribute it reads
@@ -1413,7 +1460,7 @@ def export_scene(depsgraph, test_break=lambda: False, need_camera=True):
         for key in ("visible_camera", "visible_shadow"):  # (Object › Visibility › Ray Visibility)
             if not getattr(ob, key, True):
                 meshes[-1][key] = False
-    world, world_texture, world_rotation = _world(scene, warnings, textures)
+    world, world_texture, world_rotation, backdrop = _world(scene, warnings, textures)
     if scene.render.use_motion_blur:
         warnings.append("motion blur is not rendered yet: the frame is rendered at its shutter's start")
     desc = {"meshes": meshes, "materials": materials, "textures": textures.items, "lights": lights,
@@ -1422,6 +1469,8 @@ def export_scene(depsgraph, test_break=lambda: False, need_camera=True):
         desc["world_rotation"] = world_rotation
     if need_camera:
         desc["camera"] = camera_dict(scene, scene.camera.evaluated_get(depsgraph))
+        if backdrop is not None:
+            desc["camera"]["backdrop"] = backdrop
     # the same warning once
     seen = set()
     warnings = [w for w in warnings if not (w in seen or seen.add(w))]

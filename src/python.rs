@@ -569,6 +569,7 @@ fn parse_camera(d: &Bound<'_, PyDict>) -> PyResult<CameraDesc> {
         pixel_filter: get_or(d, "pixel_filter", def.pixel_filter.clone(), ctx)?,
         filter_width: get_or(d, "filter_width", def.filter_width, ctx)?,
         film_transparent: get_or(d, "film_transparent", false, ctx)?,
+        backdrop: get_or(d, "backdrop", None, ctx)?,
     })
 }
 
@@ -1117,6 +1118,9 @@ fn builtin_scene<'py>(py: Python<'py>, name: &str, width: u32, height: u32) -> P
     cd.set_item("pixel_filter", c.pixel_filter.clone())?;
     cd.set_item("filter_width", c.filter_width)?;
     cd.set_item("film_transparent", c.film_transparent)?;
+    if let Some(b) = c.backdrop {
+        cd.set_item("backdrop", b)?;
+    }
     out.set_item("camera", cd)?;
     out.set_item("world", d.world)?;
     Ok(out)

@@ -12,6 +12,11 @@ import math
 DEFAULT_MATERIAL = {"name": "(default)", "base_color": (0.8, 0.8, 0.8), "emission": (0.0, 0.0, 0.0),
                     "roughness": 0.5, "metallic": 0.0, "transmission": 0.0, "ior": 1.5}
 
+# What Blender gives an object without a material (or an empty slot), and Cycles renders:
+# its default surface, a default Principled BSDF (base 0.8 under the specular layer of IOR
+# 1.5 at Specular IOR Level 0.5) — not Cycles' own diffuse default.
+DEFAULT_SURFACE = dict(DEFAULT_MATERIAL, name="(default surface)", specular_ior=1.5, multiscatter=True)
+
 
 def material(name: str, **params) -> dict:
     """A material: DEFAULT_MATERIAL with `params` (base_color, emission, roughness, metallic,

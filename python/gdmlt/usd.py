@@ -81,7 +81,7 @@ class _Reader:
         self.warnings = warnings
         self.mpu = pxr.UsdGeom.GetStageMetersPerUnit(stage) or 0.01
         self.xcache = pxr.UsdGeom.XformCache(time)
-        self.materials = [scenedict.material("(default)")]
+        self.materials = [dict(scenedict.DEFAULT_SURFACE)]  # (unbound meshes: as Blender renders them)
         self.material_index = {}
         self.colour_layers = {}  # material index → the colour primvar its diffuseColor reads
         self.textures = []  # scene textures: material images and the dome's

@@ -350,9 +350,28 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl)
     if settings.data_passes {
         out.layers.extend(pool.install(|| passes::data_passes(scene, settings.seed)));
     }
+    if let Some(backdrop) = scene.camera.backdrop {
+        composite_backdrop(&mut out, backdrop);
+    }
     out.stats.warnings.splice(0..0, warnings);
     out.stats.cancelled = control.is_cancelled();
     Ok(out)
+}
+
+/// Puts the camera's backdrop behind the image: Combined += (1 − α)·backdrop, with α the
+/// transparent film's alpha the render made for it (the share of camera rays that leave the
+/// scene, through transparent surfaces too); that Alpha layer is then dropped.
+fn composite_backdrop(out: &mut RenderOutput, backdrop: crate::math::Spectrum) {
+    let Some(i) = out.layers.iter().position(|(name, _)| name == "Alpha") else { return };
+    let (_, alpha) = out.layers.remove(i);
+    if let Some((_, combined)) = out.layers.iter_mut().find(|(name, _)| name == "Combined") {
+        for (px, a) in combined.data.chunks_exact_mut(3).zip(&alpha.data) {
+            let seen = 1.0 - a;
+            px[0] += seen * backdrop.x;
+            px[1] += seen * backdrop.y;
+            px[2] += seen * backdrop.z;
+        }
+    }
 }
 
 #[cfg(test)]

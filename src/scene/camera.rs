@@ -38,8 +38,12 @@ pub struct Camera {
     inv_aperture_ratio: f32,
     /// Where a pixel's samples fall (pixel_filter.rs).
     pub filter: crate::pixel_filter::PixelFilter,
-    /// The world seen by camera rays is left out of the image (CameraDesc::film_transparent).
+    /// The world seen by camera rays is left out of the image (CameraDesc::film_transparent;
+    /// also when a backdrop replaces it).
     pub film_transparent: bool,
+    /// The radiance composited where camera rays leave the scene (`CameraDesc::backdrop`;
+    /// None with a transparent film).
+    pub backdrop: Option<crate::math::Spectrum>,
 }
 
 fn mat_from_rows(m: &[[f32; 4]; 4]) -> Mat4 {
@@ -60,6 +64,9 @@ impl Camera {
         let err = |s: &str| Err(SceneError::Camera(s.to_string()));
         if d.to_world.iter().flatten().any(|x| !x.is_finite()) {
             return err("matrix has NaN or Inf");
+        }
+        if d.backdrop.is_some_and(|b| b.iter().any(|x| !x.is_finite() || *x < 0.0)) {
+            return err("backdrop must be finite and ≥ 0");
         }
         let pct = d.resolution_percentage;
         // in u64: resolution × percentage overflows u32 for sizes a file can store
@@ -181,7 +188,9 @@ impl Camera {
                 1.0
             },
             filter,
-            film_transparent: d.film_transparent,
+            // a backdrop is what a transparent film leaves out, put back behind the image
+            film_transparent: d.film_transparent || d.backdrop.is_some(),
+            backdrop: d.backdrop.filter(|_| !d.film_transparent).map(Vec3::from_array),
         })
     }
 

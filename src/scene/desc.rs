@@ -351,6 +351,11 @@ pub struct CameraDesc {
     /// has an "Alpha" layer (1 − the share of such rays, as Cycles); the world still lights
     /// the scene.
     pub film_transparent: bool,
+    /// What camera rays see where they leave the scene — directly or through transparent
+    /// surfaces — instead of the world (radiance; a world Mix Shader by Light Path › Is Camera
+    /// Ray): composited behind the image by the share of such rays (the transparent film's
+    /// alpha); the world still lights the scene. Ignored when the film is transparent.
+    pub backdrop: Option<[f32; 3]>,
 }
 
 impl Default for CameraDesc {
@@ -381,6 +386,7 @@ impl Default for CameraDesc {
             pixel_filter: "BLACKMAN_HARRIS".into(),
             filter_width: 1.5,
             film_transparent: false,
+            backdrop: None,
         }
     }
 }

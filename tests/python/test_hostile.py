@@ -421,6 +421,22 @@ def test_bad_material_blends_are_refused_naming_the_material():
             gdmlt.Scene(dict(d, materials=[{**mat, **bad}, *d["materials"][1:]]))
 
 
+def test_a_bad_camera_backdrop_is_refused():
+    """A camera backdrop (what the camera sees instead of the world) with a NaN or negative
+    component is a message naming the camera's backdrop; a good one fills the image where
+    the camera sees the world."""
+    import numpy as np
+
+    d = gdmlt.builtin_scene("cornell", 8, 8)
+    for bad in [(float("nan"), 0.0, 0.0), (-1.0, 0.0, 0.0)]:
+        d["camera"]["backdrop"] = bad
+        with pytest.raises(ValueError, match="camera.*backdrop must be finite"):
+            gdmlt.Scene(d)
+    d["camera"]["backdrop"] = (0.2, 0.4, 0.6)
+    res = gdmlt.render(gdmlt.Scene(d), spp=2, seed=1)
+    assert np.isfinite(res["layers"]["Combined"]).all() and "Alpha" not in res["layers"]
+
+
 def test_bad_corner_colours_are_refused_naming_the_mesh():
     """Corner colours (vertex colours) of the wrong count or with a NaN are a message naming
     the mesh, not a panic or NaN pixels."""
