@@ -551,8 +551,7 @@ def _mix_factor(fac, textures, warnings, what):
     src, out = link.from_node, link.from_socket.identifier
     if (src.type, out) == ("LIGHT_PATH", "Is Shadow Ray"):
         return {"blend_ray": ("SHADOW_RAY", 0.0)}
-    view = {("FRESNEL", "Fac"): ("FRESNEL", "IOR", 1.45), ("LAYER_WEIGHT", "Fresnel"): ("LAYER_FRESNEL", "Blend", 0.5),
-            ("LAYER_WEIGHT", "Facing"): ("LAYER_FACING", "Blend", 0.5)}.get((src.type, out))
+    view = _RAY_NODES.get((src.type, out))
     if view is not None:
         kind, name, default = view
         if src.inputs["Normal"].is_linked:
@@ -561,10 +560,40 @@ def _mix_factor(fac, textures, warnings, what):
         if value.is_linked:
             return None
         return {"blend_ray": (kind, float(_socket_value(value, warnings, what, default)))}
+    ray = _ray_curve(fac, warnings, what)
+    if ray is not None:
+        return ray
     if textures is None:
         return None
     tex = _socket_texture(fac, textures, [], what)
     return {"blend_texture": tex} if tex is not None and tex is not False else None
+
+
+def _ray_curve(fac, warnings, what):
+    """A Mix Shader factor of colour and value nodes over a Fresnel or Layer Weight node (a
+    Color Ramp on Facing, say): that node's factor and the nodes after it tabulated over its
+    output (`blend_ray_curve`); None for another graph."""
+    from . import texture_graph
+
+    try:
+        r = texture_graph.evaluate_ray(fac)
+    except texture_graph.Unsupported:
+        return None
+    if r is None:
+        return None
+    (src, out), table = r
+    kind, name, default = _RAY_NODES[(src.type, out)]
+    if src.inputs["Normal"].is_linked:
+        warnings.append(f"{what}: the Normal input of '{src.name}' is not read (the surface normal is used)")
+    if src.inputs[name].is_linked:
+        return None
+    return {"blend_ray": (kind, float(_socket_value(src.inputs[name], warnings, what, default))),
+            "blend_ray_curve": table.tolist()}
+
+
+# Fresnel and Layer Weight outputs as the core's ray factors: (kind, the node's input, its default)
+_RAY_NODES = {("FRESNEL", "Fac"): ("FRESNEL", "IOR", 1.45), ("LAYER_WEIGHT", "Fresnel"): ("LAYER_FRESNEL", "Blend", 0.5),
+              ("LAYER_WEIGHT", "Facing"): ("LAYER_FACING", "Blend", 0.5)}
 
 
 def _blend_material(node, blend, textures, warnings, what):

@@ -150,6 +150,7 @@ class _Graph:
         self.image_pixels = image_pixels  # node → (pixels (h·w, 4), w, h, srgb)
         self.coords = coords  # node → (space, 3×4 matrix): the coordinates a procedural reads
         self.procedural = None  # (node, output name) of the procedural texture leaf
+        self.ray = None  # (node, output identifier) of a Fresnel or Layer Weight leaf (`ray_leaf`)
         self.samples = None  # the table's values of that leaf's output
         self.domain = None  # (their first and last)
         self.image_identity = image_identity  # node → what identifies its pixels
@@ -264,10 +265,24 @@ class _Graph:
             return _Value(px[:, 3]) if out.name == "Alpha" else _Colour(px[:, :3])
         if t in _PROCEDURAL_TABLES:
             return self._procedural(node, out, walk, collect)
+        if (t, out.identifier) in RAY_LEAVES:
+            return self._ray(node, out, collect)
         op = _NODES.get(t)
         if op is None:
             raise Unsupported(f"node '{node.name}' ({t})")
         return op(node, out, walk, collect)
+
+    def _ray(self, node, out, collect):
+        """A Fresnel or Layer Weight leaf (a factor the core computes from the ray, in
+        [0, 1]): its output at the table's values."""
+        if collect:
+            if self.ray is not None and self.ray[0].name != node.name:
+                raise Unsupported(f"two view factors ('{self.ray[0].name}', '{node.name}')")
+            if self.coords is not None or self.images or self.procedural is not None:
+                raise Unsupported(f"'{node.name}' ({node.type}) here (only into a Mix Shader's factor, alone)")
+            self.ray = (node, out.identifier)
+            return None
+        return _Value(self.samples)
 
     def _procedural(self, node, out, walk, collect):
         """A procedural texture leaf: its output at the table's values."""
@@ -738,6 +753,27 @@ _NODES = {
 }
 
 
+# Fresnel and Layer Weight outputs: factors the core computes per point from the ray
+# (`RayFactor`); a graph over one of them is tabulated over [0, 1] (`evaluate_ray`).
+RAY_LEAVES = {("FRESNEL", "Fac"), ("LAYER_WEIGHT", "Fresnel"), ("LAYER_WEIGHT", "Facing")}
+RAY_TABLE = 1024
+
+
+def evaluate_ray(sock):
+    """A linked Mix Shader factor over a Fresnel or Layer Weight node (and colour and value
+    nodes after it): ((node, output identifier), the factor's luminance at RAY_TABLE values
+    of the node's output over [0, 1]) — or None when no such node feeds it. Raises
+    Unsupported for what it cannot evaluate."""
+    g = _Graph(None, None, None)
+    g.collect(sock)
+    if g.ray is None or g.images or g.procedural is not None:
+        return None
+    g.samples = np.linspace(0.0, 1.0, RAY_TABLE, dtype=np.float32)
+    v = _as_value(g._walk(sock, collect=False)).a
+    table = np.nan_to_num(np.broadcast_to(v, (RAY_TABLE,)), nan=0.0, posinf=0.0, neginf=0.0)
+    return g.ray, np.clip(table, 0.0, 1.0).astype(np.float32)
+
+
 def evaluate(sock, image_pixels, uv_key, image_identity=None, coords=None):
     """The value of the linked input `sock`: ('constant', a tuple of 3 or a float) when no
     image feeds it, else ('texture', rgb (h·w, 3) float32, w, h, transform, extension,
@@ -749,6 +785,9 @@ def evaluate(sock, image_pixels, uv_key, image_identity=None, coords=None):
     naming what it cannot evaluate."""
     g = _Graph(image_pixels, uv_key, image_identity, coords)
     g.collect(sock)
+    if g.ray is not None:
+        raise Unsupported(f"'{g.ray[0].name}' ({g.ray[0].type}: a factor from the view, evaluated only into a Mix "
+                          f"Shader's factor)")
     if g.procedural is not None:
         return _tabulated(g, sock)
     if g.images and image_pixels is None:

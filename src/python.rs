@@ -225,6 +225,9 @@ fn material_dict<'py>(py: Python<'py>, m: &MaterialDesc) -> PyResult<Bound<'py, 
             };
             md.set_item("blend_ray", (kind, x))?;
         }
+        if !m.blend_ray_curve.is_empty() {
+            md.set_item("blend_ray_curve", m.blend_ray_curve.clone())?;
+        }
     }
     Ok(md)
 }
@@ -294,6 +297,7 @@ fn parse_material(d: &Bound<'_, PyDict>) -> PyResult<MaterialDesc> {
                 }
             }),
         },
+        blend_ray_curve: get_or(d, "blend_ray_curve", Vec::new(), &ctx)?,
         name,
     })
 }

@@ -169,6 +169,10 @@ pub struct MaterialDesc {
     /// Light Path › Is Shadow Ray node into the Mix Shader's factor: `RayFactor`); one of it
     /// and `blend_texture` goes with `blend`. Such a blend's emission is this material's alone.
     pub blend_ray: Option<RayFactor>,
+    /// The colour and value nodes between that ray factor and the Mix Shader (a Color Ramp
+    /// on Layer Weight › Facing, say) as a table of the factor over the node's output at
+    /// evenly spaced values on [0, 1], interpolated linearly; empty: the output itself.
+    pub blend_ray_curve: Vec<f32>,
 }
 
 /// A Mix Shader factor computed from the ray arriving at the shading point, as Cycles' nodes
@@ -227,6 +231,7 @@ impl Default for MaterialDesc {
             blend: None,
             blend_texture: None,
             blend_ray: None,
+            blend_ray_curve: Vec::new(),
             translucency: 0.0,
             translucent_color: None,
             transparency: 0.0,

@@ -66,6 +66,8 @@ pub struct Material {
     pub blend: Option<Box<Material>>,
     pub blend_texture: Option<u32>,
     pub blend_ray: Option<RayFactor>,
+    /// `MaterialDesc::blend_ray_curve` (empty: none).
+    pub blend_ray_curve: Vec<f32>,
 }
 
 /// The largest emission (and light power) accepted: beyond it a path's throughput × emission
@@ -101,6 +103,12 @@ impl Material {
             if !x.is_finite() {
                 return Err(bad("NaN or Inf blend_ray"));
             }
+        }
+        if !d.blend_ray_curve.is_empty() && (d.blend_ray.is_none() || d.blend_ray_curve.len() < 2) {
+            return Err(bad("blend_ray_curve needs a blend_ray and at least 2 values"));
+        }
+        if d.blend_ray_curve.iter().any(|x| !x.is_finite()) {
+            return Err(bad("NaN or Inf in blend_ray_curve"));
         }
         for t in used.into_iter().chain([d.blend_texture]).flatten() {
             if t as usize >= textures {
@@ -208,6 +216,7 @@ impl Material {
             blend,
             blend_texture: d.blend_texture,
             blend_ray: d.blend_ray,
+            blend_ray_curve: d.blend_ray_curve.iter().map(|x| x.clamp(0.0, 1.0)).collect(),
         })
     }
 
@@ -330,6 +339,19 @@ impl Material {
             }
         }
     }
+}
+
+/// `curve` (values at evenly spaced points of [0, 1]) at `x`, interpolated linearly; `x`
+/// itself when the curve is empty.
+#[inline]
+pub fn ray_curve(curve: &[f32], x: f32) -> f32 {
+    if curve.len() < 2 {
+        return x;
+    }
+    let t = x.clamp(0.0, 1.0) * (curve.len() - 1) as f32;
+    let i = (t as usize).min(curve.len() - 2);
+    let f = t - i as f32;
+    curve[i] * (1.0 - f) + curve[i + 1] * f
 }
 
 impl RayFactor {
@@ -473,6 +495,12 @@ mod tests {
         assert!(near(RayFactor::LayerFresnel(0.2).at(0.6, true), RayFactor::Fresnel(1.25).at(0.6, true)));
         assert_eq!((RayFactor::ShadowRay.at(0.3, true), RayFactor::ShadowRay.at_shadow(0.3, true)), (0.0, 1.0));
         assert_eq!(RayFactor::Fresnel(1.5).at_shadow(0.3, false), RayFactor::Fresnel(1.5).at(0.3, false));
+        // a curve after the factor: its table interpolated, the identity without one
+        let ramp = [0.0, 0.0, 1.0, 1.0];
+        assert!(
+            near(ray_curve(&ramp, 0.5), 0.5) && near(ray_curve(&ramp, 0.2), 0.0) && near(ray_curve(&ramp, 1.0), 1.0)
+        );
+        assert!(near(ray_curve(&ramp, 0.45), 0.35) && near(ray_curve(&[], 0.3), 0.3));
         for (blend, k) in [(0.5f32, 1.0f32), (0.25, 0.5), (0.75, 2.0)] {
             for cos in [0.1f32, 0.5, 0.9] {
                 assert!(near(RayFactor::LayerFacing(blend).at(cos, true), 1.0 - cos.powf(k)), "{blend} {cos}");

@@ -636,8 +636,10 @@ impl Scene {
     fn blend_at(&self, m: &Material, tc: TexCoord, cos: f32, front: bool, shadow: bool) -> f32 {
         match (m.blend_texture, m.blend_ray) {
             (Some(t), _) => self.blend_factor(t, tc),
-            (None, Some(v)) if shadow => v.at_shadow(cos, front).clamp(0.0, 1.0),
-            (None, Some(v)) => v.at(cos, front).clamp(0.0, 1.0),
+            (None, Some(v)) => {
+                let x = if shadow { v.at_shadow(cos, front) } else { v.at(cos, front) };
+                material::ray_curve(&m.blend_ray_curve, x).clamp(0.0, 1.0)
+            }
             (None, None) => 0.0,
         }
     }

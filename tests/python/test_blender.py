@@ -1997,11 +1997,16 @@ def _textured_mixes(bpy):
         w.inputs["Scale"].default_value = 3.0
         return w.outputs["Fac"]
 
-    def layer_weight(output, blend):
+    def layer_weight(output, blend, ramp=None):
         def make(nt):
             w = nt.nodes.new("ShaderNodeLayerWeight")
             w.inputs["Blend"].default_value = blend
-            return w.outputs[output]
+            if ramp is None:
+                return w.outputs[output]
+            r = nt.nodes.new("ShaderNodeValToRGB")
+            r.color_ramp.elements[0].position, r.color_ramp.elements[1].position = ramp
+            nt.links.new(w.outputs[output], r.inputs["Fac"])
+            return r.outputs["Color"]
         return make
 
     def fresnel(ior):
@@ -2033,6 +2038,8 @@ def _textured_mixes(bpy):
             principled((0.9, 0.9, 0.9), Metallic=1.0, Roughness=0.2), fresnel(1.6)),
         mix("Sheen", shader("ShaderNodeBsdfDiffuse", (0.5, 0.1, 0.3)),
             shader("ShaderNodeBsdfDiffuse", (0.9, 0.8, 0.9)), layer_weight("Facing", 0.7)),
+        mix("Rimlight", shader("ShaderNodeBsdfDiffuse", (0.1, 0.3, 0.1)),
+            shader("ShaderNodeBsdfGlossy", (1.0, 0.9, 0.6), Roughness=0.2), layer_weight("Facing", 0.5, (0.3, 0.6))),
     ]
 
 
@@ -2053,8 +2060,8 @@ def test_textured_mix_shaders_agree_with_cycles(bpy_mod, tmp_out):
             bpy.ops.mesh.primitive_uv_sphere_add(radius=0.6, location=(x, 0, 0.6), segments=32, ring_count=16)
             bpy.ops.object.shade_smooth()
         bpy.ops.mesh.primitive_cube_add(size=0.8, location=(0.4, 2.0, 0.4))
-        for i, (x, y) in enumerate(((-1.1, -1.7), (0.0, -1.8), (1.1, -1.7))):
-            bpy.ops.mesh.primitive_uv_sphere_add(radius=0.3, location=(x, y, 0.3), segments=32, ring_count=16)
+        for i, (x, y) in enumerate(((-0.9, -1.8), (-0.3, -1.8), (0.3, -1.8), (0.9, -1.8))):
+            bpy.ops.mesh.primitive_uv_sphere_add(radius=0.25, location=(x, y, 0.25), segments=32, ring_count=16)
             bpy.ops.object.shade_smooth()
             bpy.context.active_object.name = f"Viewed{i}"
         for ob, mat in zip(sorted(scene.objects, key=lambda o: (o.name.startswith("Viewed"), o.name == "Cube", o.name)), _textured_mixes(bpy)):

@@ -415,6 +415,9 @@ def test_bad_material_blends_are_refused_naming_the_material():
                          ({"blend": gold, "blend_ray": ("MOOD", 0.5)}, "unknown blend_ray 'MOOD'"),
                          ({"blend": gold, "blend_ray": ("FRESNEL", float("nan"))}, "NaN or Inf blend_ray"),
                          ({"blend": gold, "blend_texture": 4}, "uses texture 4"),
+                         ({"blend": gold, "blend_ray": ("FRESNEL", 1.5), "blend_ray_curve": [0.5]}, "at least 2"),
+                         ({"blend": gold, "blend_ray": ("FRESNEL", 1.5), "blend_ray_curve": [0.0, float("nan")]},
+                          "NaN or Inf in blend_ray_curve"),
                          ({"blend": {**gold, "roughness": float("inf")}, "blend_texture": 0},
                           "its blend material: NaN or Inf")]:
         with pytest.raises(ValueError, match=f"{name}.*{message}"):
