@@ -339,10 +339,11 @@ def luxcore_render(simple: dict, budgets, max_bounces: int, nee: bool, sampler="
 # ---------------------------------------------------------------- Cycles (bpy, child process)
 
 
-def cycles_unbiased(scene, samples: int, seed: int, bounces: int, threads: int = 0):
+def cycles_unbiased(scene, samples: int, seed: int, bounces: int, threads: int = 0, kinds=None):
     """Cycles as an unbiased reference (BLENDER.md): no clamping, no glossy filter, no
     denoiser, no adaptive sampling, no light threshold, the default 1.5-pixel Blackman-Harris filter, caustics on,
-    the same bounce limit for every kind."""
+    the same bounce limit for every kind — or, with `kinds` ({"diffuse", "glossy",
+    "transmission", "transparent"} → limit), those limits (GDMLT's Light Paths)."""
     scene.render.engine = "CYCLES"
     c = scene.cycles
     c.device = "CPU"
@@ -359,6 +360,8 @@ def cycles_unbiased(scene, samples: int, seed: int, bounces: int, threads: int =
     c.filter_width = 1.5
     c.max_bounces = c.diffuse_bounces = c.glossy_bounces = c.transmission_bounces = bounces
     c.transparent_max_bounces = 16  # as the core (path.rs MAX_TRANSPARENT_BOUNCES): crossings are not bounces
+    for kind, limit in (kinds or {}).items():
+        setattr(c, "transparent_max_bounces" if kind == "transparent" else f"{kind}_bounces", min(limit, 1024))
     c.caustics_reflective = c.caustics_refractive = True
     scene.render.threads_mode = "FIXED" if threads else "AUTO"
     if threads:

@@ -318,7 +318,10 @@ def for_engine(scene, engine, spp, seed, method=None):
     if engine == "CYCLES":
         from gdmlt_bench.peers import cycles_unbiased
 
-        cycles_unbiased(scene, spp, seed, scene.gdmlt.max_bounces)
+        g = scene.gdmlt  # (GDMLT's Light Paths: Cycles' defaults unless a test changes them)
+        cycles_unbiased(scene, spp, seed, g.max_bounces, kinds={
+            "diffuse": g.diffuse_bounces, "glossy": g.glossy_bounces, "transmission": g.transmission_bounces,
+            "transparent": g.transparent_max_bounces})
     else:
         scene.render.engine = "GDMLT"
         scene.gdmlt.samples, scene.gdmlt.seed = spp, seed
@@ -496,8 +499,11 @@ def test_gdpt_through_blender_writes_its_passes(bpy_mod, tmp_out):
         assert {"Combined", "GD Primal", "GD Gradient X", "GD Gradient Y", "Denoising Albedo"} <= set(parts)
         primal = next(iter(parts["GD Primal"].channels.values())).pixels
         combined = next(iter(parts["Combined"].channels.values())).pixels
+    from gdmlt.blend import settings_of
+
     core = gdmlt.Scene(gdmlt.builtin_scene("cornell", 24, 24))
-    ref = gdmlt.render(core, method="gdpt", spp=16, seed=3, reconstruction="l2")["layers"]
+    light_paths = {k: v for k, v in settings_of(s).items() if k.endswith("bounces")}  # (the add-on's: Cycles')
+    ref = gdmlt.render(core, method="gdpt", spp=16, seed=3, reconstruction="l2", **light_paths)["layers"]
     assert np.isfinite(primal).all() and np.isfinite(combined).all()
     # the same scene, seed and method: the passes match the core's own output
     assert abs(primal[..., :3].mean() / ref["GD Primal"].mean() - 1) < 0.01
