@@ -149,7 +149,16 @@ fn a_textured_emitter_agrees_between_nee_and_naive() {
     quad.corner_uvs = [0, 1, 2, 0, 2, 3].iter().map(|&k| uv[k]).collect();
     nee_and_naive_agree(&desc);
     // the light's own pixels: white and blue squares (blue/red spread), not one colour
-    let img = run(&desc, 16, true, 0, 1, 0);
+    light_shows_two_colours(&desc, 2.0);
+    // the gradient-domain shift reconnects offsets to the light point the base sampled:
+    // evaluated there (light_eval), its gradients must match the path-traced image's
+    gdpt_gradients_match_pt("gdpt textured emitter", &desc);
+}
+
+/// The pixels that see the light directly (brighter than 2) spread in blue/red by more than
+/// `spread`: the light shows its texture's colours, not one.
+fn light_shows_two_colours(desc: &SceneDesc, spread: f64) {
+    let img = run(desc, 16, true, 0, 1, 0);
     let ratios: Vec<f64> = img
         .data
         .chunks_exact(3)
@@ -157,20 +166,23 @@ fn a_textured_emitter_agrees_between_nee_and_naive() {
         .map(|p| p[2] as f64 / p[0].max(1e-6) as f64)
         .collect();
     let (lo, hi) = ratios.iter().fold((f64::MAX, 0.0f64), |(lo, hi), &r| (lo.min(r), hi.max(r)));
-    assert!(ratios.len() > 4 && hi > 2.0 * lo, "{} light pixels, blue/red from {lo} to {hi}", ratios.len());
-    // the gradient-domain shift reconnects offsets to the light point the base sampled:
-    // evaluated there (light_eval), its gradients must match the path-traced image's
-    let ref_out = run_method(&desc, Method::Pt, Norm::L2, 4096, true, 4, 100, 0);
+    assert!(ratios.len() > 4 && hi > spread * lo, "{} light pixels, blue/red from {lo} to {hi}", ratios.len());
+}
+
+/// gdpt's gradients (four seeds, 64 spp) match those of a 4096-spp path-traced image.
+fn gdpt_gradients_match_pt(what: &str, desc: &SceneDesc) {
+    let ref_out = run_method(desc, Method::Pt, Norm::L2, 4096, true, 4, 100, 0);
     let runs: Vec<RenderOutput> =
-        (0..4).map(|s| run_method(&desc, Method::Gdpt, Norm::L2, 64, true, 4, s as u64 + 1, 0)).collect();
-    check_gradients("gdpt textured emitter", &runs, &ref_out, 64.0 / 4096.0, 2.0);
+        (0..4).map(|s| run_method(desc, Method::Gdpt, Norm::L2, 64, true, 4, s as u64 + 1, 0)).collect();
+    check_gradients(what, &runs, &ref_out, 64.0 / 4096.0, 2.0);
 }
 
 /// Materials that blend into others by a texture (a Mix Shader's textured factor): the light
 /// blends from white into dim blue emission, the red wall into a rough gold metal, each by
-/// a two-texel factor; and by the view (Layer Weight, Fresnel): the blocks. Light sampling evaluates the blended emission where it lands and the
-/// light's selection weight uses an estimate; the wall's BSDF is the lobe-by-lobe blend —
-/// NEE and naive must agree, and gdpt's gradients must match the path-traced image's.
+/// a two-texel factor; and by the view (Layer Weight, Fresnel): the blocks. Light sampling
+/// evaluates the blended emission where it lands and the light's selection weight uses an
+/// estimate; the wall's BSDF is the lobe-by-lobe blend — NEE and naive must agree, and
+/// gdpt's gradients must match the path-traced image's.
 #[test]
 fn blended_materials_agree_between_nee_and_naive() {
     use gdmlt::scene::desc::{MaterialDesc, RayFactor, TextureDesc};
@@ -220,19 +232,8 @@ fn blended_materials_agree_between_nee_and_naive() {
     }
     nee_and_naive_agree(&desc);
     // the light's own pixels show both sides' colours, mixed by the mask
-    let img = run(&desc, 16, true, 0, 1, 0);
-    let ratios: Vec<f64> = img
-        .data
-        .chunks_exact(3)
-        .filter(|p| p[0].max(p[1]).max(p[2]) > 2.0)
-        .map(|p| p[2] as f64 / p[0].max(1e-6) as f64)
-        .collect();
-    let (lo, hi) = ratios.iter().fold((f64::MAX, 0.0f64), |(lo, hi), &r| (lo.min(r), hi.max(r)));
-    assert!(ratios.len() > 4 && hi > 1.5 * lo, "{} light pixels, blue/red from {lo} to {hi}", ratios.len());
-    let ref_out = run_method(&desc, Method::Pt, Norm::L2, 4096, true, 4, 100, 0);
-    let runs: Vec<RenderOutput> =
-        (0..4).map(|s| run_method(&desc, Method::Gdpt, Norm::L2, 64, true, 4, s as u64 + 1, 0)).collect();
-    check_gradients("gdpt blended materials", &runs, &ref_out, 64.0 / 4096.0, 2.0);
+    light_shows_two_colours(&desc, 1.5);
+    gdpt_gradients_match_pt("gdpt blended materials", &desc);
 }
 
 /// A pt render whose light samples through rough glass are evaluated by the BSDF itself

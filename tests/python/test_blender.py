@@ -301,6 +301,18 @@ def assert_agrees_with_cycles(bpy, build, tmp_out, tag, spp=(256, 512), block=6,
     return c, g
 
 
+def assert_blocks_agree(bpy, build, tmp_out, tag, lit=None, slack=0.002):
+    """F12 of `build(engine, seed)` in Cycles (seeds 1, 2) and GDMLT (seed 1), as 4×4 block
+    means: GDMLT's mean relative difference from Cycles within 1.5× that of Cycles' two seeds
+    plus `slack`, over the blocks Cycles lights above `lit` (every block without)."""
+    c, c2, g = (block_means(render_to_exr(bpy, build(e, k), tmp_out / f"{tag}{e}{k}.exr"), 4)
+                for e, k in (("CYCLES", 1), ("CYCLES", 2), ("GDMLT", 1)))
+    mask = c.mean(axis=-1) > lit if lit is not None else np.ones(c.shape[:2], bool)
+    diff = np.mean((np.abs(g - c) / (c + 0.02))[mask])
+    noise = np.mean((np.abs(c2 - c) / (c + 0.02))[mask])
+    assert diff < 1.5 * noise + slack, (diff, noise, float(g.mean() / c.mean()))
+
+
 def open_scene(bpy, name, engine, spp, seed, keep=None):
     """Opens tests/scenes/NAME.blend (written by tools/make_test_scenes.py) for `engine`:
     GDMLT with the file's settings, or Cycles as an unbiased reference with the file's bounce
@@ -1940,12 +1952,7 @@ def test_procedural_bump_agrees_with_cycles(bpy_mod, tmp_out):
         scene.gdmlt.max_bounces = 2
         return for_engine(scene, engine, 256, seed, method="PT")
 
-    c, c2, g = (block_means(render_to_exr(bpy, build(e, k), tmp_out / f"pbump{e}{k}.exr"), 4)
-                for e, k in (("CYCLES", 1), ("CYCLES", 2), ("GDMLT", 1)))
-    lit = c.mean(axis=-1) > 0.02
-    diff = np.mean((np.abs(g - c) / (c + 0.02))[lit])
-    noise = np.mean((np.abs(c2 - c) / (c + 0.02))[lit])
-    assert diff < 1.5 * noise + 0.001, (diff, noise)
+    assert_blocks_agree(bpy, build, tmp_out, "pbump", lit=0.02, slack=0.001)
 
 
 def _textured_mixes(bpy):
@@ -2085,12 +2092,7 @@ def test_textured_mix_shaders_agree_with_cycles(bpy_mod, tmp_out):
         scene.gdmlt.max_bounces = 6
         return for_engine(scene, engine, 256, seed, method="PT")
 
-    c, c2, g = (block_means(render_to_exr(bpy, build(e, k), tmp_out / f"tmix{e}{k}.exr"), 4)
-                for e, k in (("CYCLES", 1), ("CYCLES", 2), ("GDMLT", 1)))
-    lit = c.mean(axis=-1) > 0.02
-    diff = np.mean((np.abs(g - c) / (c + 0.02))[lit])
-    noise = np.mean((np.abs(c2 - c) / (c + 0.02))[lit])
-    assert diff < 1.5 * noise + 0.002, (diff, noise)
+    assert_blocks_agree(bpy, build, tmp_out, "tmix", lit=0.02)
 
 
 def test_shadow_ray_glass_agrees_with_cycles(bpy_mod, tmp_out):
@@ -2135,12 +2137,7 @@ def test_shadow_ray_glass_agrees_with_cycles(bpy_mod, tmp_out):
         scene.gdmlt.max_bounces = 6
         return for_engine(scene, engine, 256, seed, method="PT")
 
-    c, c2, g = (block_means(render_to_exr(bpy, build(e, k), tmp_out / f"shadowray{e}{k}.exr"), 4)
-                for e, k in (("CYCLES", 1), ("CYCLES", 2), ("GDMLT", 1)))
-    lit = c.mean(axis=-1) > 0.02
-    diff = np.mean((np.abs(g - c) / (c + 0.02))[lit])
-    noise = np.mean((np.abs(c2 - c) / (c + 0.02))[lit])
-    assert diff < 1.5 * noise + 0.002, (diff, noise)
+    assert_blocks_agree(bpy, build, tmp_out, "shadowray", lit=0.02)
 
 
 def test_window_glass_lit_by_a_grey_world_agrees_with_cycles(bpy_mod, tmp_out):
@@ -2186,12 +2183,7 @@ def test_window_glass_lit_by_a_grey_world_agrees_with_cycles(bpy_mod, tmp_out):
         r.resolution_x, r.resolution_y, r.resolution_percentage = 64, 48, 100
         return for_engine(scene, engine, 512, seed, method="PT")
 
-    c, c2, g = (block_means(render_to_exr(bpy, build(e, k), tmp_out / f"window{e}{k}.exr"), 4)
-                for e, k in (("CYCLES", 1), ("CYCLES", 2), ("GDMLT", 1)))
-    lit = c.mean(axis=-1) > 0.01
-    diff = np.mean((np.abs(g - c) / (c + 0.02))[lit])
-    noise = np.mean((np.abs(c2 - c) / (c + 0.02))[lit])
-    assert diff < 1.5 * noise + 0.002, (diff, noise, float(g.mean() / c.mean()))
+    assert_blocks_agree(bpy, build, tmp_out, "window", lit=0.01)
 
 
 def test_objects_without_a_material_render_as_cycles_default_surface(bpy_mod, tmp_out):
@@ -2219,11 +2211,7 @@ def test_objects_without_a_material_render_as_cycles_default_surface(bpy_mod, tm
         r.resolution_x, r.resolution_y, r.resolution_percentage = 64, 48, 100
         return for_engine(scene, engine, 256, seed, method="PT")
 
-    c, c2, g = (block_means(render_to_exr(bpy, build(e, k), tmp_out / f"default{e}{k}.exr"), 4)
-                for e, k in (("CYCLES", 1), ("CYCLES", 2), ("GDMLT", 1)))
-    diff = np.mean(np.abs(g - c) / (c + 0.02))
-    noise = np.mean(np.abs(c2 - c) / (c + 0.02))
-    assert diff < 1.5 * noise + 0.002, (diff, noise)
+    assert_blocks_agree(bpy, build, tmp_out, "default")
 
 
 def test_world_seen_by_the_camera_agrees_with_cycles(bpy_mod, tmp_out):
@@ -2268,11 +2256,7 @@ def test_world_seen_by_the_camera_agrees_with_cycles(bpy_mod, tmp_out):
         scene.gdmlt.max_bounces = 6
         return for_engine(scene, engine, 256, seed, method="PT")
 
-    c, c2, g = (block_means(render_to_exr(bpy, build(e, k), tmp_out / f"camworld{e}{k}.exr"), 4)
-                for e, k in (("CYCLES", 1), ("CYCLES", 2), ("GDMLT", 1)))
-    diff = np.mean(np.abs(g - c) / (c + 0.02))
-    noise = np.mean(np.abs(c2 - c) / (c + 0.02))
-    assert diff < 1.5 * noise + 0.002, (diff, noise)
+    assert_blocks_agree(bpy, build, tmp_out, "camworld")
 
 
 def _coloured_quads():
