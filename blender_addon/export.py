@@ -1203,8 +1203,7 @@ def _light(ob, matrix, warnings):
     minus_z = -m[:3, 2]
     n = np.linalg.norm(minus_z)
     minus_z = tuple((minus_z / n if n > 0 else np.array([0, 0, -1.0])).tolist())
-    if getattr(light, "use_nodes", False):
-        warnings.append(f"light '{name}': light node trees are ignored; colour × power is used")
+    power = tuple(p * e for p, e in zip(power, _light_emission(light, warnings, f"light '{name}'")))
     soft = bool(getattr(light, "use_soft_falloff", True))
     if light.type == "POINT":
         return scenedict.point_light(name, pos, power, light.shadow_soft_size, soft, visible)
@@ -1217,9 +1216,31 @@ def _light(ob, matrix, warnings):
                                     float(getattr(light, "spread", math.pi)))
     if light.type == "SUN":
         plus_z = tuple((-np.array(minus_z)).tolist())
-        return scenedict.sun_light(name, plus_z, tuple((color * light.energy * scale).tolist()), light.angle, visible)
+        return scenedict.sun_light(name, plus_z, power, light.angle, visible)
     warnings.append(f"light '{name}': type {light.type} is not supported and was skipped")
     return None
+
+
+def _light_emission(light, warnings, what):
+    """The factor a light's node tree puts on its colour × power, as Cycles applies it: the
+    Emission node's Color × Strength into the Light Output (constant, or colour and value
+    nodes without a texture under them: a Blackbody node, say); white without a tree. Anything
+    else (a texture, an IES profile, Light Falloff) is left out with a warning: factor 1."""
+    tree = light.node_tree if getattr(light, "use_nodes", False) else None
+    out = _output_node(tree, warnings, what) if tree is not None else None
+    if out is None:
+        return (1.0, 1.0, 1.0)
+    sock = out.inputs.get("Surface")
+    node = sock.links[0].from_node if sock is not None and sock.is_linked else None
+    if node is None:
+        return (0.0, 0.0, 0.0)  # (an unconnected output: the light emits nothing, as in Cycles)
+    if node.type != "EMISSION":
+        warnings.append(f"{what}: node '{node.name}' ({node.type}) into the light output is not rendered; "
+                        f"colour × power is used")
+        return (1.0, 1.0, 1.0)
+    colour = _input_value(node, "Color", warnings, what, (1.0, 1.0, 1.0, 1.0))[:3]
+    strength = float(_input_value(node, "Strength", warnings, what, 1.0))
+    return tuple(max(float(c), 0.0) * strength for c in colour)
 
 
 def _world_rotation(node, warnings, what):

@@ -498,6 +498,16 @@ def _invert(node, out, walk, collect):
     return _Colour(_lerp(c, 1 - c, t))
 
 
+def _blackbody(node, out, walk, collect):
+    """Blackbody: Blender's colour of the temperature (blackbody.py: Rec.709, luminance 1)."""
+    from .blackbody import colour
+
+    vals = _all(walk, collect, "Temperature")
+    if collect:
+        return None
+    return _Colour(colour(_as_value(vals[0]).a))
+
+
 def _curves(node, out, walk, collect):
     """RGB Curves: each channel through the combined curve, then its own (R(C(r)), …), mixed
     with the input by the factor; the curves tabulated at 1024 points over the inputs' range
@@ -739,6 +749,7 @@ _NODES = {
     "MATH": _math,
     "VALTORGB": _ramp,
     "INVERT": _invert,
+    "BLACKBODY": _blackbody,
     "CURVE_RGB": _curves,
     "GAMMA": _gamma,
     "BRIGHTCONTRAST": _bright_contrast,
