@@ -170,7 +170,9 @@ class Textures:
         textures (texture_graph.py): ('texture', index) of the evaluated texture,
         ('constant', value) when no image feeds it, or None (warned) when the graph has a
         node the evaluator does not render. Evaluated once per material, node and socket."""
-        key = (what, sock.node.name, sock.identifier)
+        from .texture_graph import current_object
+
+        key = (what, sock.node.name, sock.identifier, current_object())
         if key not in self.graphs:
             self.graphs[key] = self._evaluate_graph(sock, warnings, what)
         return self.graphs[key]
@@ -551,6 +553,8 @@ def _mix_factor(fac, textures, warnings, what):
     src, out = link.from_node, link.from_socket.identifier
     if (src.type, out) == ("LIGHT_PATH", "Is Shadow Ray"):
         return {"blend_ray": ("SHADOW_RAY", 0.0)}
+    if (src.type, out) == ("NEW_GEOMETRY", "Backfacing"):
+        return {"blend_ray": ("BACKFACING", 0.0)}
     view = _RAY_NODES.get((src.type, out))
     if view is not None:
         kind, name, default = view
@@ -582,6 +586,8 @@ def _ray_curve(fac, warnings, what):
     if r is None:
         return None
     (src, out), table = r
+    if (src.type, out) == ("NEW_GEOMETRY", "Backfacing"):
+        return {"blend_ray": ("BACKFACING", 0.0), "blend_ray_curve": table.tolist()}
     kind, name, default = _RAY_NODES[(src.type, out)]
     if src.inputs["Normal"].is_linked:
         warnings.append(f"{what}: the Normal input of '{src.name}' is not read (the surface normal is used)")
@@ -1185,6 +1191,82 @@ def _mesh_coordinates(params, textures):
     return spaces | (_mesh_coordinates(params["blend"], textures) if "blend" in params else set())
 
 
+# A material that reads Object Info is exported once per object it is on; beyond this many
+# variants its Random output is rounded to 1/1023 (warned), which bounds the variants.
+MAX_OBJECT_VARIANTS = 4096
+
+
+def _object_info(inst, ob, mat, variants, warnings):
+    """What an Object Info node outputs in material `mat` on object instance `inst` (values
+    in the order of texture_graph.OBJECT_INFO_OUTPUTS), or None when the material reads no
+    Object Info. Random as Cycles computes it: an instance's random id over 2³² − 1, else
+    Jenkins' lookup3 mix of a hash of the object's name (measured against Cycles)."""
+    seen = variants.get(mat.name, ())
+    if seen is None:
+        return None
+    if not seen and not _reads_object_info(mat.node_tree, set()):
+        variants[mat.name] = None
+        return None
+    if inst.is_instance:
+        random = (inst.random_id & 0xFFFFFFFF) / 0xFFFFFFFF
+    else:
+        random = _hash_uint2(_hash_string(ob.name), 0) / 0xFFFFFFFF
+    colour = tuple(float(c) for c in ob.color)
+    info = (random, colour[:3], colour[3], float(ob.pass_index), float(mat.pass_index))
+    if len(seen) >= MAX_OBJECT_VARIANTS and info not in seen:
+        warnings.append(f"material '{mat.name}': on more than {MAX_OBJECT_VARIANTS} objects its Object Info "
+                        f"Random is rounded to 1/1023")
+        info = (round(random * 1023) / 1023,) + info[1:]
+    variants.setdefault(mat.name, set()).add(info)
+    return info
+
+
+def _reads_object_info(tree, seen):
+    """Whether node tree `tree` (or a group in it) reads an Object Info node's output."""
+    if tree is None or tree.name in seen:
+        return False
+    seen.add(tree.name)
+    for node in tree.nodes:
+        if node.type == "OBJECT_INFO" and any(o.is_linked for o in node.outputs):
+            return True
+        if node.type == "GROUP" and _reads_object_info(node.node_tree, seen):
+            return True
+    return False
+
+
+def _hash_string(name):
+    """Cycles' hash of a C string (x86's signed char)."""
+    h = 0
+    for b in name.encode():
+        h = (h * 37 + (b if b < 128 else b - 256)) & 0xFFFFFFFF
+    return h
+
+
+def _hash_uint2(kx, ky):
+    """Jenkins' lookup3 hash of two words (its `final` mix), as Cycles hashes."""
+    m = 0xFFFFFFFF
+
+    def rot(x, k):
+        return ((x << k) | (x >> (32 - k))) & m
+
+    a = b = c = (0xDEADBEEF + (2 << 2) + 13) & m
+    a, b = (a + kx) & m, (b + ky) & m
+    c ^= b
+    c = (c - rot(b, 14)) & m
+    a ^= c
+    a = (a - rot(c, 11)) & m
+    b ^= a
+    b = (b - rot(a, 25)) & m
+    c ^= b
+    c = (c - rot(b, 16)) & m
+    a ^= c
+    a = (a - rot(c, 4)) & m
+    b ^= a
+    b = (b - rot(a, 14)) & m
+    c ^= b
+    return (c - rot(b, 24)) & m
+
+
 def _light(ob, matrix, warnings):
     """The scene dict entry of a light object, or None when it sends no light: a Cycles
     portal (an area light marking a window, which only guides Cycles' sampling of the world)."""
@@ -1429,6 +1511,8 @@ def export_scene(depsgraph, test_break=lambda: False, need_camera=True):
     """Returns (scene dict, warnings). Raises ExportCancelled if test_break() turns true,
     ValueError for a scene that cannot be rendered (no camera, unsupported camera). Without
     `need_camera` (the viewport, which looks through its own) the dict has no camera."""
+    from . import texture_graph
+
     scene = depsgraph.scene
     warnings = []
     if scene.camera is None and need_camera:
@@ -1440,6 +1524,7 @@ def export_scene(depsgraph, test_break=lambda: False, need_camera=True):
     coordinates = {}  # material index → the mesh coordinates its procedural textures read
     meshes, lights = [], []
     cache = {}
+    variants = {}  # material name → its Object Info variants so far (None: it reads no Object Info)
     for k, inst in enumerate(depsgraph.object_instances):
         if k % 64 == 0 and test_break():
             raise ExportCancelled()
@@ -1464,13 +1549,16 @@ def export_scene(depsgraph, test_break=lambda: False, need_camera=True):
             if mat is None:
                 slot_to_global.append(0)
                 continue
-            if mat.name not in mat_index:
-                mat_index[mat.name] = len(materials)
-                params = material_params(mat, warnings, textures)
+            info = _object_info(inst, ob, mat, variants, warnings)
+            key = mat.name if info is None else (mat.name, info)
+            if key not in mat_index:
+                mat_index[key] = len(materials)
+                with texture_graph.object_info(info):
+                    params = material_params(mat, warnings, textures)
                 colour_layers[len(materials)] = params.pop("vertex_color_layer", None)
                 coordinates[len(materials)] = _mesh_coordinates(params, textures)
                 materials.append(params)
-            slot_to_global.append(mat_index[mat.name])
+            slot_to_global.append(mat_index[key])
         layer = _colour_layer(ob, [colour_layers.get(i) for i in slot_to_global], warnings)
         spaces = tuple(sorted(set().union(*(coordinates.get(i, ()) for i in slot_to_global))))
         key = (ob.name, ob.data.name if ob.data is not None else "", layer, spaces) if inst.is_instance else None

@@ -22,7 +22,8 @@ per shading point (src/scene/procedural.rs). A Noise's, Voronoi's or Brick's Col
 from constants.
 
 A graph with no image in it is a constant (a Math node on two values, a Mix of two colours):
-its value. A graph with a node outside this set, images under different UV transforms or
+its value. An Object Info node is a constant of the object being exported (`object_info`:
+the exporter evaluates such a material once per object). A graph with a node outside this set, images under different UV transforms or
 extensions, or a loop is not evaluated: `evaluate` raises Unsupported naming it, the
 exporter warns, and the input keeps its unlinked value.
 
@@ -30,6 +31,7 @@ Each node's arithmetic follows Blender's documented node behaviour (the Cycles m
 node pages); colour into value is Rec.709 luminance, value into colour is grey.
 """
 
+import contextlib
 import math
 
 import numpy as np
@@ -134,6 +136,29 @@ def _settings(node):
         out += [mapping.extend, tuple(tuple((tuple(q.location), q.handle_type) for q in c.points)
                                       for c in mapping.curves)]
     return tuple(out)
+
+
+# The outputs of an Object Info node while a material is evaluated for one object
+# (`object_info`); None outside (the node is then not evaluated).
+_OBJECT = None
+OBJECT_INFO_OUTPUTS = ("Random", "Color", "Alpha", "Object Index", "Material Index")
+
+
+@contextlib.contextmanager
+def object_info(values):
+    """Within: Object Info nodes output `values` (a tuple in the order of
+    OBJECT_INFO_OUTPUTS: Random, Color (r, g, b), Alpha, Object Index, Material Index)."""
+    global _OBJECT
+    old, _OBJECT = _OBJECT, values
+    try:
+        yield
+    finally:
+        _OBJECT = old
+
+
+def current_object():
+    """The Object Info values in force (None outside `object_info`)."""
+    return _OBJECT
 
 
 def _input(node, identifier):
@@ -267,6 +292,8 @@ class _Graph:
             return self._procedural(node, out, walk, collect)
         if (t, out.identifier) in RAY_LEAVES:
             return self._ray(node, out, collect)
+        if t == "OBJECT_INFO":
+            return self._object_info(node, out, collect)
         op = _NODES.get(t)
         if op is None:
             raise Unsupported(f"node '{node.name}' ({t})")
@@ -283,6 +310,18 @@ class _Graph:
             self.ray = (node, out.identifier)
             return None
         return _Value(self.samples)
+
+    def _object_info(self, node, out, collect):
+        """An Object Info output: the object's constant (`object_info`)."""
+        if _OBJECT is None or out.identifier not in OBJECT_INFO_OUTPUTS:
+            raise Unsupported(f"output '{out.name}' of '{node.name}' (Object Info)")
+        v = _OBJECT[OBJECT_INFO_OUTPUTS.index(out.identifier)]
+        if collect:
+            self.signature.append(("object", out.identifier, v))
+            return None
+        if out.identifier == "Color":
+            return _Colour(np.array([v[:3]], np.float32))
+        return _Value(np.array([v], np.float32))
 
     def _procedural(self, node, out, walk, collect):
         """A procedural texture leaf: its output at the table's values."""
@@ -766,7 +805,7 @@ _NODES = {
 
 # Fresnel and Layer Weight outputs: factors the core computes per point from the ray
 # (`RayFactor`); a graph over one of them is tabulated over [0, 1] (`evaluate_ray`).
-RAY_LEAVES = {("FRESNEL", "Fac"), ("LAYER_WEIGHT", "Fresnel"), ("LAYER_WEIGHT", "Facing")}
+RAY_LEAVES = {("FRESNEL", "Fac"), ("LAYER_WEIGHT", "Fresnel"), ("LAYER_WEIGHT", "Facing"), ("NEW_GEOMETRY", "Backfacing")}
 RAY_TABLE = 1024
 
 

@@ -222,6 +222,7 @@ fn material_dict<'py>(py: Python<'py>, m: &MaterialDesc) -> PyResult<Bound<'py, 
                 RayFactor::LayerFresnel(x) => ("LAYER_FRESNEL", x),
                 RayFactor::LayerFacing(x) => ("LAYER_FACING", x),
                 RayFactor::ShadowRay => ("SHADOW_RAY", 0.0),
+                RayFactor::Backfacing => ("BACKFACING", 0.0),
             };
             md.set_item("blend_ray", (kind, x))?;
         }
@@ -290,9 +291,10 @@ fn parse_material(d: &Bound<'_, PyDict>) -> PyResult<MaterialDesc> {
                 "LAYER_FRESNEL" => scene::desc::RayFactor::LayerFresnel(x),
                 "LAYER_FACING" => scene::desc::RayFactor::LayerFacing(x),
                 "SHADOW_RAY" => scene::desc::RayFactor::ShadowRay,
+                "BACKFACING" => scene::desc::RayFactor::Backfacing,
                 other => {
                     return Err(verr(format!(
-                        "{ctx}: unknown blend_ray '{other}' (FRESNEL, LAYER_FRESNEL, LAYER_FACING or SHADOW_RAY)"
+                        "{ctx}: unknown blend_ray '{other}' (FRESNEL, LAYER_FRESNEL, LAYER_FACING, SHADOW_RAY or BACKFACING)"
                     )))
                 }
             }),

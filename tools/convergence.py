@@ -715,6 +715,61 @@ def textured_mix(bpy):
     return scene
 
 
+def per_object(bpy):
+    """What varies per object and per side: six blocks and three instances of a collection of
+    one block, of one material coloured by a Color Ramp on Object Info › Random, a
+    two-sided card (Mix Shader by Geometry › Backfacing: red paper in front, blue gloss on
+    the back, seen from both sides by the camera and the floor), a bulb glowing in a
+    Blackbody node's 2700 K, and a lamp coloured by its node tree (Blackbody 4000 K,
+    Strength 1.5)."""
+    scene, grey = _grey_room(bpy, smooth=False)
+
+    def random_ramp(nt):
+        info, ramp = nt.nodes.new("ShaderNodeObjectInfo"), nt.nodes.new("ShaderNodeValToRGB")
+        ramp.color_ramp.elements[0].color, ramp.color_ramp.elements[1].color = (0.8, 0.2, 0.1, 1), (0.1, 0.3, 0.8, 1)
+        ramp.color_ramp.elements.new(0.5).color = (0.2, 0.7, 0.2, 1)
+        nt.links.new(info.outputs["Random"], ramp.inputs["Fac"])
+        return ramp.outputs["Color"]
+
+    varied = _material(bpy, "Varied", "ShaderNodeBsdfDiffuse")
+    nt = varied.node_tree
+    nt.links.new(random_ramp(nt), next(n for n in nt.nodes if n.type == "BSDF_DIFFUSE").inputs["Color"])
+    for i in range(6):
+        x, y = -0.8 + 0.3 * i, -0.3 + 0.25 * (i % 2)
+        _block(bpy, scene, f"Block{i}", (x, y, 0.0), (x + 0.2, y + 0.2, 0.15 + 0.05 * i), varied)
+    # three instances of a collection holding one block (the collection itself is not in the scene)
+    block = _block(bpy, scene, "Instanced", (-0.08, -0.08, 0.0), (0.08, 0.08, 0.16), varied)
+    scene.collection.objects.unlink(block)
+    kit = bpy.data.collections.new("Kit")
+    kit.objects.link(block)
+    for i, at in enumerate(((-0.6, 0.35, 0.0), (-0.3, 0.45, 0.0), (0.0, 0.35, 0.0))):
+        empty = bpy.data.objects.new(f"Kit{i}", None)
+        empty.instance_type, empty.instance_collection, empty.location = "COLLECTION", kit, at
+        scene.collection.objects.link(empty)
+
+    def backfacing(nt):
+        return nt.nodes.new("ShaderNodeNewGeometry").outputs["Backfacing"]
+
+    two_sided = _masked_mix(bpy, "TwoSided", ("ShaderNodeBsdfDiffuse", {"Color": (0.8, 0.1, 0.1, 1.0)}),
+                            ("ShaderNodeBsdfGlossy", {"Color": (0.1, 0.2, 0.8, 1.0), "Roughness": 0.3}), backfacing)
+    _mesh(bpy, scene, "Card", [(0.35, 0.1, 0.05), (0.85, -0.2, 0.05), (0.85, -0.2, 0.7), (0.35, 0.1, 0.7)],
+          [(0, 1, 2, 3)], two_sided, smooth=False)
+    bulb = _material(bpy, "Bulb", "ShaderNodeEmission", Strength=6.0)
+    nt = bulb.node_tree
+    bb = nt.nodes.new("ShaderNodeBlackbody")
+    bb.inputs["Temperature"].default_value = 2700.0
+    nt.links.new(bb.outputs["Color"], next(n for n in nt.nodes if n.type == "EMISSION").inputs["Color"])
+    _uv_sphere(bpy, scene, "Bulb", (0.55, 0.5, 0.9), 0.12, 16, 8, bulb, smooth=True)
+    lamp = _lamp(bpy, scene, "Lamp", "POINT", 40.0, (-0.5, -0.4, 1.1), 0.2).data
+    lamp.use_nodes = True
+    bb = lamp.node_tree.nodes.new("ShaderNodeBlackbody")
+    bb.inputs["Temperature"].default_value = 4000.0
+    lamp.node_tree.links.new(bb.outputs["Color"], lamp.node_tree.nodes["Emission"].inputs["Color"])
+    lamp.node_tree.nodes["Emission"].inputs["Strength"].default_value = 1.5
+    _camera_and_world(bpy, scene)
+    return scene
+
+
 def checked_in(name, keep=None):
     """One of tests/scenes/*.blend (tools/make_test_scenes.py) at this module's size and
     bounce limit; `keep` names the lights left on."""
@@ -785,6 +840,7 @@ SCENES = {
     "ray_visibility": (ray_visibility, 512, 16),
     "shadowless_lamp": (shadowless_lamp, 512, 16),
     "textured_mix": (textured_mix, 512, 16),
+    "per_object": (per_object, 512, 16),
     "all_lights": (checked_in("lights", {"Area", "Point", "Spot", "Sun", "World"}), 512, 16),
     "specular": (checked_in("specular"), 1024, 32),
     "textures": (checked_in("textures"), 512, 16),

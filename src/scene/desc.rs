@@ -188,6 +188,9 @@ pub enum RayFactor {
     /// Light Path › Is Shadow Ray: 1 for the shadow rays of light sampling (what they pass
     /// through), 0 for every ray a path scatters from or is seen by.
     ShadowRay,
+    /// Geometry › Backfacing: 1 where the ray arrives on the back of the surface (against its
+    /// geometric normal, as Cycles' flag), 0 on its front — a two-sided card, a lamp shade.
+    Backfacing,
 }
 
 impl Default for MaterialDesc {

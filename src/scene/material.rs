@@ -379,6 +379,7 @@ impl RayFactor {
                 1.0 - f
             }
             RayFactor::ShadowRay => 0.0,
+            RayFactor::Backfacing => f32::from(u8::from(!front)),
         }
     }
 
@@ -495,7 +496,9 @@ mod tests {
         assert!(near(RayFactor::LayerFresnel(0.2).at(0.6, true), RayFactor::Fresnel(1.25).at(0.6, true)));
         assert_eq!((RayFactor::ShadowRay.at(0.3, true), RayFactor::ShadowRay.at_shadow(0.3, true)), (0.0, 1.0));
         assert_eq!(RayFactor::Fresnel(1.5).at_shadow(0.3, false), RayFactor::Fresnel(1.5).at(0.3, false));
-        // a curve after the factor: its table interpolated, the identity without one
+        assert_eq!((RayFactor::Backfacing.at(0.3, true), RayFactor::Backfacing.at(0.3, false)), (0.0, 1.0));
+        assert_eq!(RayFactor::Backfacing.at_shadow(0.7, false), 1.0); // (shadow rays see the side they cross)
+                                                                      // a curve after the factor: its table interpolated, the identity without one
         let ramp = [0.0, 0.0, 1.0, 1.0];
         assert!(
             near(ray_curve(&ramp, 0.5), 0.5) && near(ray_curve(&ramp, 0.2), 0.0) && near(ray_curve(&ramp, 1.0), 1.0)
