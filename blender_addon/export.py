@@ -527,8 +527,8 @@ def _factored_mix(node, textures, warnings, what):
     """The first Mix Shader of the shader tree under `node` (depth first, first shaders
     first) whose Fac the core computes per point: (its name, the material keys of the
     factor) — `blend_texture` for an image or procedural texture (or colour and value nodes
-    over one), `blend_ray` for a Fresnel or Layer Weight node (their Normal unlinked) or a
-    Light Path's Is Shadow Ray; None without one."""
+    over one), `blend_ray` for a Fresnel or Layer Weight node (their Normal unlinked), a
+    Light Path's Is Shadow Ray or Is Camera Ray, or Geometry › Backfacing; None without one."""
     stack, seen = [node], set()
     while stack:
         n = stack.pop()
@@ -553,6 +553,8 @@ def _mix_factor(fac, textures, warnings, what):
     src, out = link.from_node, link.from_socket.identifier
     if (src.type, out) == ("LIGHT_PATH", "Is Shadow Ray"):
         return {"blend_ray": ("SHADOW_RAY", 0.0)}
+    if (src.type, out) == ("LIGHT_PATH", "Is Camera Ray"):
+        return {"blend_ray": ("CAMERA_RAY", 0.0)}
     if (src.type, out) == ("NEW_GEOMETRY", "Backfacing"):
         return {"blend_ray": ("BACKFACING", 0.0)}
     view = _RAY_NODES.get((src.type, out))
@@ -626,7 +628,8 @@ def _blend_material(node, blend, textures, warnings, what):
         b.pop("vertex_color", None)
     b.pop("vertex_color_layer", None)
     drop = ["pass_index", *NORMAL_KEYS]
-    if "blend_ray" in factor:  # (the core blends emission by a texture only)
+    if "blend_ray" in factor and factor["blend_ray"][0] != "CAMERA_RAY":
+        # (the core blends emission by a texture, or by Is Camera Ray: the camera sees the second's)
         drop += ["emission", "emission_texture"]
         if any(a.get(k) != b.get(k) for k in ("emission", "emission_texture")) and any(
                 max(p.get("emission", (0, 0, 0))) > 0 for p in (a, b)):

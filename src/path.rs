@@ -125,6 +125,8 @@ pub struct Vertex {
     pub color: Spectrum,
     /// The unmapped shading normal in `frame` (`SurfaceInteraction::unmapped`).
     pub unmapped: Vec3,
+    /// Seen by the camera's ray (`SurfaceInteraction::camera`).
+    pub camera: bool,
     /// Unit direction towards the previous vertex (world).
     pub wo: Vec3,
     /// Path throughput arriving at this vertex (product of f·cos/pdf and 1/RR so far).
@@ -159,6 +161,7 @@ impl Vertex {
             tex: si.tex,
             color: si.color,
             unmapped: si.unmapped,
+            camera: si.camera,
             wo,
             throughput,
             pdf_in,
@@ -357,7 +360,7 @@ pub fn trace_path_from<S: Sampler>(
         };
 
         // 4. the surface: its emission, the vertex
-        let si: SurfaceInteraction = scene.interaction(&hit, st.d);
+        let si = SurfaceInteraction { camera: camera_visibility, ..scene.interaction(&hit, st.d) };
         if let Some((le, pdf_light)) = scene.surface_emission(&si, st.prev_p, st.d) {
             add(&mut out, cfg.clamp(st.beta * le * st.mis(pdf_light), st.depth), camera_ray, st.direct_emission());
             let li = scene.triangle_light(si.prim).unwrap_or(u32::MAX);
@@ -699,7 +702,7 @@ pub fn first_hit(scene: &Scene, cam: &CameraRay, hit: Option<TriHit>) -> FirstHi
         None if scene.camera.film_transparent => {}
         None => out.very_direct += scene.world_eval(cam.origin, cam.dir).0,
         Some(h) => {
-            let si = scene.interaction(&h, cam.dir);
+            let si = SurfaceInteraction { camera: true, ..scene.interaction(&h, cam.dir) };
             if let Some((le, _)) = scene.surface_emission(&si, cam.origin, cam.dir) {
                 out.very_direct += le;
             }
@@ -721,7 +724,7 @@ pub fn camera_transparency(scene: &Scene, cam: &CameraRay, hit: Option<TriHit>, 
         let Some(h) = hit else {
             return (t.x + t.y + t.z) / 3.0;
         };
-        let si = scene.interaction(&h, cam.dir);
+        let si = SurfaceInteraction { camera: true, ..scene.interaction(&h, cam.dir) };
         t *= scene.bsdf_at(&si).pass_through();
         if !(t.max_element() > 0.0) {
             return 0.0;

@@ -223,6 +223,7 @@ fn material_dict<'py>(py: Python<'py>, m: &MaterialDesc) -> PyResult<Bound<'py, 
                 RayFactor::LayerFacing(x) => ("LAYER_FACING", x),
                 RayFactor::ShadowRay => ("SHADOW_RAY", 0.0),
                 RayFactor::Backfacing => ("BACKFACING", 0.0),
+                RayFactor::CameraRay => ("CAMERA_RAY", 0.0),
             };
             md.set_item("blend_ray", (kind, x))?;
         }
@@ -292,9 +293,10 @@ fn parse_material(d: &Bound<'_, PyDict>) -> PyResult<MaterialDesc> {
                 "LAYER_FACING" => scene::desc::RayFactor::LayerFacing(x),
                 "SHADOW_RAY" => scene::desc::RayFactor::ShadowRay,
                 "BACKFACING" => scene::desc::RayFactor::Backfacing,
+                "CAMERA_RAY" => scene::desc::RayFactor::CameraRay,
                 other => {
                     return Err(verr(format!(
-                        "{ctx}: unknown blend_ray '{other}' (FRESNEL, LAYER_FRESNEL, LAYER_FACING, SHADOW_RAY or BACKFACING)"
+                        "{ctx}: unknown blend_ray '{other}' (FRESNEL, LAYER_FRESNEL, LAYER_FACING, SHADOW_RAY, CAMERA_RAY or BACKFACING)"
                     )))
                 }
             }),

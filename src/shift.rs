@@ -109,7 +109,7 @@ fn bsdf_at(scene: &Scene, v: &Vertex) -> Bsdf {
 /// joined to the base at `v` arrives from elsewhere (what a blend by the view reads).
 #[inline]
 fn bsdf_seen(scene: &Scene, v: &Vertex, wo: Vec3) -> Bsdf {
-    scene.bsdf(v.material, v.front, v.tex, v.color, v.unmapped, wo)
+    scene.bsdf(v.material, v.front, v.tex, v.color, v.unmapped, wo, v.camera)
 }
 
 /// The shift's vertex class: diffuse (reconnectable) or not.
@@ -239,7 +239,7 @@ impl<'a> Offset<'a> {
         let state = (|| {
             let x0 = base.vertices.first()?;
             let (ray, hit) = primary?;
-            let y = scene.interaction(&hit?, ray.dir);
+            let y = SurfaceInteraction { camera: true, ..scene.interaction(&hit?, ray.dir) };
             let diffuse = is_diffuse(scene, x0);
             (diffuse == self::diffuse(&scene.bsdf_at(&y))).then_some(State::Free(Free {
                 y,
@@ -432,7 +432,11 @@ fn half_vector_step(scene: &Scene, x: &Vertex, f: &Free) -> Option<Step> {
         return None; // the shading normal sent the offset through the geometric surface
     }
     let origin = f.y.spawn_origin(dir);
-    let hit = scene.intersect(origin, dir, 0.0, f32::INFINITY).map(|h| scene.interaction(&h, dir));
+    // (a camera ray that went straight through is still the camera's: Is Camera Ray)
+    let camera = f.y.camera && x.passed_through();
+    let hit = scene
+        .intersect(origin, dir, 0.0, f32::INFINITY)
+        .map(|h| SurfaceInteraction { camera, ..scene.interaction(&h, dir) });
     Some(Step { origin, dir, hit, f: fy, pdf, j, eta, delta: x.delta_out })
 }
 

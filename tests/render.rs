@@ -1092,3 +1092,56 @@ fn metropolis_frames_of_emission_alone_are_not_reported_black() {
         assert!((m[0] - 0.5).abs() < 1e-3 && (m[2] - 0.125).abs() < 1e-3, "{method:?}: {m:?}");
     }
 }
+
+/// Renders `a` (seeds 1, 2) and `b` (seed 3) with `method` at `spp`: their 4×4 block means
+/// differ by no more than two renders of `a` do (×1.5), and the mean difference is within
+/// 4 standard errors.
+fn renders_agree(what: &str, method: Method, a: &SceneDesc, b: &SceneDesc, spp: u32) {
+    let blocks = |d: &SceneDesc, seed: u64| {
+        block_means(run_method(d, method, Norm::L2, spp, true, 6, seed, 0).layer("Combined").unwrap(), 4)
+    };
+    let (a1, a2, b3) = (blocks(a, 1), blocks(a, 2), blocks(b, 3));
+    let rms = |v: &[f64]| (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt();
+    let d: Vec<f64> = a1.iter().zip(&b3).map(|(x, y)| x - y).collect();
+    let e: Vec<f64> = a1.iter().zip(&a2).map(|(x, y)| x - y).collect();
+    let (rd, re) = (rms(&d), rms(&e));
+    let mean_d = d.iter().sum::<f64>() / d.len() as f64;
+    assert!(rd < 1.5 * re, "{what} {method:?}: block rms {rd} vs the seeds' {re}");
+    assert!(mean_d.abs() < 4.0 * re / (d.len() as f64).sqrt(), "{what} {method:?}: mean difference {mean_d} ({re})");
+}
+
+/// Light Path › Is Camera Ray as a Mix Shader's factor: the box's light as Mix(its Emission,
+/// Transparent) lights the box as the light hidden by its ray visibility (Camera off) does,
+/// with every method, and the camera sees the ceiling through it; the sides swapped (a glow
+/// only the camera sees) light nothing: the box is dark but for the glowing quad, whose
+/// pixels show the emission.
+#[test]
+fn is_camera_ray_hides_an_emitter_from_the_camera_only() {
+    use gdmlt::scene::desc::{MaterialDesc, RayFactor};
+    let base = cornell_box(24, 24);
+    let mut hidden = base.clone();
+    hidden.meshes.iter_mut().find(|m| m.name == "Light").unwrap().camera_invisible = true;
+    let clear = MaterialDesc { name: "Clear".into(), base_color: [0.0; 3], transparency: 1.0, ..Default::default() };
+    let mut by_ray = base.clone();
+    let light = by_ray.materials.iter_mut().find(|m| m.name == "Light").unwrap();
+    (light.blend, light.blend_ray) = (Some(Box::new(clear.clone())), Some(RayFactor::CameraRay));
+    for (method, spp) in [(Method::Pt, 64), (Method::Gdpt, 16), (Method::Pssmlt, 128), (Method::Gdpssmlt, 64)] {
+        renders_agree("Is Camera Ray", method, &hidden, &by_ray, spp);
+    }
+    // the sides swapped: only the camera sees the glow
+    let mut glow = cornell_box(48, 48);
+    let light = glow.materials.iter_mut().find(|m| m.name == "Light").unwrap();
+    let emission = light.clone();
+    *light = MaterialDesc { blend: Some(Box::new(emission.clone())), blend_ray: Some(RayFactor::CameraRay), ..clear };
+    let img = run(&glow, 16, true, 6, 1, 0);
+    let brightest = img.data.iter().cloned().fold(0.0f32, f32::max);
+    let want = emission.emission.iter().cloned().fold(0.0f32, f32::max);
+    assert!((brightest - want).abs() < 1e-3 * want, "{brightest} vs {want}");
+    let lower_half = &img.data[img.data.len() / 2..]; // (the floor and the walls' lower halves)
+    let lit = lower_half.iter().filter(|&&x| x > 0.0).count();
+    assert_eq!(lit, 0, "{lit} values lit by a glow only the camera sees");
+    // and with the glow's first side emitting instead, the same pixels are lit
+    let lit_base =
+        run(&cornell_box(48, 48), 16, true, 6, 1, 0).data[img.data.len() / 2..].iter().filter(|&&x| x > 0.0).count();
+    assert!(lit_base > lower_half.len() / 2, "{lit_base}");
+}

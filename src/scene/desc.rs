@@ -191,6 +191,11 @@ pub enum RayFactor {
     /// Geometry › Backfacing: 1 where the ray arrives on the back of the surface (against its
     /// geometric normal, as Cycles' flag), 0 on its front — a two-sided card, a lamp shade.
     Backfacing,
+    /// Light Path › Is Camera Ray: 1 for the camera's rays (and their continuation straight
+    /// through transparent surfaces, as Cycles keeps the flag), 0 for every other ray — an
+    /// emitter the camera does not see, a different look for reflections. The emission too:
+    /// the camera sees the second shader's, light sampling and scattered rays the first's.
+    CameraRay,
 }
 
 impl Default for MaterialDesc {

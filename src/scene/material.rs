@@ -354,12 +354,23 @@ pub fn ray_curve(curve: &[f32], x: f32) -> f32 {
     curve[i] * (1.0 - f) + curve[i + 1] * f
 }
 
+/// The kind of ray a surface is seen by, as Light Path's outputs read it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RayKind {
+    /// A camera ray, or its continuation straight through transparent surfaces.
+    Camera,
+    /// A ray a path scattered into (after its first bounce).
+    Scattered,
+    /// The shadow ray of light sampling.
+    Shadow,
+}
+
 impl RayFactor {
-    /// The factor for a ray that is not a shadow ray, whose direction makes cosine `cos` with
-    /// the shading normal (before normal and bump maps, on the viewer's side), arriving on the
-    /// front (`front`) or the back of the surface — Cycles' Fresnel and Layer Weight nodes.
+    /// The factor for a `ray` whose direction makes cosine `cos` with the shading normal
+    /// (before normal and bump maps, on the viewer's side), arriving on the front (`front`) or
+    /// the back of the surface — Cycles' Fresnel, Layer Weight, Geometry and Light Path nodes.
     #[inline]
-    pub fn at(&self, cos: f32, front: bool) -> f32 {
+    pub fn at(&self, cos: f32, front: bool, ray: RayKind) -> f32 {
         use crate::bsdf::microfacet::fresnel_dielectric;
         match *self {
             RayFactor::Fresnel(ior) => {
@@ -378,17 +389,9 @@ impl RayFactor {
                 }
                 1.0 - f
             }
-            RayFactor::ShadowRay => 0.0,
+            RayFactor::ShadowRay => f32::from(u8::from(ray == RayKind::Shadow)),
+            RayFactor::CameraRay => f32::from(u8::from(ray == RayKind::Camera)),
             RayFactor::Backfacing => f32::from(u8::from(!front)),
-        }
-    }
-
-    /// The factor for a shadow ray: as `at`, but 1 for Is Shadow Ray.
-    #[inline]
-    pub fn at_shadow(&self, cos: f32, front: bool) -> f32 {
-        match self {
-            RayFactor::ShadowRay => 1.0,
-            other => other.at(cos, front),
         }
     }
 }
@@ -487,18 +490,28 @@ mod tests {
     /// follows the blend (0.25 → |cos|^0.5, 0.75 → |cos|^2).
     #[test]
     fn ray_factors_follow_cycles_nodes() {
+        use RayKind::*;
         let f0 = |eta: f32| ((eta - 1.0) / (eta + 1.0)).powi(2);
         let near = |a: f32, b: f32| (a - b).abs() < 1e-5;
-        assert!(near(RayFactor::Fresnel(1.5).at(1.0, true), f0(1.5)));
-        assert!(near(RayFactor::Fresnel(1.5).at(1.0, false), f0(1.0 / 1.5)));
-        assert!(RayFactor::Fresnel(1.5).at(1e-4, true) > 0.99);
-        assert!(near(RayFactor::LayerFresnel(0.2).at(1.0, true), f0(1.0 / 0.8)));
-        assert!(near(RayFactor::LayerFresnel(0.2).at(0.6, true), RayFactor::Fresnel(1.25).at(0.6, true)));
-        assert_eq!((RayFactor::ShadowRay.at(0.3, true), RayFactor::ShadowRay.at_shadow(0.3, true)), (0.0, 1.0));
-        assert_eq!(RayFactor::Fresnel(1.5).at_shadow(0.3, false), RayFactor::Fresnel(1.5).at(0.3, false));
-        assert_eq!((RayFactor::Backfacing.at(0.3, true), RayFactor::Backfacing.at(0.3, false)), (0.0, 1.0));
-        assert_eq!(RayFactor::Backfacing.at_shadow(0.7, false), 1.0); // (shadow rays see the side they cross)
-                                                                      // a curve after the factor: its table interpolated, the identity without one
+        assert!(near(RayFactor::Fresnel(1.5).at(1.0, true, Scattered), f0(1.5)));
+        assert!(near(RayFactor::Fresnel(1.5).at(1.0, false, Scattered), f0(1.0 / 1.5)));
+        assert!(RayFactor::Fresnel(1.5).at(1e-4, true, Scattered) > 0.99);
+        assert!(near(RayFactor::LayerFresnel(0.2).at(1.0, true, Scattered), f0(1.0 / 0.8)));
+        assert!(near(
+            RayFactor::LayerFresnel(0.2).at(0.6, true, Scattered),
+            RayFactor::Fresnel(1.25).at(0.6, true, Scattered)
+        ));
+        let kinds = |f: RayFactor| [Camera, Scattered, Shadow].map(|k| f.at(0.3, true, k));
+        assert_eq!(kinds(RayFactor::ShadowRay), [0.0, 0.0, 1.0]);
+        assert_eq!(kinds(RayFactor::CameraRay), [1.0, 0.0, 0.0]);
+        assert_eq!(kinds(RayFactor::Fresnel(1.5)), [RayFactor::Fresnel(1.5).at(0.3, true, Scattered); 3]);
+        assert_eq!(
+            (RayFactor::Backfacing.at(0.3, true, Camera), RayFactor::Backfacing.at(0.3, false, Camera)),
+            (0.0, 1.0)
+        );
+        assert_eq!(RayFactor::Backfacing.at(0.7, false, Shadow), 1.0); // (shadow rays see the side they cross)
+
+        // a curve after the factor: its table interpolated, the identity without one
         let ramp = [0.0, 0.0, 1.0, 1.0];
         assert!(
             near(ray_curve(&ramp, 0.5), 0.5) && near(ray_curve(&ramp, 0.2), 0.0) && near(ray_curve(&ramp, 1.0), 1.0)
@@ -506,7 +519,10 @@ mod tests {
         assert!(near(ray_curve(&ramp, 0.45), 0.35) && near(ray_curve(&[], 0.3), 0.3));
         for (blend, k) in [(0.5f32, 1.0f32), (0.25, 0.5), (0.75, 2.0)] {
             for cos in [0.1f32, 0.5, 0.9] {
-                assert!(near(RayFactor::LayerFacing(blend).at(cos, true), 1.0 - cos.powf(k)), "{blend} {cos}");
+                assert!(
+                    near(RayFactor::LayerFacing(blend).at(cos, true, Scattered), 1.0 - cos.powf(k)),
+                    "{blend} {cos}"
+                );
             }
         }
     }

@@ -27,6 +27,7 @@ use crate::math::{ray_epsilon, square_to_triangle, Frame, Spectrum};
 use build::{Lighting, Shading, Triangles, RAY_CAMERA_INVISIBLE, RAY_SHADOW_INVISIBLE};
 use environment::Environment;
 use glam::{Vec2, Vec3, Vec4};
+use material::RayKind;
 use procedural::Space;
 /// At most this many objects a ray does not see are skipped along one ray (camera rays past
 /// camera-invisible objects, shadow rays past shadow-invisible ones).
@@ -56,6 +57,9 @@ pub struct SurfaceInteraction {
     pub unmapped: Vec3,
     /// The direction back along the ray that arrived, in the shading frame.
     pub wo: Vec3,
+    /// The ray that arrived is the camera's (or its continuation straight through
+    /// transparent surfaces): what Light Path › Is Camera Ray reads. Set by the path builder.
+    pub camera: bool,
 }
 
 impl SurfaceInteraction {
@@ -449,6 +453,7 @@ impl Scene {
             color,
             unmapped,
             wo: frame.to_local(-d),
+            camera: false,
         }
     }
 
@@ -466,15 +471,17 @@ impl Scene {
     /// `tc`: the factor, times the material's emission texture where it has one. A material
     /// that blends into another by a texture emits the blend of the two sides' own emission
     /// (the light's factor is then only its selection estimate, `Lighting::build`).
+    /// Seen by the `camera`, a blend by Is Camera Ray emits its second side's emission.
     #[inline]
-    fn emission_at(&self, t: usize, emission: Spectrum, tc: TexCoord) -> Spectrum {
+    fn emission_at(&self, t: usize, emission: Spectrum, tc: TexCoord, camera: bool) -> Spectrum {
         let m = &self.materials[self.tri_material[t] as usize];
-        match (&m.blend, m.blend_texture) {
-            // (a blend by the view emits this material's emission alone)
-            (Some(b), Some(tex)) => {
+        match (&m.blend, m.blend_texture, m.blend_ray) {
+            (Some(b), Some(tex), _) => {
                 let f = self.blend_factor(tex, tc);
                 self.own_emission(m, m.emission, tc) * (1.0 - f) + self.own_emission(b, b.emission, tc) * f
             }
+            (Some(b), None, Some(RayFactor::CameraRay)) if camera => self.own_emission(b, b.emission, tc),
+            // (another blend by the ray emits this material's emission alone)
             _ => self.own_emission(m, emission, tc),
         }
     }
@@ -495,7 +502,7 @@ impl Scene {
         if m.emission_texture.is_none() && m.blend.is_none() {
             return emission;
         }
-        self.emission_at(t, emission, self.tex_coord(t, 1.0 - b1 - b2, b1, b2))
+        self.emission_at(t, emission, self.tex_coord(t, 1.0 - b1 - b2, b1, b2), false)
     }
 
     /// Barycentric coordinates (b1, b2) of point `p` (on the plane of) triangle `t`.
@@ -594,8 +601,19 @@ impl Scene {
     /// bump-shadowed where the surface's own normal is `unmapped` (shading frame; +Z: none),
     /// seen from direction `wo` (shading frame: what a blend by the view reads).
     #[inline]
-    pub fn bsdf(&self, material: u32, front: bool, tc: TexCoord, color: Spectrum, unmapped: Vec3, wo: Vec3) -> Bsdf {
-        let bsdf = self.unbumped_bsdf(material, front, tc, color, wo.dot(unmapped));
+    #[allow(clippy::too_many_arguments)]
+    pub fn bsdf(
+        &self,
+        material: u32,
+        front: bool,
+        tc: TexCoord,
+        color: Spectrum,
+        unmapped: Vec3,
+        wo: Vec3,
+        camera: bool,
+    ) -> Bsdf {
+        let ray = if camera { RayKind::Camera } else { RayKind::Scattered };
+        let bsdf = self.unbumped_bsdf(material, front, tc, color, wo.dot(unmapped), ray);
         if unmapped == Vec3::Z || !self.materials[material as usize].bump_map_correction {
             bsdf
         } else {
@@ -607,12 +625,12 @@ impl Scene {
     /// another by a texture or by the view (a Mix Shader's factor) mixes the two BSDFs lobe by
     /// lobe; `cos`: the view's cosine with the unmapped shading normal.
     #[inline]
-    fn unbumped_bsdf(&self, material: u32, front: bool, tc: TexCoord, color: Spectrum, cos: f32) -> Bsdf {
+    fn unbumped_bsdf(&self, material: u32, front: bool, tc: TexCoord, color: Spectrum, cos: f32, ray: RayKind) -> Bsdf {
         let m = &self.materials[material as usize];
         let Some(b) = &m.blend else {
             return self.material_bsdf(m, front, tc, color, m.general);
         };
-        match self.blend_at(m, tc, cos, front, false) {
+        match self.blend_at(m, tc, cos, front, ray) {
             f if f <= 0.0 => self.material_bsdf(m, front, tc, color, m.general),
             f if f >= 1.0 => self.material_bsdf(b, front, tc, color, b.general),
             f => Bsdf::blend(
@@ -631,13 +649,13 @@ impl Scene {
     }
 
     /// The factor of material `m`'s blend at `tc`, seen at cosine `cos` with the unmapped
-    /// shading normal from the `front` or back, by a `shadow` ray or another.
+    /// shading normal from the `front` or back, by a `ray` of that kind.
     #[inline]
-    fn blend_at(&self, m: &Material, tc: TexCoord, cos: f32, front: bool, shadow: bool) -> f32 {
+    fn blend_at(&self, m: &Material, tc: TexCoord, cos: f32, front: bool, ray: RayKind) -> f32 {
         match (m.blend_texture, m.blend_ray) {
             (Some(t), _) => self.blend_factor(t, tc),
             (None, Some(v)) => {
-                let x = if shadow { v.at_shadow(cos, front) } else { v.at(cos, front) };
+                let x = v.at(cos, front, ray);
                 material::ray_curve(&m.blend_ray_curve, x).clamp(0.0, 1.0)
             }
             (None, None) => 0.0,
@@ -681,7 +699,7 @@ impl Scene {
         let own = |m: &Material| m.transparent_color * self.transparency(m, si.tex);
         match &m.blend {
             Some(b) => {
-                let f = self.blend_at(m, si.tex, si.wo.dot(si.unmapped), si.front, true);
+                let f = self.blend_at(m, si.tex, si.wo.dot(si.unmapped), si.front, RayKind::Shadow);
                 own(m) * (1.0 - f) + own(b) * f
             }
             None => own(m),
@@ -691,7 +709,7 @@ impl Scene {
     /// The BSDF at a surface point.
     #[inline]
     pub fn bsdf_at(&self, si: &SurfaceInteraction) -> Bsdf {
-        self.bsdf(si.material, si.front, si.tex, si.color, si.unmapped, si.wo)
+        self.bsdf(si.material, si.front, si.tex, si.color, si.unmapped, si.wo, si.camera)
     }
 
     #[inline]
@@ -755,12 +773,20 @@ impl Scene {
 
     /// Emitted radiance of the surface at `si` towards the ray origin, and the NEE pdf
     /// (selection included) with which a light sample from `from` would have chosen it.
+    /// A surface only the camera sees glowing (the second side of a blend by Is Camera Ray,
+    /// whose first side does not emit) is no light: the camera sees its emission, pdf 0.
     pub fn surface_emission(&self, si: &SurfaceInteraction, from: Vec3, dir: Vec3) -> Option<(Spectrum, f32)> {
         let li = self.tri_light[si.prim as usize];
         if li == u32::MAX {
-            return None;
+            let m = &self.materials[si.material as usize];
+            return match (&m.blend, m.blend_ray) {
+                (Some(b), Some(RayFactor::CameraRay)) if si.camera && b.emits() => {
+                    Some((self.own_emission(b, b.emission, si.tex), 0.0))
+                }
+                _ => None,
+            };
         }
-        let le = self.emission_at(si.prim as usize, self.lights[li as usize].emission, si.tex);
+        let le = self.emission_at(si.prim as usize, self.lights[li as usize].emission, si.tex, si.camera);
         let cos_l = dir.dot(si.ng).abs();
         let d2 = (si.p - from).length_squared();
         let pdf = if cos_l > 0.0 {

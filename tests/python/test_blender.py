@@ -2328,6 +2328,53 @@ def test_backfacing_mix_agrees_with_cycles(bpy_mod, tmp_out):
     assert_blocks_agree(bpy, build, tmp_out, "backfacing", lit=0.02)
 
 
+def test_is_camera_ray_mixes_agree_with_cycles(bpy_mod, tmp_out):
+    """Mix Shaders by Light Path › Is Camera Ray, as artists use it: a light panel the camera
+    does not see (Emission for every other ray, Transparent for the camera's), a ball blue to
+    the camera and red to everything else (its bounce light and reflection), and a card that
+    glows only for the camera (Transparent to other rays: it lights nothing); 4×4 blocks
+    against Cycles, as for the window glass. Before, each factor was its unlinked 0.5."""
+    bpy = bpy_mod
+
+    def mixed(name, first, second):
+        mat = bpy.data.materials.new(name)
+        nt = mat.node_tree
+        nt.nodes.remove(nt.nodes["Principled BSDF"])
+        mix, path = nt.nodes.new("ShaderNodeMixShader"), nt.nodes.new("ShaderNodeLightPath")
+        for i, (kind, inputs) in ((1, first), (2, second)):
+            node = nt.nodes.new(kind)
+            for key, value in inputs.items():
+                node.inputs[key].default_value = value
+            nt.links.new(node.outputs[0], mix.inputs[i])
+        nt.links.new(path.outputs["Is Camera Ray"], mix.inputs["Fac"])
+        nt.links.new(mix.outputs[0], nt.nodes["Material Output"].inputs["Surface"])
+        bpy.context.active_object.data.materials.append(mat)
+
+    def build(engine, seed):
+        bpy.ops.wm.read_factory_settings(use_empty=True)
+        scene = bpy.context.scene
+        bpy.ops.mesh.primitive_plane_add(size=8)
+        bpy.ops.mesh.primitive_plane_add(size=1.5, location=(0.3, 0.4, 1.9), rotation=(0.5, 0, 0))
+        mixed("Panel", ("ShaderNodeEmission", {"Strength": 8.0}), ("ShaderNodeBsdfTransparent", {}))
+        bpy.ops.mesh.primitive_uv_sphere_add(radius=0.5, location=(-0.3, 0.2, 0.5), segments=32, ring_count=16)
+        bpy.ops.object.shade_smooth()
+        mixed("TwoFaced", ("ShaderNodeBsdfDiffuse", {"Color": (0.8, 0.1, 0.1, 1.0)}),
+              ("ShaderNodeBsdfDiffuse", {"Color": (0.1, 0.2, 0.8, 1.0)}))
+        bpy.ops.mesh.primitive_plane_add(size=0.6, location=(1.1, 0.0, 0.5), rotation=(1.3, 0, 0))
+        mixed("Glow", ("ShaderNodeBsdfTransparent", {}), ("ShaderNodeEmission", {"Strength": 3.0}))
+        cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
+        cam.location, cam.rotation_euler = (0, -5.0, 2.2), (1.2, 0, 0)
+        scene.collection.objects.link(cam)
+        scene.camera, scene.world = cam, bpy.data.worlds.new("World")
+        scene.world.color = (0.05, 0.05, 0.05)
+        r = scene.render
+        r.resolution_x, r.resolution_y, r.resolution_percentage = 96, 72, 100
+        scene.gdmlt.max_bounces = 6
+        return for_engine(scene, engine, 256, seed, method="PT")
+
+    assert_blocks_agree(bpy, build, tmp_out, "cameraray", lit=0.02)
+
+
 def test_window_glass_lit_by_a_grey_world_agrees_with_cycles(bpy_mod, tmp_out):
     """A room lit only by a grey world through a window of Mix(Glass, Transparent, Is
     Shadow Ray): Cycles' light samples of the world pass the pane, its scattered paths
