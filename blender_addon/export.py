@@ -1451,13 +1451,23 @@ def _warn_unrendered_outputs(node_out, warnings, what, skip=()):
             warnings.append(f"{what}: its {socket} output is not rendered yet (left out)")
 
 
-def camera_dict(scene, cam_ob):
+def camera_dict(scene, cam_ob, warnings=None):
+    """The scene dict's camera: Perspective, Orthographic, or Panoramic › Equirectangular (its
+    latitude and longitude ranges; depth of field is not rendered for it, warned)."""
     cam = cam_ob.data
     r = scene.render
-    if cam.type not in ("PERSP", "ORTHO"):
-        raise ValueError(f"camera '{cam_ob.name}': {cam.type} cameras are not supported (use Perspective or Orthographic)")
+    kind = cam.type
+    if kind == "PANO":
+        pano = getattr(cam, "panorama_type", "")
+        if pano != "EQUIRECTANGULAR":
+            raise ValueError(f"camera '{cam_ob.name}': panoramic type {pano} is not supported (use Equirectangular, "
+                             f"Perspective or Orthographic)")
+        kind = pano
+    elif kind not in ("PERSP", "ORTHO"):
+        raise ValueError(f"camera '{cam_ob.name}': {cam.type} cameras are not supported (use Perspective, "
+                         f"Orthographic or Panoramic › Equirectangular)")
     d = {
-        "matrix": _matrix(cam_ob.matrix_world).astype(np.float32), "type": cam.type, "lens": cam.lens,
+        "matrix": _matrix(cam_ob.matrix_world).astype(np.float32), "type": kind, "lens": cam.lens,
         "sensor_width": cam.sensor_width, "sensor_height": cam.sensor_height, "sensor_fit": cam.sensor_fit,
         "ortho_scale": cam.ortho_scale, "shift_x": cam.shift_x, "shift_y": cam.shift_y,
         "clip_start": cam.clip_start, "clip_end": cam.clip_end,
@@ -1470,7 +1480,12 @@ def camera_dict(scene, cam_ob):
         d["pixel_filter"], d["filter_width"] = g.pixel_filter_type, g.filter_width
     if r.film_transparent:
         d["film_transparent"] = True
-    if cam.dof.use_dof:
+    if kind == "EQUIRECTANGULAR":
+        for key in ("latitude_min", "latitude_max", "longitude_min", "longitude_max"):
+            d[key] = float(getattr(cam, key))
+        if cam.dof.use_dof and warnings is not None:
+            warnings.append(f"camera '{cam_ob.name}': depth of field is not rendered for a panoramic camera")
+    elif cam.dof.use_dof:
         d["fstop"] = cam.dof.aperture_fstop
         # the aperture's shape: blades (a polygon; fewer than 3 is round), their rotation and
         # the anamorphic ratio, as Cycles reads them
@@ -1609,7 +1624,7 @@ def export_scene(depsgraph, test_break=lambda: False, need_camera=True):
     if world_rotation is not None:
         desc["world_rotation"] = world_rotation
     if need_camera:
-        desc["camera"] = camera_dict(scene, scene.camera.evaluated_get(depsgraph))
+        desc["camera"] = camera_dict(scene, scene.camera.evaluated_get(depsgraph), warnings)
         if backdrop is not None:
             desc["camera"]["backdrop"] = backdrop
     # the same warning once

@@ -547,7 +547,8 @@ fn parse_camera(d: &Bound<'_, PyDict>) -> PyResult<CameraDesc> {
         projection: match projection.to_ascii_uppercase().as_str() {
             "PERSP" => Projection::Perspective,
             "ORTHO" => Projection::Orthographic,
-            p => return Err(verr(format!("camera: unsupported type '{p}' (PERSP or ORTHO)"))),
+            "EQUIRECTANGULAR" => Projection::Equirectangular,
+            p => return Err(verr(format!("camera: unsupported type '{p}' (PERSP, ORTHO or EQUIRECTANGULAR)"))),
         },
         sensor_fit: match fit.to_ascii_uppercase().as_str() {
             "AUTO" => SensorFit::Auto,
@@ -578,6 +579,12 @@ fn parse_camera(d: &Bound<'_, PyDict>) -> PyResult<CameraDesc> {
         filter_width: get_or(d, "filter_width", def.filter_width, ctx)?,
         film_transparent: get_or(d, "film_transparent", false, ctx)?,
         backdrop: get_or(d, "backdrop", None, ctx)?,
+        panorama: [
+            get_or(d, "latitude_min", def.panorama[0], ctx)?,
+            get_or(d, "latitude_max", def.panorama[1], ctx)?,
+            get_or(d, "longitude_min", def.panorama[2], ctx)?,
+            get_or(d, "longitude_max", def.panorama[3], ctx)?,
+        ],
     })
 }
 
@@ -1114,7 +1121,17 @@ fn builtin_scene<'py>(py: Python<'py>, name: &str, width: u32, height: u32) -> P
     let c = &d.camera;
     let cd = PyDict::new(py);
     cd.set_item("matrix", mat_to_numpy(py, &c.to_world)?)?;
-    cd.set_item("type", if c.projection == Projection::Perspective { "PERSP" } else { "ORTHO" })?;
+    cd.set_item(
+        "type",
+        match c.projection {
+            Projection::Perspective => "PERSP",
+            Projection::Orthographic => "ORTHO",
+            Projection::Equirectangular => "EQUIRECTANGULAR",
+        },
+    )?;
+    for (k, v) in ["latitude_min", "latitude_max", "longitude_min", "longitude_max"].iter().zip(c.panorama) {
+        cd.set_item(*k, v)?;
+    }
     cd.set_item("lens", c.lens)?;
     cd.set_item("sensor_width", c.sensor_width)?;
     cd.set_item("sensor_height", c.sensor_height)?;

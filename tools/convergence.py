@@ -788,6 +788,16 @@ def checked_in(name, keep=None):
     return build
 
 
+def panorama(bpy):
+    """The lights scene (area, point, sun and a world colour) seen by a Panoramic ›
+    Equirectangular camera standing in it, turned: every direction at once."""
+    scene = checked_in("lights", {"Area", "Point", "Sun", "World"})(bpy)
+    cam = scene.camera
+    cam.data.type, cam.data.panorama_type = "PANO", "EQUIRECTANGULAR"
+    cam.location, cam.rotation_euler = (0.3, -1.5, 1.2), (1.3, 0.1, 0.4)
+    return scene
+
+
 def hdri(bpy):
     """The lights scene lit only by an HDRI world: one of the CC0 studio lights bpy ships (a
     1024×512 EXR) through an Environment Texture node, strength 0.8."""
@@ -841,6 +851,7 @@ SCENES = {
     "shadowless_lamp": (shadowless_lamp, 512, 16),
     "textured_mix": (textured_mix, 512, 16),
     "per_object": (per_object, 512, 16),
+    "panorama": (panorama, 512, 16),
     "all_lights": (checked_in("lights", {"Area", "Point", "Spot", "Sun", "World"}), 512, 16),
     "specular": (checked_in("specular"), 1024, 32),
     "textures": (checked_in("textures"), 512, 16),

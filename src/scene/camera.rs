@@ -44,6 +44,9 @@ pub struct Camera {
     /// The radiance composited where camera rays leave the scene (`CameraDesc::backdrop`;
     /// None with a transparent film).
     pub backdrop: Option<crate::math::Spectrum>,
+    /// An equirectangular camera's map from image coordinates (u, v) ∈ [0, 1]² (v up) to
+    /// spherical angles, Cycles' range: φ = a·u + b, θ = c·v + d.
+    equirect: Vec4,
 }
 
 fn mat_from_rows(m: &[[f32; 4]; 4]) -> Mat4 {
@@ -112,7 +115,12 @@ impl Camera {
             f => f,
         };
         let sensor = if d.sensor_fit == SensorFit::Vertical { d.sensor_height } else { d.sensor_width };
+        if d.panorama.iter().any(|x| !x.is_finite()) || d.panorama[0] >= d.panorama[1] || d.panorama[2] >= d.panorama[3]
+        {
+            return err("panorama latitude and longitude ranges must be finite and not empty");
+        }
         let s = match d.projection {
+            Projection::Equirectangular => 1.0, // (the image spans the angles: no sensor)
             Projection::Perspective => {
                 if !positive(d.lens) || !positive(sensor) {
                     return err("lens and sensor size must be positive");
@@ -191,12 +199,19 @@ impl Camera {
             // a backdrop is what a transparent film leaves out, put back behind the image
             film_transparent: d.film_transparent || d.backdrop.is_some(),
             backdrop: d.backdrop.filter(|_| !d.film_transparent).map(Vec3::from_array),
+            equirect: {
+                let [lat_min, lat_max, lon_min, lon_max] = d.panorama;
+                Vec4::new(lon_min - lon_max, -lon_min, lat_min - lat_max, std::f32::consts::FRAC_PI_2 - lat_min)
+            },
         })
     }
 
     /// Depth of world point `p` as Cycles' Depth pass has it: its distance along the camera's
     /// viewing axis (camera-space z; not the ray length).
     pub fn axial_depth(&self, p: Vec3) -> f32 {
+        if self.projection == Projection::Equirectangular {
+            return (p - self.to_world.w_axis.truncate()).length(); // (a panorama has no axis)
+        }
         let forward = -self.to_world.z_axis.truncate(); // a Blender camera looks down its −Z
         (p - self.to_world.w_axis.truncate()).dot(forward)
     }
@@ -239,8 +254,33 @@ impl Camera {
         p
     }
 
+    /// The direction (camera space: −Z forward, +Y up) an equirectangular camera sees at image
+    /// coordinates (u, v), v up: Cycles' spherical angles (φ from its +X, θ from its +Z), its
+    /// panorama frame turned onto Blender's camera (forward −Z, up +Y, left −X).
+    #[inline]
+    fn equirect_direction(&self, u: f32, v: f32) -> Vec3 {
+        let r = self.equirect;
+        let (phi, theta) = (r.x * u + r.y, r.z * v + r.w);
+        let (sin_t, cos_t) = theta.sin_cos();
+        let (sin_p, cos_p) = phi.sin_cos();
+        let d = Vec3::new(sin_t * cos_p, sin_t * sin_p, cos_t); // (Cycles' panorama frame)
+        Vec3::new(-d.y, d.z, -d.x)
+    }
+
     /// Primary ray through `raster` (pixels, origin top-left), lens sample `u_lens`.
     pub fn generate_ray(&self, raster: Vec2, u_lens: Vec2) -> CameraRay {
+        if self.projection == Projection::Equirectangular {
+            let raster = raster + self.offset;
+            let d = self.equirect_direction(raster.x / self.full.x, 1.0 - raster.y / self.full.y);
+            let dir = self.to_world.transform_vector3(d).normalize();
+            // (clipping along the ray: a panorama has no view axis)
+            return CameraRay {
+                origin: self.to_world.w_axis.truncate(),
+                dir,
+                tmin: self.clip_start,
+                tmax: self.clip_end,
+            };
+        }
         let q = self.plane_point(raster);
         let (o_cam, d_cam, axial) = match self.projection {
             Projection::Perspective => {
@@ -266,6 +306,7 @@ impl Camera {
                 }
             }
             Projection::Orthographic => (Vec3::new(q.x, q.y, 0.0), Vec3::NEG_Z, 1.0),
+            Projection::Equirectangular => unreachable!("handled above"),
         };
         // Clipping distances are measured along the view axis, as in Blender.
         let origin = self.to_world.transform_point3(o_cam);
@@ -276,6 +317,13 @@ impl Camera {
     /// Raster position (pixels, y from the top) of a world point, if in front of the camera.
     pub fn project(&self, p: Vec3) -> Option<Vec2> {
         let pc = self.to_world.inverse().transform_point3(p);
+        if self.projection == Projection::Equirectangular {
+            let d = pc.normalize_or_zero(); // (back to Cycles' panorama frame)
+            let (x, y, z) = (-d.z, -d.x, d.y);
+            let r = self.equirect;
+            let (u, v) = ((y.atan2(x) - r.y) / r.x, (z.clamp(-1.0, 1.0).acos() - r.w) / r.z);
+            return Some(Vec2::new(u * self.full.x, (1.0 - v) * self.full.y) - self.offset);
+        }
         let depth = -pc.z;
         let q = match self.projection {
             Projection::Perspective => {
@@ -285,6 +333,7 @@ impl Camera {
                 Vec2::new(pc.x / depth, pc.y / depth)
             }
             Projection::Orthographic => Vec2::new(pc.x, pc.y),
+            Projection::Equirectangular => unreachable!("handled above"),
         };
         let u = (q.x - self.center.x) / self.ext.x + 0.5;
         let v = (q.y - self.center.y) / self.ext.y + 0.5;
@@ -370,7 +419,7 @@ mod tests {
         d.shift_y = -0.2;
         d.sensor_fit = SensorFit::Vertical;
         d.resolution_percentage = 50;
-        for proj in [Projection::Perspective, Projection::Orthographic] {
+        for proj in [Projection::Perspective, Projection::Orthographic, Projection::Equirectangular] {
             d.projection = proj;
             let cam = Camera::new(&d).unwrap();
             assert_eq!((cam.width, cam.height), (100, 50));
@@ -380,6 +429,36 @@ mod tests {
                 let back = cam.project(p).unwrap();
                 assert!((back - raster).length() < 1e-3, "{proj:?} {raster:?} -> {back:?}");
             }
+        }
+    }
+
+    /// An equirectangular camera as Cycles maps it: the image's centre looks down the camera's
+    /// −Z, a quarter of the width to the left looks to its left (−X), the top row straight up
+    /// (+Y), with the default 360° × 180° ranges; narrower ranges narrow the view, and empty
+    /// or NaN ranges are errors.
+    #[test]
+    fn equirectangular_directions_follow_cycles() {
+        let mut d = CameraDesc {
+            projection: Projection::Equirectangular,
+            resolution_x: 400,
+            resolution_y: 200,
+            ..Default::default()
+        };
+        let cam = Camera::new(&d).unwrap();
+        let dir = |c: &Camera, x: f32, y: f32| c.generate_ray(Vec2::new(x, y), Vec2::ZERO).dir;
+        let near = |a: Vec3, b: Vec3| (a - b).length() < 1e-5;
+        assert!(near(dir(&cam, 200.0, 100.0), Vec3::NEG_Z));
+        assert!(near(dir(&cam, 100.0, 100.0), Vec3::NEG_X));
+        assert!(near(dir(&cam, 300.0, 100.0), Vec3::X));
+        assert!(near(dir(&cam, 0.0, 100.0), Vec3::Z) && near(dir(&cam, 200.0, 0.0), Vec3::Y));
+        d.panorama = [-0.5, 0.5, -1.0, 1.0];
+        let narrow = Camera::new(&d).unwrap();
+        let right_edge = dir(&narrow, 400.0, 100.0);
+        assert!(near(right_edge, Vec3::new(1f32.sin(), 0.0, -1f32.cos())), "{right_edge:?}");
+        assert!(near(dir(&narrow, 200.0, 0.0), Vec3::new(0.0, 0.5f32.sin(), -0.5f32.cos())));
+        for bad in [[0.5, -0.5, -1.0, 1.0], [-0.5, 0.5, f32::NAN, 1.0]] {
+            d.panorama = bad;
+            assert!(Camera::new(&d).err().unwrap().to_string().contains("panorama"), "{bad:?}");
         }
     }
 

@@ -314,6 +314,9 @@ pub enum LightDesc {
 pub enum Projection {
     Perspective,
     Orthographic,
+    /// Blender's Panoramic › Equirectangular camera: longitude across the image, latitude up
+    /// it, over `CameraDesc::panorama` (a 360° × 180° image by default), as Cycles maps it.
+    Equirectangular,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -369,6 +372,8 @@ pub struct CameraDesc {
     /// Ray): composited behind the image by the share of such rays (the transparent film's
     /// alpha); the world still lights the scene. Ignored when the film is transparent.
     pub backdrop: Option<[f32; 3]>,
+    /// An equirectangular camera's ranges (radians): latitude min, max, longitude min, max.
+    pub panorama: [f32; 4],
 }
 
 impl Default for CameraDesc {
@@ -400,6 +405,12 @@ impl Default for CameraDesc {
             filter_width: 1.5,
             film_transparent: false,
             backdrop: None,
+            panorama: [
+                -std::f32::consts::FRAC_PI_2,
+                std::f32::consts::FRAC_PI_2,
+                -std::f32::consts::PI,
+                std::f32::consts::PI,
+            ],
         }
     }
 }

@@ -798,6 +798,26 @@ def test_orthographic_and_depth_of_field_cameras_agree_with_cycles(bpy_mod, tmp_
     assert_agrees_with_cycles(bpy_mod, build, tmp_out, kind, block=5)
 
 
+@pytest.mark.parametrize("ranges", ["full", "narrow"])
+def test_equirectangular_camera_agrees_with_cycles(bpy_mod, tmp_out, ranges):
+    """The lights scene through a Panoramic › Equirectangular camera (a 360° × 180° view, and
+    one narrowed to latitudes −30…60° and longitudes −100…80°), turned and placed inside the
+    scene, against Cycles. Before, the camera was refused ("PANO cameras are not supported")."""
+    def build(bpy, engine, spp, seed):
+        scene = open_scene(bpy, "lights", engine, spp, seed, keep={"Area", "Point", "Sun"})
+        cam = scene.camera
+        cam.data.type, cam.data.panorama_type = "PANO", "EQUIRECTANGULAR"
+        cam.location, cam.rotation_euler = (0.3, -1.5, 1.2), (1.3, 0.1, 0.4)
+        if ranges == "narrow":
+            cam.data.latitude_min, cam.data.latitude_max = math.radians(-30.0), math.radians(60.0)
+            cam.data.longitude_min, cam.data.longitude_max = math.radians(-100.0), math.radians(80.0)
+        r = scene.render
+        r.resolution_x, r.resolution_y, r.resolution_percentage = 128, 64, 100
+        return scene
+
+    assert_agrees_with_cycles(bpy_mod, build, tmp_out, f"equirect{ranges}", block=4)
+
+
 def test_polygonal_and_anamorphic_bokeh_agree_with_cycles(bpy_mod, tmp_out):
     """Out-of-focus highlights take the aperture's shape: Blender's blades (a pentagon,
     turned) and anamorphic ratio (2: half as wide), as Cycles samples the aperture. Three
