@@ -818,6 +818,18 @@ def test_equirectangular_camera_agrees_with_cycles(bpy_mod, tmp_out, ranges):
     assert_agrees_with_cycles(bpy_mod, build, tmp_out, f"equirect{ranges}", block=4)
 
 
+def test_other_panoramic_cameras_are_refused_naming_the_camera(bpy_mod):
+    """A fisheye (or mirror ball, cubemap face, cylindrical) camera is an error naming the
+    camera and its type, not a wrong image."""
+    from gdmlt_blender import export
+
+    bpy = bpy_mod
+    scene = open_scene(bpy, "lights", "GDMLT", 4, 1)
+    scene.camera.data.type, scene.camera.data.panorama_type = "PANO", "FISHEYE_EQUISOLID"
+    with pytest.raises(ValueError, match=f"camera '{scene.camera.name}': panoramic type FISHEYE_EQUISOLID"):
+        export.export_scene(bpy.context.evaluated_depsgraph_get())
+
+
 def test_polygonal_and_anamorphic_bokeh_agree_with_cycles(bpy_mod, tmp_out):
     """Out-of-focus highlights take the aperture's shape: Blender's blades (a pentagon,
     turned) and anamorphic ratio (2: half as wide), as Cycles samples the aperture. Three

@@ -440,6 +440,22 @@ def test_a_bad_camera_backdrop_is_refused():
     assert np.isfinite(res["layers"]["Combined"]).all() and "Alpha" not in res["layers"]
 
 
+def test_bad_panorama_ranges_are_refused():
+    """An equirectangular camera whose latitude or longitude range is empty, reversed or NaN
+    is a message naming the camera's panorama ranges, not a black frame; a good one renders
+    finite."""
+    import numpy as np
+
+    d = gdmlt.builtin_scene("cornell", 16, 8)
+    d["camera"]["type"] = "EQUIRECTANGULAR"
+    for key, bad in [("latitude_min", 2.0), ("longitude_max", float("nan")), ("longitude_min", 3.2)]:
+        with pytest.raises(ValueError, match="camera.*panorama latitude and longitude ranges"):
+            gdmlt.Scene(dict(d, camera=dict(d["camera"], **{key: bad})))
+    res = gdmlt.render(gdmlt.Scene(d), spp=2, seed=1)
+    img = res["layers"]["Combined"]
+    assert np.isfinite(img).all() and img.mean() > 0
+
+
 def test_bad_corner_colours_are_refused_naming_the_mesh():
     """Corner colours (vertex colours) of the wrong count or with a NaN are a message naming
     the mesh, not a panic or NaN pixels."""
