@@ -130,7 +130,7 @@ class Textures:
         if node.projection != ("EQUIRECTANGULAR" if env else "FLAT"):
             warnings.append(f"{what}: texture '{node.name}' projection {node.projection} is not supported "
                             f"(rendered as {'EQUIRECTANGULAR' if env else 'FLAT'})")
-        if ext not in ("REPEAT", "EXTEND", "CLIP"):
+        if ext not in ("REPEAT", "EXTEND", "CLIP", "MIRROR"):
             warnings.append(f"{what}: Image Texture '{node.name}' extension {ext} is rendered as REPEAT")
             ext = "REPEAT"
         self.index[key] = len(self.items)
@@ -226,7 +226,7 @@ class Textures:
             self.spaces[len(self.items) - 1] = spec["space"]
             return ("texture", len(self.items) - 1)
         _, rgb, w, h, transform, ext, closest = r
-        if ext not in ("REPEAT", "EXTEND", "CLIP"):
+        if ext not in ("REPEAT", "EXTEND", "CLIP", "MIRROR"):
             ext = "REPEAT"
         self.items.append(scenedict.texture(f"{what}: {node.name} › {sock.name}", rgb, w, h,
                                             interpolation="Closest" if closest else "Linear",

@@ -326,7 +326,8 @@ fn parse_texture(d: &Bound<'_, PyDict>) -> PyResult<TextureDesc> {
         "REPEAT" => TextureExtension::Repeat,
         "EXTEND" => TextureExtension::Extend,
         "CLIP" => TextureExtension::Clip,
-        other => return Err(verr(format!("{ctx}: unknown extension '{other}' (REPEAT, EXTEND or CLIP)"))),
+        "MIRROR" => TextureExtension::Mirror,
+        other => return Err(verr(format!("{ctx}: unknown extension '{other}' (REPEAT, EXTEND, CLIP or MIRROR)"))),
     };
     let srgb: bool = get_or(d, "srgb", false, &ctx)?;
     let transform: Option<[f32; 6]> = get_or(d, "transform", None, &ctx)?;
@@ -1108,6 +1109,7 @@ fn builtin_scene<'py>(py: Python<'py>, name: &str, width: u32, height: u32) -> P
             TextureExtension::Repeat => "REPEAT",
             TextureExtension::Extend => "EXTEND",
             TextureExtension::Clip => "CLIP",
+            TextureExtension::Mirror => "MIRROR",
         };
         td.set_item("extension", ext)?;
         td.set_item("srgb", t.srgb)?;

@@ -39,6 +39,8 @@ pub enum TextureExtension {
     Repeat,
     Extend,
     Clip,
+    /// Repeated with every other copy mirrored (Blender's Mirror), so edges meet seamlessly.
+    Mirror,
 }
 
 /// An image texture, row 0 at the bottom: linear values, or sRGB-encoded values (8-bit sRGB

@@ -1,6 +1,6 @@
 //! Image textures as Cycles samples them: RGB pixels, row 0 at the bottom (v = 0), pixel
 //! centres at (i + ½)/width, bilinear ("Linear") or nearest ("Closest") lookup, Blender's
-//! extension modes (Repeat, Extend, Clip). 8-bit sRGB images keep their encoded values and
+//! extension modes (Repeat, Extend, Clip, Mirror). 8-bit sRGB images keep their encoded values and
 //! are decoded after interpolation — Cycles' NODE_IMAGE_COMPRESS_AS_SRGB path, which a
 //! checker texture shows: interpolating decoded values instead renders it 40% brighter.
 
@@ -66,6 +66,18 @@ fn srgb_slope(c: f32) -> f32 {
         1.0 / 12.92
     } else {
         2.4 / 1.055 * ((c + 0.055) / 1.055).powf(1.4)
+    }
+}
+
+/// Texel index `i` of a row of `n` repeated with every other copy mirrored: …, 1, 0 | 0, 1,
+/// …, n − 1 | n − 1, … (Cycles' mirror wrap).
+#[inline]
+fn mirrored(i: i64, n: i64) -> i64 {
+    let m = i.rem_euclid(2 * n);
+    if m >= n {
+        2 * n - 1 - m
+    } else {
+        m
     }
 }
 
@@ -152,6 +164,7 @@ impl Texture {
                 }
                 (x, y)
             }
+            TextureExtension::Mirror => (mirrored(x, w), mirrored(y, h)),
         };
         Some(self.pixels[(y * w + x) as usize])
     }
@@ -306,6 +319,13 @@ mod tests {
         let c = tex(TextureExtension::Clip, true);
         assert_eq!(c.eval(Vec2::new(1.5, 0.5)), Spectrum::ZERO);
         assert_eq!(c.eval(Vec2::new(0.99, 0.01)), Spectrum::new(0.0, 1.0, 0.0));
+        // Mirror: the next copy is flipped, so the edge texel meets itself (no blend there)
+        let m = tex(TextureExtension::Mirror, false);
+        assert_eq!(m.eval(Vec2::new(1.0, 0.25)), Spectrum::new(0.0, 1.0, 0.0));
+        assert_eq!(m.eval(Vec2::new(1.25, 0.25)), Spectrum::new(0.0, 1.0, 0.0)); // (green, mirrored)
+        assert_eq!(m.eval(Vec2::new(1.75, 0.25)), Spectrum::new(1.0, 0.0, 0.0));
+        assert_eq!(m.eval(Vec2::new(-0.25, -0.25)), Spectrum::new(1.0, 0.0, 0.0));
+        assert_eq!((mirrored(-1, 3), mirrored(3, 3), mirrored(5, 3), mirrored(6, 3), mirrored(-7, 3)), (0, 2, 0, 0, 0));
     }
 
     #[test]
