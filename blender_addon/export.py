@@ -1248,26 +1248,12 @@ def _hash_string(name):
 def _hash_uint2(kx, ky):
     """Jenkins' lookup3 hash of two words (its `final` mix), as Cycles hashes."""
     m = 0xFFFFFFFF
-
-    def rot(x, k):
-        return ((x << k) | (x >> (32 - k))) & m
-
-    a = b = c = (0xDEADBEEF + (2 << 2) + 13) & m
-    a, b = (a + kx) & m, (b + ky) & m
-    c ^= b
-    c = (c - rot(b, 14)) & m
-    a ^= c
-    a = (a - rot(c, 11)) & m
-    b ^= a
-    b = (b - rot(a, 25)) & m
-    c ^= b
-    c = (c - rot(b, 16)) & m
-    a ^= c
-    a = (a - rot(c, 4)) & m
-    b ^= a
-    b = (b - rot(a, 14)) & m
-    c ^= b
-    return (c - rot(b, 24)) & m
+    v = {"a": (0xDEADBEEF + (2 << 2) + 13 + kx) & m, "b": (0xDEADBEEF + (2 << 2) + 13 + ky) & m,
+         "c": (0xDEADBEEF + (2 << 2) + 13) & m}
+    for x, y, k in (("c", "b", 14), ("a", "c", 11), ("b", "a", 25), ("c", "b", 16), ("a", "c", 4), ("b", "a", 14),
+                    ("c", "b", 24)):
+        v[x] = ((v[x] ^ v[y]) - (((v[y] << k) | (v[y] >> (32 - k))) & m)) & m
+    return v["c"]
 
 
 def _light(ob, matrix, warnings):

@@ -2173,6 +2173,27 @@ def test_procedural_bump_agrees_with_cycles(bpy_mod, tmp_out):
     assert_blocks_agree(bpy, build, tmp_out, "pbump", lit=0.02, slack=0.001)
 
 
+def _stage(bpy, scene, engine, seed, sun=None, world=0.1, camera=((0, -5.0, 2.2), (1.2, 0, 0))):
+    """Finishes a 96×72 test scene for `engine` (256 samples, `pt`, 6 bounces): a sun of
+    strength 3 and angle 0.05 turned by `sun` (none without), a camera at `camera` (location,
+    rotation), a grey world of `world`."""
+    obs = []
+    if sun is not None:
+        light = bpy.data.objects.new("Sun", bpy.data.lights.new("Sun", "SUN"))
+        light.data.energy, light.data.angle, light.rotation_euler = 3.0, 0.05, sun
+        obs.append(light)
+    cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
+    cam.location, cam.rotation_euler = camera
+    for ob in obs + [cam]:
+        scene.collection.objects.link(ob)
+    scene.camera, scene.world = cam, bpy.data.worlds.new("World")
+    scene.world.color = (world, world, world)
+    r = scene.render
+    r.resolution_x, r.resolution_y, r.resolution_percentage = 96, 72, 100
+    scene.gdmlt.max_bounces = 6
+    return for_engine(scene, engine, 256, seed, method="PT")
+
+
 def _textured_mixes(bpy):
     """Materials whose Mix Shader takes its factor from a texture, as artists mask one
     material into another: painted floor into gold by a ramped Noise, red Diffuse into a
@@ -2297,18 +2318,7 @@ def test_textured_mix_shaders_agree_with_cycles(bpy_mod, tmp_out):
             bpy.context.active_object.name = f"Viewed{i}"
         for ob, mat in zip(sorted(scene.objects, key=lambda o: (o.name.startswith("Viewed"), o.name == "Cube", o.name)), _textured_mixes(bpy)):
             ob.data.materials.append(mat)
-        sun = bpy.data.objects.new("Sun", bpy.data.lights.new("Sun", "SUN"))
-        sun.data.energy, sun.data.angle, sun.rotation_euler = 3.0, 0.05, (0.6, 0.2, 0.4)
-        cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
-        cam.location, cam.rotation_euler = (0, -5.0, 2.2), (1.2, 0, 0)
-        for ob in (sun, cam):
-            scene.collection.objects.link(ob)
-        scene.camera, scene.world = cam, bpy.data.worlds.new("World")
-        scene.world.color = (0.1, 0.1, 0.1)
-        r = scene.render
-        r.resolution_x, r.resolution_y, r.resolution_percentage = 96, 72, 100
-        scene.gdmlt.max_bounces = 6
-        return for_engine(scene, engine, 256, seed, method="PT")
+        return _stage(bpy, scene, engine, seed, sun=(0.6, 0.2, 0.4))
 
     assert_blocks_agree(bpy, build, tmp_out, "tmix", lit=0.02)
 
@@ -2342,18 +2352,7 @@ def test_shadow_ray_glass_agrees_with_cycles(bpy_mod, tmp_out):
         nt.links.new(clear.outputs[0], mix.inputs[2])
         nt.links.new(mix.outputs[0], nt.nodes["Material Output"].inputs["Surface"])
         pane.data.materials.append(mat)
-        sun = bpy.data.objects.new("Sun", bpy.data.lights.new("Sun", "SUN"))
-        sun.data.energy, sun.data.angle, sun.rotation_euler = 3.0, 0.05, (0.35, 0.1, 0.3)
-        cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
-        cam.location, cam.rotation_euler = (0, -5.0, 3.0), (1.05, 0, 0)
-        for ob in (sun, cam):
-            scene.collection.objects.link(ob)
-        scene.camera, scene.world = cam, bpy.data.worlds.new("World")
-        scene.world.color = (0.02, 0.02, 0.02)
-        r = scene.render
-        r.resolution_x, r.resolution_y, r.resolution_percentage = 96, 72, 100
-        scene.gdmlt.max_bounces = 6
-        return for_engine(scene, engine, 256, seed, method="PT")
+        return _stage(bpy, scene, engine, seed, sun=(0.35, 0.1, 0.3), world=0.02, camera=((0, -5.0, 3.0), (1.05, 0, 0)))
 
     assert_blocks_agree(bpy, build, tmp_out, "shadowray", lit=0.02)
 
@@ -2394,18 +2393,7 @@ def test_backfacing_mix_agrees_with_cycles(bpy_mod, tmp_out):
         card("Facing", (-1.3, 0, 0.8), (1.3, 0, 0.3))
         card("Turned", (0.0, 0, 0.8), (1.3 + math.pi, 0, -0.3))
         card("Ramped", (1.3, 0.3, 0.8), (1.0, 0, 0.5), ramp=True)
-        sun = bpy.data.objects.new("Sun", bpy.data.lights.new("Sun", "SUN"))
-        sun.data.energy, sun.data.angle, sun.rotation_euler = 3.0, 0.05, (0.6, 0.3, 0.4)
-        cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
-        cam.location, cam.rotation_euler = (0, -5.0, 2.2), (1.2, 0, 0)
-        for ob in (sun, cam):
-            scene.collection.objects.link(ob)
-        scene.camera, scene.world = cam, bpy.data.worlds.new("World")
-        scene.world.color = (0.1, 0.1, 0.1)
-        r = scene.render
-        r.resolution_x, r.resolution_y, r.resolution_percentage = 96, 72, 100
-        scene.gdmlt.max_bounces = 6
-        return for_engine(scene, engine, 256, seed, method="PT")
+        return _stage(bpy, scene, engine, seed, sun=(0.6, 0.3, 0.4))
 
     assert_blocks_agree(bpy, build, tmp_out, "backfacing", lit=0.02)
 
@@ -2444,15 +2432,7 @@ def test_is_camera_ray_mixes_agree_with_cycles(bpy_mod, tmp_out):
               ("ShaderNodeBsdfDiffuse", {"Color": (0.1, 0.2, 0.8, 1.0)}))
         bpy.ops.mesh.primitive_plane_add(size=0.6, location=(1.1, 0.0, 0.5), rotation=(1.3, 0, 0))
         mixed("Glow", ("ShaderNodeBsdfTransparent", {}), ("ShaderNodeEmission", {"Strength": 3.0}))
-        cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
-        cam.location, cam.rotation_euler = (0, -5.0, 2.2), (1.2, 0, 0)
-        scene.collection.objects.link(cam)
-        scene.camera, scene.world = cam, bpy.data.worlds.new("World")
-        scene.world.color = (0.05, 0.05, 0.05)
-        r = scene.render
-        r.resolution_x, r.resolution_y, r.resolution_percentage = 96, 72, 100
-        scene.gdmlt.max_bounces = 6
-        return for_engine(scene, engine, 256, seed, method="PT")
+        return _stage(bpy, scene, engine, seed, world=0.05)
 
     assert_blocks_agree(bpy, build, tmp_out, "cameraray", lit=0.02)
 
