@@ -1351,9 +1351,10 @@ def _world_rotation(node, warnings, what):
 
 def _world(scene, warnings, textures):
     """(colour × strength, or strength alone with an environment texture; texture index or
-    None; the texture's rotation or None; the camera's backdrop colour or None). A Mix
+    None; the texture's rotation or None; the camera's backdrop keys or None). A Mix
     Shader by Light Path › Is Camera Ray (lighting by one background, the camera seeing
-    another) gives the lighting world and, for a constant camera background, the backdrop."""
+    another) gives the lighting world and the camera's: a colour (`backdrop`), or an
+    environment texture's strength, index and rotation (`backdrop_texture`, `_rotation`)."""
     world = scene.world
     black = ((0.0, 0.0, 0.0), None, None)
     if world is None:
@@ -1370,12 +1371,12 @@ def _world(scene, warnings, textures):
     backdrop = None
     if node.type == "MIX_SHADER" and _light_path_output(node.inputs[0]) == "Is Camera Ray":
         lighting, camera = (s.links[0].from_node if s.is_linked else None for s in (node.inputs[1], node.inputs[2]))
-        seen = _background(camera, warnings, what, textures)
-        if seen[1] is None:
-            backdrop = seen[0]
-        else:
-            warnings.append(f"{what}: a textured background for camera rays (Mix Shader '{node.name}' by Is Camera "
-                            f"Ray) is not rendered; the camera sees the world that lights the scene")
+        strength, tex, rotation = _background(camera, warnings, what, textures)
+        backdrop = {"backdrop": strength}
+        if tex is not None:  # (an environment texture only the camera sees)
+            backdrop["backdrop_texture"] = tex
+            if rotation is not None:
+                backdrop["backdrop_rotation"] = rotation
         node = lighting
     return (*_background(node, warnings, what, textures), backdrop)
 
@@ -1612,7 +1613,7 @@ def export_scene(depsgraph, test_break=lambda: False, need_camera=True):
     if need_camera:
         desc["camera"] = camera_dict(scene, scene.camera.evaluated_get(depsgraph), warnings)
         if backdrop is not None:
-            desc["camera"]["backdrop"] = backdrop
+            desc["camera"].update(backdrop)
     # the same warning once
     seen = set()
     warnings = [w for w in warnings if not (w in seen or seen.add(w))]

@@ -351,6 +351,13 @@ pub fn trace_path_from<S: Sampler>(
                 out.transparent += (st.beta.x + st.beta.y + st.beta.z) / 3.0;
                 break;
             }
+            if let Some(backdrop) = scene.backdrop.as_ref().filter(|_| camera_visibility) {
+                // what the camera sees instead of the world (no light sampling finds it)
+                let le = backdrop.eval(&scene.textures, st.d);
+                add(&mut out, cfg.clamp(st.beta * le, st.depth), camera_ray, st.direct_emission());
+                st.record_emission(&mut record, scene.env_light(), st.d, true, le, 0.0);
+                break;
+            }
             let (le, pdf_light) = scene.world_eval(st.prev_p, st.d);
             if le.max_element() > 0.0 {
                 add(&mut out, cfg.clamp(st.beta * le * st.mis(pdf_light), st.depth), camera_ray, st.direct_emission());
@@ -700,7 +707,7 @@ pub fn first_hit(scene: &Scene, cam: &CameraRay, hit: Option<TriHit>) -> FirstHi
     scene.for_each_light_crossed(cam.origin, cam.origin, cam.dir, tmax, true, |_, _, le, _| *l += le);
     match hit {
         None if scene.camera.film_transparent => {}
-        None => out.very_direct += scene.world_eval(cam.origin, cam.dir).0,
+        None => out.very_direct += scene.camera_background(cam.dir),
         Some(h) => {
             let si = SurfaceInteraction { camera: true, ..scene.interaction(&h, cam.dir) };
             if let Some((le, _)) = scene.surface_emission(&si, cam.origin, cam.dir) {

@@ -580,6 +580,17 @@ fn parse_camera(d: &Bound<'_, PyDict>) -> PyResult<CameraDesc> {
         filter_width: get_or(d, "filter_width", def.filter_width, ctx)?,
         film_transparent: get_or(d, "film_transparent", false, ctx)?,
         backdrop: get_or(d, "backdrop", None, ctx)?,
+        backdrop_texture: get_or(d, "backdrop_texture", None, ctx)?,
+        backdrop_rotation: match item(d, "backdrop_rotation")? {
+            Some(r) if !r.is_none() => {
+                let v = floats(&r, 3, "camera: backdrop_rotation")?;
+                if v.len() != 9 {
+                    return Err(verr("camera: backdrop_rotation must be 3×3"));
+                }
+                Some([0, 1, 2].map(|i| [v[3 * i], v[3 * i + 1], v[3 * i + 2]]))
+            }
+            _ => None,
+        },
         panorama: [
             get_or(d, "latitude_min", def.panorama[0], ctx)?,
             get_or(d, "latitude_max", def.panorama[1], ctx)?,

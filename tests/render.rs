@@ -1145,3 +1145,39 @@ fn is_camera_ray_hides_an_emitter_from_the_camera_only() {
         run(&cornell_box(48, 48), 16, true, 6, 1, 0).data[img.data.len() / 2..].iter().filter(|&&x| x > 0.0).count();
     assert!(lit_base > lower_half.len() / 2, "{lit_base}");
 }
+
+/// A textured camera backdrop (an environment the camera sees where its rays leave the
+/// scene, the world lighting it): one of a single texel equals the constant backdrop of
+/// that colour, which is composited — with pt, gdpt, pssmlt and gdpssmlt (block means
+/// within the seeds' spread); a two-colour one (blue above the horizon, orange below)
+/// shows both colours to the camera while the world still lights the box.
+#[test]
+fn a_textured_camera_backdrop_is_seen_by_the_camera_rays() {
+    use gdmlt::scene::desc::TextureDesc;
+    let (w, h) = (24, 24);
+    let mut constant = open_box_transparent_film(w, h);
+    constant.camera.film_transparent = false;
+    constant.camera.backdrop = Some([0.9, 0.1, 0.05]);
+    let mut textured = constant.clone();
+    textured.textures.push(TextureDesc {
+        name: "backdrop".into(),
+        width: 1,
+        height: 1,
+        pixels: vec![[0.45, 0.05, 0.025]],
+        ..Default::default()
+    });
+    textured.camera.backdrop = Some([2.0, 2.0, 2.0]); // (the strength times the texel)
+    textured.camera.backdrop_texture = Some(textured.textures.len() as u32 - 1);
+    for (method, spp) in [(Method::Pt, 64), (Method::Gdpt, 16), (Method::Pssmlt, 128), (Method::Gdpssmlt, 64)] {
+        renders_agree("textured backdrop", method, &constant, &textured, spp);
+    }
+    // two colours: the camera sees the one of each ray's direction
+    let mut two = textured.clone();
+    let t = two.textures.last_mut().unwrap();
+    (t.height, t.pixels) = (2, vec![[0.4, 0.15, 0.0], [0.0, 0.1, 0.45]]); // (row 0 at the bottom)
+    let img = run(&two, 16, true, 4, 1, 0);
+    let (warm, cool) = img.data.chunks_exact(3).fold((0, 0), |(a, b), p| {
+        (a + usize::from(p[0] > 3.0 * p[2] && p[0] > 0.5), b + usize::from(p[2] > 3.0 * p[0] && p[2] > 0.5))
+    });
+    assert!(warm > 10 && cool > 10, "{warm} warm and {cool} cool pixels");
+}

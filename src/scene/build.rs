@@ -4,7 +4,9 @@
 //! object at fault.
 
 use super::environment::Environment;
-use super::{light_select, Light, LightShape, Material, MaterialDesc, MeshDesc, SceneDesc, SceneReport, Texture};
+use super::{
+    light_select, CameraDesc, Light, LightShape, Material, MaterialDesc, MeshDesc, SceneDesc, SceneReport, Texture,
+};
 use crate::error::SceneError;
 use crate::math::Spectrum;
 use glam::{Vec2, Vec3, Vec4};
@@ -285,6 +287,9 @@ pub(super) struct Lighting {
     /// Non-triangle lights that a ray can hit (spheres, planes, suns with an angle).
     pub hittable_lights: Vec<u32>,
     pub env: Environment,
+    /// What the camera sees where its rays leave the scene, when it is not the world (a
+    /// textured `CameraDesc::backdrop`).
+    pub backdrop: Option<Environment>,
     pub emissive_triangles: usize,
     /// Said when nothing lights the scene.
     pub warning: Option<String>,
@@ -335,6 +340,7 @@ impl Lighting {
             }
         }
         let env = Self::world(desc, textures)?;
+        let backdrop = Self::backdrop(&desc.camera, textures)?;
         // a textured emitter: its image's mean brightness scales the selection weight (the
         // mean of each emission image once, not once per emissive triangle)
         let emission_scale: Vec<f32> = materials
@@ -369,30 +375,51 @@ impl Lighting {
             "the scene has no light: no emitting material, no light object and a black world; the image is black"
                 .to_string()
         });
-        Ok(Lighting { lights, selector, tri_light, hittable_lights, env, emissive_triangles, warning })
+        Ok(Lighting { lights, selector, tri_light, hittable_lights, env, backdrop, emissive_triangles, warning })
     }
 
     /// The world background: a colour, or an image rotated by `world_rotation`.
     fn world(desc: &SceneDesc, textures: &[Texture]) -> Result<Environment, SceneError> {
-        let world_tex = match desc.world_texture {
+        let bad = |what: String| SceneError::World(what);
+        Self::environment(desc.world, desc.world_texture, desc.world_rotation, textures).map_err(bad)
+    }
+
+    /// The camera's textured backdrop (None without one, or when the film is transparent).
+    fn backdrop(camera: &CameraDesc, textures: &[Texture]) -> Result<Option<Environment>, SceneError> {
+        let Some(t) = camera.backdrop_texture.filter(|_| !camera.film_transparent) else { return Ok(None) };
+        let scale =
+            camera.backdrop.ok_or_else(|| SceneError::Camera("backdrop_texture needs a backdrop strength".into()))?;
+        Self::environment(scale, Some(t), camera.backdrop_rotation, textures)
+            .map(Some)
+            .map_err(|what| SceneError::Camera(format!("backdrop: {what}")))
+    }
+
+    /// A background of colour (or strength) `scale`, with `texture` turned by `rotation`.
+    fn environment(
+        scale: [f32; 3],
+        texture: Option<u32>,
+        rotation: Option<[[f32; 3]; 3]>,
+        textures: &[Texture],
+    ) -> Result<Environment, String> {
+        let tex = match texture {
             Some(t) if t as usize >= textures.len() => {
-                return Err(SceneError::World(format!("uses texture {t} but the scene has {}", textures.len())))
+                return Err(format!("uses texture {t} but the scene has {}", textures.len()))
             }
             Some(t) => Some((t, &textures[t as usize])),
             None => None,
         };
-        let rotation = match desc.world_rotation {
+        let rotation = match rotation {
             None => glam::Mat3::IDENTITY,
             Some(r) => {
                 let m = glam::Mat3::from_cols_array_2d(&r).transpose(); // rows given
                                                                         // a rotation: orthonormal with determinant 1 (else the pdf would be wrong)
                 let ortho = (m * m.transpose() - glam::Mat3::IDENTITY).to_cols_array().iter().all(|x| x.abs() < 1e-3);
                 if !ortho || (m.determinant() - 1.0).abs() > 1e-3 {
-                    return Err(SceneError::World("world rotation must be a rotation matrix".into()));
+                    return Err("rotation must be a rotation matrix".into());
                 }
                 m
             }
         };
-        Ok(Environment::new(Vec3::from_array(desc.world), world_tex, rotation))
+        Ok(Environment::new(Vec3::from_array(scale), tex, rotation))
     }
 }

@@ -197,8 +197,9 @@ impl Camera {
             },
             filter,
             // a backdrop is what a transparent film leaves out, put back behind the image
-            film_transparent: d.film_transparent || d.backdrop.is_some(),
-            backdrop: d.backdrop.filter(|_| !d.film_transparent).map(Vec3::from_array),
+            // (a textured backdrop is seen by the camera's rays instead: Scene::backdrop)
+            film_transparent: d.film_transparent || (d.backdrop.is_some() && d.backdrop_texture.is_none()),
+            backdrop: d.backdrop.filter(|_| !d.film_transparent && d.backdrop_texture.is_none()).map(Vec3::from_array),
             equirect: {
                 let [lat_min, lat_max, lon_min, lon_max] = d.panorama;
                 Vec4::new(lon_min - lon_max, -lon_min, lat_min - lat_max, std::f32::consts::FRAC_PI_2 - lat_min)

@@ -374,6 +374,11 @@ pub struct CameraDesc {
     /// Ray): composited behind the image by the share of such rays (the transparent film's
     /// alpha); the world still lights the scene. Ignored when the film is transparent.
     pub backdrop: Option<[f32; 3]>,
+    /// A textured backdrop: the camera sees this environment texture (times `backdrop`, its
+    /// strength, required with it) where its rays leave the scene, turned by
+    /// `backdrop_rotation` (rows: world direction → the texture's frame), as the world's.
+    pub backdrop_texture: Option<u32>,
+    pub backdrop_rotation: Option<[[f32; 3]; 3]>,
     /// An equirectangular camera's ranges (radians): latitude min, max, longitude min, max.
     pub panorama: [f32; 4],
 }
@@ -407,6 +412,8 @@ impl Default for CameraDesc {
             filter_width: 1.5,
             film_transparent: false,
             backdrop: None,
+            backdrop_texture: None,
+            backdrop_rotation: None,
             panorama: [
                 -std::f32::consts::FRAC_PI_2,
                 std::f32::consts::FRAC_PI_2,

@@ -124,6 +124,9 @@ pub struct Scene {
     pub camera: Camera,
     /// The world background, a light with index `env_light()` when it is not black.
     pub env: Environment,
+    /// What the camera sees where its rays leave the scene when it is not the world: a
+    /// textured backdrop (`CameraDesc::backdrop_texture`; a constant one is composited).
+    pub backdrop: Option<Environment>,
     accel: Option<Accel>,
     /// Some material lets light through (pass-through lobe): shadow rays then cross such
     /// surfaces instead of stopping (decided once; without it shadow rays stay any-hit tests).
@@ -186,6 +189,7 @@ impl Scene {
             hittable_lights: Vec::new(),
             camera,
             env: lighting.env,
+            backdrop: lighting.backdrop,
             accel,
             bounds_center,
             bounds_radius,
@@ -229,7 +233,7 @@ impl Scene {
         let lighting = lighting?;
         self.report.emissive_triangles = lighting.emissive_triangles;
         (self.lights, self.selector, self.tri_light) = (lighting.lights, lighting.selector, lighting.tri_light);
-        (self.hittable_lights, self.env) = (lighting.hittable_lights, lighting.env);
+        (self.hittable_lights, self.env, self.backdrop) = (lighting.hittable_lights, lighting.env, lighting.backdrop);
         self.set_shading(shading);
         Ok(())
     }
@@ -841,6 +845,16 @@ impl Scene {
     #[inline]
     pub fn casts_shadow(&self, li: u32) -> bool {
         self.lights.get(li as usize).is_none_or(|l| l.cast_shadow)
+    }
+
+    /// What a camera ray leaving the scene in direction `d` sees: the textured backdrop, or
+    /// the world.
+    #[inline]
+    pub fn camera_background(&self, d: Vec3) -> Spectrum {
+        match &self.backdrop {
+            Some(b) => b.eval(&self.textures, d),
+            None => self.world_eval(self.camera.position(), d).0,
+        }
     }
 
     /// Background radiance arriving from direction `d` and the NEE pdf from shading point

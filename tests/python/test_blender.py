@@ -2511,13 +2511,15 @@ def test_objects_without_a_material_render_as_cycles_default_surface(bpy_mod, tm
     assert_blocks_agree(bpy, build, tmp_out, "default")
 
 
-def test_world_seen_by_the_camera_agrees_with_cycles(bpy_mod, tmp_out):
-    """The product-shot world: Mix(Background blue sky lighting the scene, Background dark
-    grey seen by the camera, Light Path › Is Camera Ray). A floor, a diffuse ball and a
-    glass ball (through which the camera sees the sky: a refracted ray is no camera ray), a
-    mirror-like ball reflecting the sky: the 4×4 block means differ from Cycles' by no more
-    than Cycles' own two seeds do (×1.5, + 0.2%). Before, a world Mix Shader was 'not
-    supported': the world was black."""
+@pytest.mark.parametrize("seen", ["grey", "hdri"])
+def test_world_seen_by_the_camera_agrees_with_cycles(bpy_mod, tmp_out, seen):
+    """The product-shot world: Mix(Background blue sky lighting the scene, Background seen by
+    the camera, Light Path › Is Camera Ray) — dark grey, or an HDRI turned by a Mapping node.
+    A floor, a diffuse ball and a glass ball (through which the camera sees the sky: a
+    refracted ray is no camera ray), a mirror-like ball reflecting the sky: the 4×4 block
+    means differ from Cycles' by no more than Cycles' own two seeds do (×1.5, + 0.2%).
+    Before, a world Mix Shader was 'not supported' (the world was black), then the HDRI
+    side was warned and the camera saw the blue sky."""
     bpy = bpy_mod
 
     def build(engine, seed):
@@ -2539,6 +2541,16 @@ def test_world_seen_by_the_camera_agrees_with_cycles(bpy_mod, tmp_out):
         sky, backdrop = nt.nodes["Background"], nt.nodes.new("ShaderNodeBackground")
         sky.inputs["Color"].default_value, sky.inputs["Strength"].default_value = (0.4, 0.55, 0.9, 1), 1.5
         backdrop.inputs["Color"].default_value = (0.05, 0.05, 0.05, 1)
+        if seen == "hdri":
+            env, coord, mapping = (nt.nodes.new(t) for t in ("ShaderNodeTexEnvironment", "ShaderNodeTexCoord",
+                                                             "ShaderNodeMapping"))
+            env.image = bpy.data.images.load(str(Path(bpy.utils.system_resource("DATAFILES")) / "studiolights" /
+                                                 "world" / "forest.exr"))
+            mapping.inputs["Rotation"].default_value = (0.0, 0.0, math.radians(40.0))
+            nt.links.new(coord.outputs["Generated"], mapping.inputs["Vector"])
+            nt.links.new(mapping.outputs["Vector"], env.inputs["Vector"])
+            nt.links.new(env.outputs["Color"], backdrop.inputs["Color"])
+            backdrop.inputs["Strength"].default_value = 0.7
         mix, path = nt.nodes.new("ShaderNodeMixShader"), nt.nodes.new("ShaderNodeLightPath")
         nt.links.new(path.outputs["Is Camera Ray"], mix.inputs["Fac"])
         nt.links.new(sky.outputs[0], mix.inputs[1])
@@ -2553,7 +2565,7 @@ def test_world_seen_by_the_camera_agrees_with_cycles(bpy_mod, tmp_out):
         scene.gdmlt.max_bounces = 6
         return for_engine(scene, engine, 256, seed, method="PT")
 
-    assert_blocks_agree(bpy, build, tmp_out, "camworld")
+    assert_blocks_agree(bpy, build, tmp_out, f"camworld{seen}")
 
 
 def _coloured_quads():

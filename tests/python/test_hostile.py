@@ -438,6 +438,22 @@ def test_a_bad_camera_backdrop_is_refused():
     d["camera"]["backdrop"] = (0.2, 0.4, 0.6)
     res = gdmlt.render(gdmlt.Scene(d), spp=2, seed=1)
     assert np.isfinite(res["layers"]["Combined"]).all() and "Alpha" not in res["layers"]
+    # a textured backdrop: a texture that does not exist, a rotation that is none, no strength
+    d["camera"]["backdrop_texture"] = 7
+    with pytest.raises(ValueError, match="camera.*backdrop: uses texture 7"):
+        gdmlt.Scene(d)
+    from gdmlt import scenedict
+
+    d["textures"] = [scenedict.texture("sky", np.full((2, 3), 0.5, np.float32), 2, 1)]
+    d["camera"].update(backdrop_texture=0, backdrop_rotation=np.eye(3, dtype=np.float32) * 2)
+    with pytest.raises(ValueError, match="camera.*backdrop: rotation must be a rotation matrix"):
+        gdmlt.Scene(d)
+    del d["camera"]["backdrop_rotation"], d["camera"]["backdrop"]
+    with pytest.raises(ValueError, match="camera.*backdrop_texture needs a backdrop strength"):
+        gdmlt.Scene(d)
+    d["camera"]["backdrop"] = (1.0, 1.0, 1.0)
+    res = gdmlt.render(gdmlt.Scene(d), spp=2, seed=1)
+    assert np.isfinite(res["layers"]["Combined"]).all() and "Alpha" not in res["layers"]
 
 
 def test_bad_panorama_ranges_are_refused():
