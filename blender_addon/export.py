@@ -551,12 +551,8 @@ def _mix_factor(fac, textures, warnings, what):
     (then the factor keeps its unlinked value, warned by `_shader_leaves`)."""
     link = fac.links[0]
     src, out = link.from_node, link.from_socket.identifier
-    if (src.type, out) == ("LIGHT_PATH", "Is Shadow Ray"):
-        return {"blend_ray": ("SHADOW_RAY", 0.0)}
-    if (src.type, out) == ("LIGHT_PATH", "Is Camera Ray"):
-        return {"blend_ray": ("CAMERA_RAY", 0.0)}
-    if (src.type, out) == ("NEW_GEOMETRY", "Backfacing"):
-        return {"blend_ray": ("BACKFACING", 0.0)}
+    if (src.type, out) in _KIND_FACTORS:
+        return {"blend_ray": (_KIND_FACTORS[(src.type, out)], 0.0)}
     view = _RAY_NODES.get((src.type, out))
     if view is not None:
         kind, name, default = view
@@ -588,8 +584,8 @@ def _ray_curve(fac, warnings, what):
     if r is None:
         return None
     (src, out), table = r
-    if (src.type, out) == ("NEW_GEOMETRY", "Backfacing"):
-        return {"blend_ray": ("BACKFACING", 0.0), "blend_ray_curve": table.tolist()}
+    if (src.type, out) in _KIND_FACTORS:  # (a factor of 0 or 1: the curve's two ends)
+        return {"blend_ray": (_KIND_FACTORS[(src.type, out)], 0.0), "blend_ray_curve": table.tolist()}
     kind, name, default = _RAY_NODES[(src.type, out)]
     if src.inputs["Normal"].is_linked:
         warnings.append(f"{what}: the Normal input of '{src.name}' is not read (the surface normal is used)")
@@ -599,6 +595,9 @@ def _ray_curve(fac, warnings, what):
             "blend_ray_curve": table.tolist()}
 
 
+# Outputs that are 0 or 1 by the ray's kind or side, as the core's ray factors
+_KIND_FACTORS = {("NEW_GEOMETRY", "Backfacing"): "BACKFACING", ("LIGHT_PATH", "Is Camera Ray"): "CAMERA_RAY",
+                 ("LIGHT_PATH", "Is Shadow Ray"): "SHADOW_RAY"}
 # Fresnel and Layer Weight outputs as the core's ray factors: (kind, the node's input, its default)
 _RAY_NODES = {("FRESNEL", "Fac"): ("FRESNEL", "IOR", 1.45), ("LAYER_WEIGHT", "Fresnel"): ("LAYER_FRESNEL", "Blend", 0.5),
               ("LAYER_WEIGHT", "Facing"): ("LAYER_FACING", "Blend", 0.5)}

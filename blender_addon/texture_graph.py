@@ -805,7 +805,8 @@ _NODES = {
 
 # Fresnel and Layer Weight outputs: factors the core computes per point from the ray
 # (`RayFactor`); a graph over one of them is tabulated over [0, 1] (`evaluate_ray`).
-RAY_LEAVES = {("FRESNEL", "Fac"), ("LAYER_WEIGHT", "Fresnel"), ("LAYER_WEIGHT", "Facing"), ("NEW_GEOMETRY", "Backfacing")}
+RAY_LEAVES = {("FRESNEL", "Fac"), ("LAYER_WEIGHT", "Fresnel"), ("LAYER_WEIGHT", "Facing"), ("NEW_GEOMETRY", "Backfacing"),
+              ("LIGHT_PATH", "Is Camera Ray"), ("LIGHT_PATH", "Is Shadow Ray")}
 RAY_TABLE = 1024
 
 

@@ -1128,6 +1128,19 @@ fn is_camera_ray_hides_an_emitter_from_the_camera_only() {
     for (method, spp) in [(Method::Pt, 64), (Method::Gdpt, 16), (Method::Pssmlt, 128), (Method::Gdpssmlt, 64)] {
         renders_agree("Is Camera Ray", method, &hidden, &by_ray, spp);
     }
+    // the same through an inverting curve (1 − Is Camera Ray: a Math node), the sides swapped
+    let mut inverted = base.clone();
+    let light = inverted.materials.iter_mut().find(|m| m.name == "Light").unwrap();
+    let emission = light.clone();
+    *light = MaterialDesc {
+        blend: Some(Box::new(emission)),
+        blend_ray: Some(RayFactor::CameraRay),
+        blend_ray_curve: vec![1.0, 0.0],
+        ..clear.clone()
+    };
+    for (method, spp) in [(Method::Pt, 64), (Method::Gdpt, 16)] {
+        renders_agree("1 − Is Camera Ray", method, &hidden, &inverted, spp);
+    }
     // the sides swapped: only the camera sees the glow
     let mut glow = cornell_box(48, 48);
     let light = glow.materials.iter_mut().find(|m| m.name == "Light").unwrap();

@@ -310,19 +310,24 @@ impl Lighting {
         let mut tri_light = vec![u32::MAX; tris.positions.len()];
         let mut emissive_triangles = 0;
         // a material that blends into another by a texture: its emission estimated with the
-        // textures' means (the radiance itself is evaluated per point, `Scene::emission_at`)
+        // textures' means (the radiance itself is evaluated per point, `Scene::emission_at`);
+        // by Is Camera Ray: the emission every other ray sees
         let emission: Vec<Spectrum> = materials
             .iter()
-            .map(|m| match (&m.blend, m.blend_texture) {
-                (Some(b), Some(t)) => {
-                    let f = crate::math::luminance(textures[t as usize].mean()).clamp(0.0, 1.0);
-                    let own = |m: &Material| {
-                        m.emission
-                            * m.emission_texture.map_or(1.0, |t| crate::math::luminance(textures[t as usize].mean()))
-                    };
-                    (own(m) * (1.0 - f) + own(b) * f).max(Spectrum::splat(1e-6))
+            .map(|m| {
+                let own = |m: &Material| {
+                    m.emission * m.emission_texture.map_or(1.0, |t| crate::math::luminance(textures[t as usize].mean()))
+                };
+                // the factor the light's rays see: a texture's mean, or a blend by Is Camera
+                // Ray's for every other ray
+                let f = match m.blend_texture {
+                    Some(t) => Some(crate::math::luminance(textures[t as usize].mean()).clamp(0.0, 1.0)),
+                    None => m.unseen_blend(),
+                };
+                match (&m.blend, f) {
+                    (Some(b), Some(f)) => (own(m) * (1.0 - f) + own(b) * f).max(Spectrum::splat(1e-6)),
+                    _ => m.emission,
                 }
-                _ => m.emission,
             })
             .collect();
         for (t, &m) in tris.material.iter().enumerate() {

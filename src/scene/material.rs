@@ -227,7 +227,20 @@ impl Material {
     /// Does the surface emit: this material, or the one it blends into by a texture (a
     /// blend by the view emits this material's emission only)?
     pub fn emits(&self) -> bool {
-        self.is_emissive() || (self.blend_texture.is_some() && self.blend.as_ref().is_some_and(|b| b.is_emissive()))
+        let blend_emits = self.blend.as_ref().is_some_and(|b| b.is_emissive());
+        match self.unseen_blend() {
+            // (what every ray but the camera's sees of a blend by Is Camera Ray)
+            Some(f) => (self.is_emissive() && f < 1.0) || (blend_emits && f > 0.0),
+            None => self.is_emissive() || (self.blend_texture.is_some() && blend_emits),
+        }
+    }
+
+    /// For a blend by Is Camera Ray: its factor for every ray but the camera's (the curve
+    /// after the node at 0), which light sampling and scattered rays see.
+    #[inline]
+    pub fn unseen_blend(&self) -> Option<f32> {
+        (self.blend.is_some() && self.blend_texture.is_none() && self.blend_ray == Some(RayFactor::CameraRay))
+            .then(|| ray_curve(&self.blend_ray_curve, 0.0).clamp(0.0, 1.0))
     }
 
     /// The BSDF at a surface point; `front` is true when the ray arrives on the side the

@@ -475,7 +475,8 @@ impl Scene {
     /// `tc`: the factor, times the material's emission texture where it has one. A material
     /// that blends into another by a texture emits the blend of the two sides' own emission
     /// (the light's factor is then only its selection estimate, `Lighting::build`).
-    /// Seen by the `camera`, a blend by Is Camera Ray emits its second side's emission.
+    /// A blend by Is Camera Ray emits the blend of the sides' own emission by its factor for
+    /// the `camera`'s rays or for every other ray (the light's factor is the latter's estimate).
     #[inline]
     fn emission_at(&self, t: usize, emission: Spectrum, tc: TexCoord, camera: bool) -> Spectrum {
         let m = &self.materials[self.tri_material[t] as usize];
@@ -484,7 +485,11 @@ impl Scene {
                 let f = self.blend_factor(tex, tc);
                 self.own_emission(m, m.emission, tc) * (1.0 - f) + self.own_emission(b, b.emission, tc) * f
             }
-            (Some(b), None, Some(RayFactor::CameraRay)) if camera => self.own_emission(b, b.emission, tc),
+            (Some(b), None, Some(RayFactor::CameraRay)) => {
+                let f = material::ray_curve(&m.blend_ray_curve, f32::from(u8::from(camera))).clamp(0.0, 1.0);
+                let a = if f < 1.0 { self.own_emission(m, m.emission, tc) * (1.0 - f) } else { Spectrum::ZERO };
+                a + if f > 0.0 { self.own_emission(b, b.emission, tc) * f } else { Spectrum::ZERO }
+            }
             // (another blend by the ray emits this material's emission alone)
             _ => self.own_emission(m, emission, tc),
         }
@@ -784,8 +789,9 @@ impl Scene {
         if li == u32::MAX {
             let m = &self.materials[si.material as usize];
             return match (&m.blend, m.blend_ray) {
-                (Some(b), Some(RayFactor::CameraRay)) if si.camera && b.emits() => {
-                    Some((self.own_emission(b, b.emission, si.tex), 0.0))
+                (Some(b), Some(RayFactor::CameraRay)) if si.camera && (m.is_emissive() || b.is_emissive()) => {
+                    let le = self.emission_at(si.prim as usize, m.emission, si.tex, true);
+                    (le.max_element() > 0.0).then_some((le, 0.0))
                 }
                 _ => None,
             };

@@ -2402,11 +2402,12 @@ def test_is_camera_ray_mixes_agree_with_cycles(bpy_mod, tmp_out):
     """Mix Shaders by Light Path › Is Camera Ray, as artists use it: a light panel the camera
     does not see (Emission for every other ray, Transparent for the camera's), a ball blue to
     the camera and red to everything else (its bounce light and reflection), and a card that
-    glows only for the camera (Transparent to other rays: it lights nothing); 4×4 blocks
-    against Cycles, as for the window glass. Before, each factor was its unlinked 0.5."""
+    glows only for the camera (Transparent to other rays: it lights nothing; its factor
+    1 − Is Camera Ray through a Math node); 4×4 blocks against Cycles, as for the window
+    glass. Before, each factor was its unlinked 0.5."""
     bpy = bpy_mod
 
-    def mixed(name, first, second):
+    def mixed(name, first, second, inverted=False):
         mat = bpy.data.materials.new(name)
         nt = mat.node_tree
         nt.nodes.remove(nt.nodes["Principled BSDF"])
@@ -2416,7 +2417,13 @@ def test_is_camera_ray_mixes_agree_with_cycles(bpy_mod, tmp_out):
             for key, value in inputs.items():
                 node.inputs[key].default_value = value
             nt.links.new(node.outputs[0], mix.inputs[i])
-        nt.links.new(path.outputs["Is Camera Ray"], mix.inputs["Fac"])
+        fac = path.outputs["Is Camera Ray"]
+        if inverted:  # (1 − Is Camera Ray, the sides swapped: the same material)
+            sub = nt.nodes.new("ShaderNodeMath")
+            sub.operation, sub.inputs[0].default_value = "SUBTRACT", 1.0
+            nt.links.new(fac, sub.inputs[1])
+            fac = sub.outputs[0]
+        nt.links.new(fac, mix.inputs["Fac"])
         nt.links.new(mix.outputs[0], nt.nodes["Material Output"].inputs["Surface"])
         bpy.context.active_object.data.materials.append(mat)
 
@@ -2431,7 +2438,7 @@ def test_is_camera_ray_mixes_agree_with_cycles(bpy_mod, tmp_out):
         mixed("TwoFaced", ("ShaderNodeBsdfDiffuse", {"Color": (0.8, 0.1, 0.1, 1.0)}),
               ("ShaderNodeBsdfDiffuse", {"Color": (0.1, 0.2, 0.8, 1.0)}))
         bpy.ops.mesh.primitive_plane_add(size=0.6, location=(1.1, 0.0, 0.5), rotation=(1.3, 0, 0))
-        mixed("Glow", ("ShaderNodeBsdfTransparent", {}), ("ShaderNodeEmission", {"Strength": 3.0}))
+        mixed("Glow", ("ShaderNodeEmission", {"Strength": 3.0}), ("ShaderNodeBsdfTransparent", {}), inverted=True)
         return _stage(bpy, scene, engine, seed, world=0.05)
 
     assert_blocks_agree(bpy, build, tmp_out, "cameraray", lit=0.02)
