@@ -71,7 +71,8 @@ pub const PIXEL_DIMENSIONS: u32 = 4;
 /// 2^16 (the table's size) draw independent numbers instead.
 #[derive(Clone, Debug)]
 pub struct SobolSampler {
-    index: u32,
+    /// The sample's index, bit-reversed once (`sobol::sample_4d_reversed`).
+    index_reversed: u32,
     seed: u32,
     dim: u32,
     set: u32,
@@ -85,7 +86,7 @@ impl SobolSampler {
         let fallback =
             (index >= crate::sobol::TABLE_SIZE).then(|| IndependentSampler::new(seed, stream ^ ((index as u64) << 40)));
         SobolSampler {
-            index,
+            index_reversed: (index << 16).reverse_bits(),
             seed: mix64(seed ^ mix64(stream)) as u32,
             dim: 0,
             set: u32::MAX,
@@ -116,7 +117,7 @@ impl Sampler for SobolSampler {
         self.dim += 1;
         if set != self.set {
             let set_seed = mix64(((self.seed as u64) << 32) | set as u64) as u32;
-            self.cache = crate::sobol::sample_4d(self.index, set_seed);
+            self.cache = crate::sobol::sample_4d_reversed(self.index_reversed, set_seed);
             self.set = set;
         }
         self.cache[k].min(1.0 - f32::EPSILON / 2.0)

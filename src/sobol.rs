@@ -20,6 +20,14 @@
 //! (min of 8; median 0.552 → 0.494), `gdpt` 32 spp on the Cornell box 0.607 → 0.552 s (min of
 //! 6; median 0.651 → 0.631). A single 1 MB table of all 2^16 points was 20 ns a point alone
 //! but no faster in a render, where its lookups missed the cache.
+//! The sampler evaluates in the bit-reversed domain (`sample_4d_reversed`, equal bit for bit):
+//! its index reversed once, tables of reversed entries at reversed bytes, so a 4-D set costs 4
+//! bit reversals instead of 10 (x86-64 has no reversal instruction). Cornell box 256², 7 runs,
+//! old and new core in turn (2026-12-05): `pt` 64 spp 1.449 → 1.355 s (min; median 1.465 →
+//! 1.379), `gdpt` 16 spp 0.950 → 0.924 s (median 1.149 → 0.937).
+
+/// The keys of the four coordinates' scrambles (with the set's seed).
+const LANES: [u32; 4] = [0x912f_69ba, 0x174f_18ab, 0x691e_72ca, 0xb40c_c1b8];
 
 /// The largest sample index + 1 a 4-D set serves.
 pub const TABLE_SIZE: u32 = 1 << 16;
@@ -91,6 +99,29 @@ static BYTES: [[[u32; 4]; 256]; 2] = {
     t
 };
 
+/// REVERSED[h][x]: the bit-reversed entries of BYTES[h] at the bit-reversed byte x — what
+/// `sample_4d_reversed` looks up with the index shuffle's hash before its bits are turned
+/// back (reversal is linear over xor, so the point's reversed coordinates are the xor of
+/// these, and the Owen scramble's first reversal is already done).
+static REVERSED: [[[u32; 4]; 256]; 2] = {
+    let mut t = [[[0u32; 4]; 256]; 2];
+    let mut h = 0;
+    while h < 2 {
+        let mut x = 0;
+        while x < 256 {
+            let b = (x as u8).reverse_bits() as usize;
+            let mut d = 0;
+            while d < 4 {
+                t[h][x][d] = BYTES[h][b][d].reverse_bits();
+                d += 1;
+            }
+            x += 1;
+        }
+        h += 1;
+    }
+    t
+};
+
 /// Point `index` (< `TABLE_SIZE`) of Sobol's dimensions 0–3, as 32-bit fractions.
 #[inline]
 fn sobol4(index: u32) -> [u32; 4] {
@@ -133,18 +164,43 @@ pub fn owen_scramble(v: u32, seed: u32) -> u32 {
     lk_hash(v.reverse_bits(), seed).reverse_bits()
 }
 
+/// `sample_4d` from `(index << 16).reverse_bits()` (a sampler's index, reversed once): the
+/// same values with 4 bit reversals instead of 10. The shuffle's hash h gives the shuffled
+/// index's bytes reversed (its low byte is h's second byte turned round, its high byte h's
+/// first), which index `REVERSED` directly.
+#[inline]
+pub fn sample_4d_reversed(index_reversed: u32, seed: u32) -> [f32; 4] {
+    let h = lk_hash(index_reversed, hash(seed ^ 0x79c6_8e4a));
+    let (lo, hi) = (&REVERSED[0][((h >> 8) & 0xff) as usize], &REVERSED[1][(h & 0xff) as usize]);
+    let s = seed.wrapping_mul(0x9c8f_2d3b);
+    std::array::from_fn(|d| crate::sampler::u32_to_unit_f32(lk_hash(lo[d] ^ hi[d], hash(s ^ LANES[d])).reverse_bits()))
+}
+
 /// Point `index` (< `TABLE_SIZE`) of the 4-D sequence keyed by `seed`, in [0,1)^4.
 #[inline]
 pub fn sample_4d(index: u32, seed: u32) -> [f32; 4] {
     let p = sobol4(shuffle_index(index, hash(seed ^ 0x79c6_8e4a)));
     let s = seed.wrapping_mul(0x9c8f_2d3b);
-    const LANES: [u32; 4] = [0x912f_69ba, 0x174f_18ab, 0x691e_72ca, 0xb40c_c1b8];
     std::array::from_fn(|d| crate::sampler::u32_to_unit_f32(owen_scramble(p[d], hash(s ^ LANES[d]))))
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The reversed-domain evaluation is the reference one, bit for bit.
+    #[test]
+    fn reversed_sampling_is_sample_4d() {
+        for index in (0..TABLE_SIZE).step_by(97).chain([0, 1, 255, 256, TABLE_SIZE - 1]) {
+            for seed in [0u32, 1, 0xdead_beef, 0x1234_5678] {
+                assert_eq!(
+                    sample_4d_reversed((index << 16).reverse_bits(), seed),
+                    sample_4d(index, seed),
+                    "{index} {seed}"
+                );
+            }
+        }
+    }
 
     /// The first 2^m points of each dimension hit every interval of width 2^−m once, and
     /// dimensions 0 and 1 form a (0, 2)-sequence: every elementary interval of area 2^−8
