@@ -1200,40 +1200,46 @@ MAX_OBJECT_VARIANTS = 4096
 
 def _object_info(inst, ob, mat, variants, warnings):
     """What an Object Info node outputs in material `mat` on object instance `inst` (values
-    in the order of texture_graph.OBJECT_INFO_OUTPUTS), or None when the material reads no
-    Object Info. Random as Cycles computes it: an instance's random id over 2³² − 1, else
-    Jenkins' lookup3 mix of a hash of the object's name (measured against Cycles)."""
-    seen = variants.get(mat.name, ())
-    if seen is None:
+    in the order of texture_graph.OBJECT_INFO_OUTPUTS; None for those the material does not
+    read, so that objects differing only there share a variant), or None when the material
+    reads no Object Info. Random as Cycles computes it: an instance's random id over
+    2³² − 1, else Jenkins' lookup3 mix of a hash of the object's name (measured against
+    Cycles). `variants`: material name → (the outputs it reads, its variants so far)."""
+    from .texture_graph import OBJECT_INFO_OUTPUTS
+
+    if mat.name not in variants:
+        read = _object_info_read(mat.node_tree, set())
+        variants[mat.name] = (read, set()) if read else None
+    if variants[mat.name] is None:
         return None
-    if not seen and not _reads_object_info(mat.node_tree, set()):
-        variants[mat.name] = None
-        return None
+    read, seen = variants[mat.name]
     if inst.is_instance:
         random = (inst.random_id & 0xFFFFFFFF) / 0xFFFFFFFF
     else:
         random = _hash_uint2(_hash_string(ob.name), 0) / 0xFFFFFFFF
     colour = tuple(float(c) for c in ob.color)
-    info = (random, colour[:3], colour[3], float(ob.pass_index), float(mat.pass_index))
-    if len(seen) >= MAX_OBJECT_VARIANTS and info not in seen:
+    values = (random, colour[:3], colour[3], float(ob.pass_index), float(mat.pass_index))
+    info = tuple(v if name in read else None for name, v in zip(OBJECT_INFO_OUTPUTS, values))
+    if len(seen) >= MAX_OBJECT_VARIANTS and info not in seen and info[0] is not None:
         warnings.append(f"material '{mat.name}': on more than {MAX_OBJECT_VARIANTS} objects its Object Info "
                         f"Random is rounded to 1/1023")
         info = (round(random * 1023) / 1023,) + info[1:]
-    variants.setdefault(mat.name, set()).add(info)
+    seen.add(info)
     return info
 
 
-def _reads_object_info(tree, seen):
-    """Whether node tree `tree` (or a group in it) reads an Object Info node's output."""
+def _object_info_read(tree, seen):
+    """The Object Info outputs (identifiers) node tree `tree` and the groups in it read."""
     if tree is None or tree.name in seen:
-        return False
+        return set()
     seen.add(tree.name)
+    read = set()
     for node in tree.nodes:
-        if node.type == "OBJECT_INFO" and any(o.is_linked for o in node.outputs):
-            return True
-        if node.type == "GROUP" and _reads_object_info(node.node_tree, seen):
-            return True
-    return False
+        if node.type == "OBJECT_INFO":
+            read |= {o.identifier for o in node.outputs if o.is_linked}
+        elif node.type == "GROUP":
+            read |= _object_info_read(node.node_tree, seen)
+    return read
 
 
 def _hash_string(name):
@@ -1528,7 +1534,7 @@ def export_scene(depsgraph, test_break=lambda: False, need_camera=True):
     coordinates = {}  # material index → the mesh coordinates its procedural textures read
     meshes, lights = [], []
     cache = {}
-    variants = {}  # material name → its Object Info variants so far (None: it reads no Object Info)
+    variants = {}  # material name → (the Object Info outputs it reads, its variants) or None
     for k, inst in enumerate(depsgraph.object_instances):
         if k % 64 == 0 and test_break():
             raise ExportCancelled()

@@ -313,9 +313,10 @@ class _Graph:
 
     def _object_info(self, node, out, collect):
         """An Object Info output: the object's constant (`object_info`)."""
-        if _OBJECT is None or out.identifier not in OBJECT_INFO_OUTPUTS:
+        v = _OBJECT[OBJECT_INFO_OUTPUTS.index(out.identifier)] if (
+            _OBJECT is not None and out.identifier in OBJECT_INFO_OUTPUTS) else None
+        if v is None:
             raise Unsupported(f"output '{out.name}' of '{node.name}' (Object Info)")
-        v = _OBJECT[OBJECT_INFO_OUTPUTS.index(out.identifier)]
         if collect:
             self.signature.append(("object", out.identifier, v))
             return None

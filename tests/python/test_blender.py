@@ -1655,6 +1655,35 @@ def test_blackbody_node_agrees_with_cycles(bpy_mod, tmp_out):
     assert max(err) < 0.005, err
 
 
+def test_object_info_variants_follow_what_the_material_reads(bpy_mod):
+    """A material exported per object for Object Info makes one variant per distinct value
+    of the outputs it reads: six planes of two colours under a material reading only Color
+    give two materials; reading Random too, six."""
+    from gdmlt_blender import export
+
+    bpy = bpy_mod
+    for reads, want in (("Color", 2), ("Random", 6)):
+        bpy.ops.wm.read_factory_settings(use_empty=True)
+        mat = bpy.data.materials.new("ByObject")
+        nt = mat.node_tree
+        info, mix = nt.nodes.new("ShaderNodeObjectInfo"), nt.nodes.new("ShaderNodeMix")
+        mix.data_type = "RGBA"
+        nt.links.new(info.outputs["Color"], mix.inputs["A"])
+        if reads == "Random":
+            nt.links.new(info.outputs["Random"], mix.inputs["Factor"])
+        nt.links.new(mix.outputs["Result"], nt.nodes["Principled BSDF"].inputs["Base Color"])
+        for i in range(6):
+            bpy.ops.mesh.primitive_plane_add(size=0.5, location=(i, 0, 0))
+            ob = bpy.context.active_object
+            ob.data.materials.append(mat)
+            ob.color = (0.9, 0.2, 0.1, 1.0) if i % 2 else (0.1, 0.3, 0.9, 1.0)
+        cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
+        bpy.context.scene.collection.objects.link(cam)
+        bpy.context.scene.camera = cam
+        desc, warnings = export.export_scene(bpy.context.evaluated_depsgraph_get())
+        assert sum(m.get("name") == "ByObject" for m in desc["materials"]) == want, (reads, warnings)
+
+
 def test_blackbody_table_is_blenders_function(bpy_mod):
     """The add-on's blackbody table (tools/make_blackbody_table.py) against Blender's own
     colour (a light's Temperature colour) at 300 random temperatures inside and outside the
