@@ -1445,15 +1445,16 @@ def _warn_unrendered_outputs(node_out, warnings, what, skip=()):
 
 def camera_dict(scene, cam_ob, warnings=None):
     """The scene dict's camera: Perspective, Orthographic, or Panoramic › Equirectangular (its
-    latitude and longitude ranges; depth of field is not rendered for it, warned)."""
+    latitude and longitude ranges) or Fisheye Equidistant / Equisolid (field of view, lens);
+    depth of field is not rendered for a panoramic camera, warned."""
     cam = cam_ob.data
     r = scene.render
     kind = cam.type
     if kind == "PANO":
         pano = getattr(cam, "panorama_type", "")
-        if pano != "EQUIRECTANGULAR":
+        if pano not in ("EQUIRECTANGULAR", "FISHEYE_EQUIDISTANT", "FISHEYE_EQUISOLID"):
             raise ValueError(f"camera '{cam_ob.name}': panoramic type {pano} is not supported (use Equirectangular, "
-                             f"Perspective or Orthographic)")
+                             f"Fisheye Equidistant or Equisolid, Perspective or Orthographic)")
         kind = pano
     elif kind not in ("PERSP", "ORTHO"):
         raise ValueError(f"camera '{cam_ob.name}': {cam.type} cameras are not supported (use Perspective, "
@@ -1472,8 +1473,8 @@ def camera_dict(scene, cam_ob, warnings=None):
         d["pixel_filter"], d["filter_width"] = g.pixel_filter_type, g.filter_width
     if r.film_transparent:
         d["film_transparent"] = True
-    if kind == "EQUIRECTANGULAR":
-        for key in ("latitude_min", "latitude_max", "longitude_min", "longitude_max"):
+    if kind in ("EQUIRECTANGULAR", "FISHEYE_EQUIDISTANT", "FISHEYE_EQUISOLID"):
+        for key in ("latitude_min", "latitude_max", "longitude_min", "longitude_max", "fisheye_fov", "fisheye_lens"):
             d[key] = float(getattr(cam, key))
         if cam.dof.use_dof and warnings is not None:
             warnings.append(f"camera '{cam_ob.name}': depth of field is not rendered for a panoramic camera")

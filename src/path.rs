@@ -313,6 +313,9 @@ pub fn trace_path_from<S: Sampler>(
         p.lens = primary.lens;
     }
     let mut out = PathContribution::default();
+    if primary.ray.is_dead() {
+        return out; // (outside a fisheye's circle: no light)
+    }
     let mut st = PathState::new(primary.ray, cfg.nee && scene.has_lights(), !cfg.strict_glass_nee);
     let mut pending_hit = Some(primary.hit); // the camera ray's, traced by the caller
     let mut guide = Some(Spectrum::ONE); // the denoising guides' throughput, until they are written
@@ -702,6 +705,9 @@ pub struct FirstHit {
 /// renders trace a pixel's camera rays in packets).
 pub fn first_hit(scene: &Scene, cam: &CameraRay, hit: Option<TriHit>) -> FirstHit {
     let mut out = FirstHit::default();
+    if cam.is_dead() {
+        return out;
+    }
     let l = &mut out.very_direct;
     let tmax = hit.map_or(cam.tmax, |h| h.t);
     scene.for_each_light_crossed(cam.origin, cam.origin, cam.dir, tmax, true, |_, _, le, _| *l += le);
@@ -725,6 +731,9 @@ pub fn first_hit(scene: &Scene, cam: &CameraRay, hit: Option<TriHit>) -> FirstHi
 /// throughputs; 0 at an opaque surface): 1 − alpha of a transparent film, without the noise
 /// of choosing pass-through or not (the path's own `transparent` has the same mean).
 pub fn camera_transparency(scene: &Scene, cam: &CameraRay, hit: Option<TriHit>, max_crossings: u32) -> f32 {
+    if cam.is_dead() {
+        return 0.0; // (no view there: opaque black, as a path that adds nothing leaves the film)
+    }
     let mut t = Spectrum::ONE;
     let mut hit = hit;
     for _ in 0..=max_crossings {

@@ -549,7 +549,13 @@ fn parse_camera(d: &Bound<'_, PyDict>) -> PyResult<CameraDesc> {
             "PERSP" => Projection::Perspective,
             "ORTHO" => Projection::Orthographic,
             "EQUIRECTANGULAR" => Projection::Equirectangular,
-            p => return Err(verr(format!("camera: unsupported type '{p}' (PERSP, ORTHO or EQUIRECTANGULAR)"))),
+            "FISHEYE_EQUIDISTANT" => Projection::FisheyeEquidistant,
+            "FISHEYE_EQUISOLID" => Projection::FisheyeEquisolid,
+            p => {
+                return Err(verr(format!(
+                    "camera: unsupported type '{p}' (PERSP, ORTHO, EQUIRECTANGULAR, FISHEYE_EQUIDISTANT or FISHEYE_EQUISOLID)"
+                )))
+            }
         },
         sensor_fit: match fit.to_ascii_uppercase().as_str() {
             "AUTO" => SensorFit::Auto,
@@ -597,6 +603,8 @@ fn parse_camera(d: &Bound<'_, PyDict>) -> PyResult<CameraDesc> {
             get_or(d, "longitude_min", def.panorama[2], ctx)?,
             get_or(d, "longitude_max", def.panorama[3], ctx)?,
         ],
+        fisheye_fov: get_or(d, "fisheye_fov", def.fisheye_fov, ctx)?,
+        fisheye_lens: get_or(d, "fisheye_lens", def.fisheye_lens, ctx)?,
     })
 }
 
@@ -1140,8 +1148,12 @@ fn builtin_scene<'py>(py: Python<'py>, name: &str, width: u32, height: u32) -> P
             Projection::Perspective => "PERSP",
             Projection::Orthographic => "ORTHO",
             Projection::Equirectangular => "EQUIRECTANGULAR",
+            Projection::FisheyeEquidistant => "FISHEYE_EQUIDISTANT",
+            Projection::FisheyeEquisolid => "FISHEYE_EQUISOLID",
         },
     )?;
+    cd.set_item("fisheye_fov", c.fisheye_fov)?;
+    cd.set_item("fisheye_lens", c.fisheye_lens)?;
     for (k, v) in ["latitude_min", "latitude_max", "longitude_min", "longitude_max"].iter().zip(c.panorama) {
         cd.set_item(*k, v)?;
     }

@@ -798,6 +798,14 @@ def panorama(bpy):
     return scene
 
 
+def fisheye(bpy):
+    """The lights scene seen by a Panoramic › Fisheye Equidistant camera of 200° standing in
+    it: an ellipse over the frame, its corners black (no light there)."""
+    scene = panorama(bpy)
+    scene.camera.data.panorama_type, scene.camera.data.fisheye_fov = "FISHEYE_EQUIDISTANT", math.radians(200.0)
+    return scene
+
+
 def hdri(bpy):
     """The lights scene lit only by an HDRI world: one of the CC0 studio lights bpy ships (a
     1024×512 EXR) through an Environment Texture node, strength 0.8."""
@@ -852,6 +860,7 @@ SCENES = {
     "textured_mix": (textured_mix, 512, 16),
     "per_object": (per_object, 512, 16),
     "panorama": (panorama, 512, 16),
+    "fisheye": (fisheye, 512, 16),
     "all_lights": (checked_in("lights", {"Area", "Point", "Spot", "Sun", "World"}), 512, 16),
     "specular": (checked_in("specular"), 1024, 32),
     "textures": (checked_in("textures"), 512, 16),

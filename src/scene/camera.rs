@@ -7,6 +7,7 @@ use crate::error::SceneError;
 use crate::math::square_to_disk_concentric;
 use glam::{Mat4, Vec2, Vec3, Vec4};
 
+/// A camera ray; one with `tmax` 0 carries no light (`is_dead`: outside a fisheye's circle).
 #[derive(Clone, Copy, Debug, Default)]
 pub struct CameraRay {
     pub origin: Vec3,
@@ -14,6 +15,15 @@ pub struct CameraRay {
     pub dir: Vec3,
     pub tmin: f32,
     pub tmax: f32,
+}
+
+impl CameraRay {
+    /// The ray carries no light: the image has no view in this direction (Cycles' zero
+    /// direction outside a fisheye's circle: the sample adds nothing).
+    #[inline]
+    pub fn is_dead(&self) -> bool {
+        self.tmax <= 0.0
+    }
 }
 
 #[derive(Clone, Debug)]
@@ -47,6 +57,9 @@ pub struct Camera {
     /// An equirectangular camera's map from image coordinates (u, v) ∈ [0, 1]² (v up) to
     /// spherical angles, Cycles' range: φ = a·u + b, θ = c·v + d.
     equirect: Vec4,
+    /// A fisheye camera's field of view (radians) and lens (mm; `ext` is then its sensor, mm).
+    fisheye_fov: f32,
+    fisheye_lens: f32,
 }
 
 fn mat_from_rows(m: &[[f32; 4]; 4]) -> Mat4 {
@@ -119,8 +132,14 @@ impl Camera {
         {
             return err("panorama latitude and longitude ranges must be finite and not empty");
         }
+        if matches!(d.projection, Projection::FisheyeEquidistant | Projection::FisheyeEquisolid)
+            && !(positive(d.fisheye_fov) && positive(d.fisheye_lens) && positive(sensor))
+        {
+            return err("fisheye field of view, lens and sensor size must be positive");
+        }
         let s = match d.projection {
-            Projection::Equirectangular => 1.0, // (the image spans the angles: no sensor)
+            Projection::Equirectangular | Projection::FisheyeEquidistant => 1.0, // (the image spans angles)
+            Projection::FisheyeEquisolid => sensor, // (ext: the sensor, mm, as its fit gives it)
             Projection::Perspective => {
                 if !positive(d.lens) || !positive(sensor) {
                     return err("lens and sensor size must be positive");
@@ -204,13 +223,15 @@ impl Camera {
                 let [lat_min, lat_max, lon_min, lon_max] = d.panorama;
                 Vec4::new(lon_min - lon_max, -lon_min, lat_min - lat_max, std::f32::consts::FRAC_PI_2 - lat_min)
             },
+            fisheye_fov: d.fisheye_fov,
+            fisheye_lens: d.fisheye_lens,
         })
     }
 
     /// Depth of world point `p` as Cycles' Depth pass has it: its distance along the camera's
     /// viewing axis (camera-space z; not the ray length).
     pub fn axial_depth(&self, p: Vec3) -> f32 {
-        if self.projection == Projection::Equirectangular {
+        if self.is_panoramic() {
             return (p - self.to_world.w_axis.truncate()).length(); // (a panorama has no axis)
         }
         let forward = -self.to_world.z_axis.truncate(); // a Blender camera looks down its −Z
@@ -255,32 +276,70 @@ impl Camera {
         p
     }
 
-    /// The direction (camera space: −Z forward, +Y up) an equirectangular camera sees at image
-    /// coordinates (u, v), v up: Cycles' spherical angles (φ from its +X, θ from its +Z), its
-    /// panorama frame turned onto Blender's camera (forward −Z, up +Y, left −X).
+    /// A panoramic camera (equirectangular or fisheye): no view plane, clipping along the ray.
     #[inline]
-    fn equirect_direction(&self, u: f32, v: f32) -> Vec3 {
-        let r = self.equirect;
-        let (phi, theta) = (r.x * u + r.y, r.z * v + r.w);
-        let (sin_t, cos_t) = theta.sin_cos();
-        let (sin_p, cos_p) = phi.sin_cos();
-        let d = Vec3::new(sin_t * cos_p, sin_t * sin_p, cos_t); // (Cycles' panorama frame)
-        Vec3::new(-d.y, d.z, -d.x)
+    pub fn is_panoramic(&self) -> bool {
+        matches!(
+            self.projection,
+            Projection::Equirectangular | Projection::FisheyeEquidistant | Projection::FisheyeEquisolid
+        )
     }
 
-    /// Primary ray through `raster` (pixels, origin top-left), lens sample `u_lens`.
+    /// The direction (camera space: −Z forward, +Y up) a panoramic camera sees at image
+    /// coordinates (u, v) ∈ [0, 1]², v up, as Cycles maps them in its panorama frame (+X
+    /// forward, +Z up), turned onto Blender's camera (forward −Z, up +Y, left −X); None
+    /// outside a fisheye's circle, where the image receives no light.
+    #[inline]
+    fn panorama_direction(&self, u: f32, v: f32) -> Option<Vec3> {
+        let d = match self.projection {
+            Projection::Equirectangular => {
+                let r = self.equirect;
+                let (phi, theta) = (r.x * u + r.y, r.z * v + r.w);
+                let (sin_t, cos_t) = theta.sin_cos();
+                let (sin_p, cos_p) = phi.sin_cos();
+                Vec3::new(sin_t * cos_p, sin_t * sin_p, cos_t)
+            }
+            // angle θ from the axis by the distance from the centre: r·fov/2 (equidistant, r
+            // ∈ [0, 1] over the frame's half width and height), 2·asin(r/2f) (equisolid, r in
+            // mm on the sensor); φ the direction around the axis
+            _ => {
+                let (x, y, theta) = if self.projection == Projection::FisheyeEquidistant {
+                    let (x, y) = (2.0 * u - 1.0, 2.0 * v - 1.0);
+                    let r = (x * x + y * y).sqrt();
+                    if r > 1.0 {
+                        return None;
+                    }
+                    (x, y, r * self.fisheye_fov * 0.5)
+                } else {
+                    let (x, y) = ((u - 0.5) * self.ext.x, (v - 0.5) * self.ext.y);
+                    let r = (x * x + y * y).sqrt();
+                    let theta = 2.0 * (r / (2.0 * self.fisheye_lens)).min(1.0).asin();
+                    if theta > self.fisheye_fov * 0.5 || r > 2.0 * self.fisheye_lens {
+                        return None;
+                    }
+                    (x, y, theta)
+                };
+                let r = (x * x + y * y).sqrt();
+                let (cos_p, sin_p) = if r > 0.0 { (x / r, y / r) } else { (1.0, 0.0) };
+                let (sin_t, cos_t) = theta.sin_cos();
+                Vec3::new(cos_t, -cos_p * sin_t, sin_p * sin_t)
+            }
+        };
+        Some(Vec3::new(-d.y, d.z, -d.x))
+    }
+
+    /// Primary ray through `raster` (pixels, origin top-left), lens sample `u_lens`. A
+    /// panoramic camera's ray outside its image circle carries no light (`CameraRay::is_dead`).
     pub fn generate_ray(&self, raster: Vec2, u_lens: Vec2) -> CameraRay {
-        if self.projection == Projection::Equirectangular {
+        if self.is_panoramic() {
             let raster = raster + self.offset;
-            let d = self.equirect_direction(raster.x / self.full.x, 1.0 - raster.y / self.full.y);
+            let origin = self.to_world.w_axis.truncate();
+            let Some(d) = self.panorama_direction(raster.x / self.full.x, 1.0 - raster.y / self.full.y) else {
+                return CameraRay { origin, dir: -self.to_world.z_axis.truncate(), tmin: 0.0, tmax: 0.0 };
+            };
             let dir = self.to_world.transform_vector3(d).normalize();
             // (clipping along the ray: a panorama has no view axis)
-            return CameraRay {
-                origin: self.to_world.w_axis.truncate(),
-                dir,
-                tmin: self.clip_start,
-                tmax: self.clip_end,
-            };
+            return CameraRay { origin, dir, tmin: self.clip_start, tmax: self.clip_end };
         }
         let q = self.plane_point(raster);
         let (o_cam, d_cam, axial) = match self.projection {
@@ -307,7 +366,7 @@ impl Camera {
                 }
             }
             Projection::Orthographic => (Vec3::new(q.x, q.y, 0.0), Vec3::NEG_Z, 1.0),
-            Projection::Equirectangular => unreachable!("handled above"),
+            _ => unreachable!("panoramas are handled above"),
         };
         // Clipping distances are measured along the view axis, as in Blender.
         let origin = self.to_world.transform_point3(o_cam);
@@ -318,11 +377,28 @@ impl Camera {
     /// Raster position (pixels, y from the top) of a world point, if in front of the camera.
     pub fn project(&self, p: Vec3) -> Option<Vec2> {
         let pc = self.to_world.inverse().transform_point3(p);
-        if self.projection == Projection::Equirectangular {
+        if self.is_panoramic() {
             let d = pc.normalize_or_zero(); // (back to Cycles' panorama frame)
             let (x, y, z) = (-d.z, -d.x, d.y);
-            let r = self.equirect;
-            let (u, v) = ((y.atan2(x) - r.y) / r.x, (z.clamp(-1.0, 1.0).acos() - r.w) / r.z);
+            let (u, v) = match self.projection {
+                Projection::Equirectangular => {
+                    let r = self.equirect;
+                    ((y.atan2(x) - r.y) / r.x, (z.clamp(-1.0, 1.0).acos() - r.w) / r.z)
+                }
+                _ => {
+                    let theta = x.clamp(-1.0, 1.0).acos();
+                    if theta > self.fisheye_fov * 0.5 {
+                        return None;
+                    }
+                    let phi = z.atan2(-y);
+                    let (r, size) = if self.projection == Projection::FisheyeEquidistant {
+                        (theta / (self.fisheye_fov * 0.5), Vec2::splat(2.0))
+                    } else {
+                        (2.0 * self.fisheye_lens * (theta * 0.5).sin(), self.ext)
+                    };
+                    (r * phi.cos() / size.x + 0.5, r * phi.sin() / size.y + 0.5)
+                }
+            };
             return Some(Vec2::new(u * self.full.x, (1.0 - v) * self.full.y) - self.offset);
         }
         let depth = -pc.z;
@@ -334,7 +410,7 @@ impl Camera {
                 Vec2::new(pc.x / depth, pc.y / depth)
             }
             Projection::Orthographic => Vec2::new(pc.x, pc.y),
-            Projection::Equirectangular => unreachable!("handled above"),
+            _ => unreachable!("panoramas are handled above"),
         };
         let u = (q.x - self.center.x) / self.ext.x + 0.5;
         let v = (q.y - self.center.y) / self.ext.y + 0.5;
@@ -420,11 +496,28 @@ mod tests {
         d.shift_y = -0.2;
         d.sensor_fit = SensorFit::Vertical;
         d.resolution_percentage = 50;
-        for proj in [Projection::Perspective, Projection::Orthographic, Projection::Equirectangular] {
+        for proj in [
+            Projection::Perspective,
+            Projection::Orthographic,
+            Projection::Equirectangular,
+            Projection::FisheyeEquidistant,
+            Projection::FisheyeEquisolid,
+        ] {
             d.projection = proj;
             let cam = Camera::new(&d).unwrap();
             assert_eq!((cam.width, cam.height), (100, 50));
-            for raster in [Vec2::new(0.5, 0.5), Vec2::new(73.2, 12.9), Vec2::new(99.0, 49.0)] {
+            let fisheye = matches!(proj, Projection::FisheyeEquidistant | Projection::FisheyeEquisolid);
+            // (inside the fisheyes' circles: a 180° equidistant spans the frame; the equisolid's
+            // 10.5 mm lens on a 12 mm-high sensor of twice that width)
+            let rasters: &[Vec2] = if fisheye {
+                &[Vec2::new(50.5, 25.5), Vec2::new(62.2, 20.9), Vec2::new(41.0, 33.0)]
+            } else {
+                &[Vec2::new(0.5, 0.5), Vec2::new(73.2, 12.9), Vec2::new(99.0, 49.0)]
+            };
+            if fisheye {
+                assert!(cam.generate_ray(Vec2::new(0.5, 0.5), Vec2::ZERO).is_dead(), "{proj:?}: a corner sees nothing");
+            }
+            for &raster in rasters {
                 let r = cam.generate_ray(raster, Vec2::splat(0.5));
                 let p = r.origin + r.dir * 4.0;
                 let back = cam.project(p).unwrap();

@@ -319,6 +319,12 @@ pub enum Projection {
     /// Blender's Panoramic › Equirectangular camera: longitude across the image, latitude up
     /// it, over `CameraDesc::panorama` (a 360° × 180° image by default), as Cycles maps it.
     Equirectangular,
+    /// Panoramic › Fisheye Equidistant: the angle from the view axis grows with the distance
+    /// from the image's centre, `CameraDesc::fisheye_fov` across the frame's width and height.
+    FisheyeEquidistant,
+    /// Panoramic › Fisheye Equisolid: a fisheye lens of `fisheye_lens` mm on the sensor,
+    /// r = 2f·sin(θ/2), cut at `fisheye_fov`.
+    FisheyeEquisolid,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -381,6 +387,9 @@ pub struct CameraDesc {
     pub backdrop_rotation: Option<[[f32; 3]; 3]>,
     /// An equirectangular camera's ranges (radians): latitude min, max, longitude min, max.
     pub panorama: [f32; 4],
+    /// A fisheye camera's field of view (radians) and, for the equisolid one, its lens (mm).
+    pub fisheye_fov: f32,
+    pub fisheye_lens: f32,
 }
 
 impl Default for CameraDesc {
@@ -420,6 +429,8 @@ impl Default for CameraDesc {
                 -std::f32::consts::PI,
                 std::f32::consts::PI,
             ],
+            fisheye_fov: std::f32::consts::PI,
+            fisheye_lens: 10.5,
         }
     }
 }

@@ -798,35 +798,46 @@ def test_orthographic_and_depth_of_field_cameras_agree_with_cycles(bpy_mod, tmp_
     assert_agrees_with_cycles(bpy_mod, build, tmp_out, kind, block=5)
 
 
-@pytest.mark.parametrize("ranges", ["full", "narrow"])
-def test_equirectangular_camera_agrees_with_cycles(bpy_mod, tmp_out, ranges):
-    """The lights scene through a Panoramic › Equirectangular camera (a 360° × 180° view, and
-    one narrowed to latitudes −30…60° and longitudes −100…80°), turned and placed inside the
-    scene, against Cycles. Before, the camera was refused ("PANO cameras are not supported")."""
+@pytest.mark.parametrize("kind", ["full", "narrow", "equidistant", "equisolid"])
+def test_panoramic_cameras_agree_with_cycles(bpy_mod, tmp_out, kind):
+    """The lights scene (with its world) through a Panoramic camera turned and placed inside
+    the scene, against Cycles: Equirectangular (a 360° × 180° view, and one narrowed to
+    latitudes −30…60° and longitudes −100…80°), Fisheye Equidistant (a 200° view over a 2:1
+    frame: an ellipse, black outside) and Fisheye Equisolid (a 12 mm lens of 180°, vertical
+    sensor fit). Before, these cameras were refused ("PANO cameras are not supported")."""
     def build(bpy, engine, spp, seed):
-        scene = open_scene(bpy, "lights", engine, spp, seed, keep={"Area", "Point", "Sun"})
+        scene = open_scene(bpy, "lights", engine, spp, seed, keep={"Area", "Point", "Sun", "World"})
         cam = scene.camera
-        cam.data.type, cam.data.panorama_type = "PANO", "EQUIRECTANGULAR"
+        cam.data.type = "PANO"
         cam.location, cam.rotation_euler = (0.3, -1.5, 1.2), (1.3, 0.1, 0.4)
-        if ranges == "narrow":
+        if kind in ("full", "narrow"):
+            cam.data.panorama_type = "EQUIRECTANGULAR"
+        if kind == "narrow":
             cam.data.latitude_min, cam.data.latitude_max = math.radians(-30.0), math.radians(60.0)
             cam.data.longitude_min, cam.data.longitude_max = math.radians(-100.0), math.radians(80.0)
+        if kind == "equidistant":
+            cam.data.panorama_type, cam.data.fisheye_fov = "FISHEYE_EQUIDISTANT", math.radians(200.0)
+        if kind == "equisolid":
+            cam.data.panorama_type, cam.data.fisheye_lens = "FISHEYE_EQUISOLID", 12.0
+            cam.data.fisheye_fov, cam.data.sensor_fit, cam.data.sensor_height = math.pi, "VERTICAL", 30.0
         r = scene.render
         r.resolution_x, r.resolution_y, r.resolution_percentage = 128, 64, 100
         return scene
 
-    assert_agrees_with_cycles(bpy_mod, build, tmp_out, f"equirect{ranges}", block=4)
+    c, _ = assert_agrees_with_cycles(bpy_mod, build, tmp_out, f"pano{kind}", block=4)
+    if kind.startswith("equi"):  # the corners lie outside the image circle: black
+        assert c[0, 0].max() == 0.0 and c[-1, -1].max() == 0.0
 
 
 def test_other_panoramic_cameras_are_refused_naming_the_camera(bpy_mod):
-    """A fisheye (or mirror ball, cubemap face, cylindrical) camera is an error naming the
-    camera and its type, not a wrong image."""
+    """A mirror ball (or cubemap face, lens polynomial, cylindrical) camera is an error naming
+    the camera and its type, not a wrong image."""
     from gdmlt_blender import export
 
     bpy = bpy_mod
     scene = open_scene(bpy, "lights", "GDMLT", 4, 1)
-    scene.camera.data.type, scene.camera.data.panorama_type = "PANO", "FISHEYE_EQUISOLID"
-    with pytest.raises(ValueError, match=f"camera '{scene.camera.name}': panoramic type FISHEYE_EQUISOLID"):
+    scene.camera.data.type, scene.camera.data.panorama_type = "PANO", "MIRRORBALL"
+    with pytest.raises(ValueError, match=f"camera '{scene.camera.name}': panoramic type MIRRORBALL"):
         export.export_scene(bpy.context.evaluated_depsgraph_get())
 
 

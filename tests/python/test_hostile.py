@@ -457,9 +457,9 @@ def test_a_bad_camera_backdrop_is_refused():
 
 
 def test_bad_panorama_ranges_are_refused():
-    """An equirectangular camera whose latitude or longitude range is empty, reversed or NaN
-    is a message naming the camera's panorama ranges, not a black frame; a good one renders
-    finite."""
+    """An equirectangular camera whose latitude or longitude range is empty, reversed or NaN,
+    a fisheye of no field of view or lens, is a message naming the camera, not a black frame;
+    good ones render finite."""
     import numpy as np
 
     d = gdmlt.builtin_scene("cornell", 16, 8)
@@ -470,6 +470,12 @@ def test_bad_panorama_ranges_are_refused():
     res = gdmlt.render(gdmlt.Scene(d), spp=2, seed=1)
     img = res["layers"]["Combined"]
     assert np.isfinite(img).all() and img.mean() > 0
+    d["camera"]["type"] = "FISHEYE_EQUISOLID"
+    for key, bad in [("fisheye_fov", 0.0), ("fisheye_lens", -1.0), ("fisheye_fov", float("nan"))]:
+        with pytest.raises(ValueError, match="camera.*fisheye field of view, lens and sensor size must be positive"):
+            gdmlt.Scene(dict(d, camera=dict(d["camera"], **{key: bad})))
+    img = gdmlt.render(gdmlt.Scene(d), spp=2, seed=1)["layers"]["Combined"]
+    assert np.isfinite(img).all() and img.mean() > 0 and img[0, 0].max() == 0.0  # (a corner: no light)
 
 
 def test_bad_corner_colours_are_refused_naming_the_mesh():
