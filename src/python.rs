@@ -538,6 +538,20 @@ fn parse_light(d: &Bound<'_, PyDict>) -> PyResult<LightDesc> {
     })
 }
 
+/// Optional 3×3 matrix `key` of `d` (rows; None when absent or None).
+fn rotation3(d: &Bound<'_, PyDict>, key: &'static str, ctx: &str) -> PyResult<Option<[[f32; 3]; 3]>> {
+    match item(d, key)? {
+        Some(r) if !r.is_none() => {
+            let v = floats(&r, 3, &format!("{ctx}: {key}"))?;
+            if v.len() != 9 {
+                return Err(verr(format!("{ctx}: {key} must be 3×3")));
+            }
+            Ok(Some([0, 1, 2].map(|i| [v[3 * i], v[3 * i + 1], v[3 * i + 2]])))
+        }
+        _ => Ok(None),
+    }
+}
+
 fn parse_camera(d: &Bound<'_, PyDict>) -> PyResult<CameraDesc> {
     let ctx = "camera";
     let def = CameraDesc::default();
@@ -587,16 +601,7 @@ fn parse_camera(d: &Bound<'_, PyDict>) -> PyResult<CameraDesc> {
         film_transparent: get_or(d, "film_transparent", false, ctx)?,
         backdrop: get_or(d, "backdrop", None, ctx)?,
         backdrop_texture: get_or(d, "backdrop_texture", None, ctx)?,
-        backdrop_rotation: match item(d, "backdrop_rotation")? {
-            Some(r) if !r.is_none() => {
-                let v = floats(&r, 3, "camera: backdrop_rotation")?;
-                if v.len() != 9 {
-                    return Err(verr("camera: backdrop_rotation must be 3×3"));
-                }
-                Some([0, 1, 2].map(|i| [v[3 * i], v[3 * i + 1], v[3 * i + 2]]))
-            }
-            _ => None,
-        },
+        backdrop_rotation: rotation3(d, "backdrop_rotation", ctx)?,
         panorama: [
             get_or(d, "latitude_min", def.panorama[0], ctx)?,
             get_or(d, "latitude_max", def.panorama[1], ctx)?,
@@ -691,16 +696,7 @@ fn parse_scene(d: &Bound<'_, PyDict>) -> PyResult<SceneDesc> {
         world: get_or(d, "world", [0.0; 3], "scene")?,
         world_texture: get_or(d, "world_texture", None, "scene")?,
         general_paths: get_or(d, "general_paths", false, "scene")?,
-        world_rotation: match item(d, "world_rotation")? {
-            Some(r) if !r.is_none() => {
-                let v = floats(&r, 3, "scene: world_rotation")?;
-                if v.len() != 9 {
-                    return Err(verr("scene: world_rotation must be 3×3"));
-                }
-                Some([0, 1, 2].map(|i| [v[3 * i], v[3 * i + 1], v[3 * i + 2]]))
-            }
-            _ => None,
-        },
+        world_rotation: rotation3(d, "world_rotation", "scene")?,
     })
 }
 
