@@ -127,6 +127,9 @@ pub struct Vertex {
     pub unmapped: Vec3,
     /// Seen by the camera's ray (`SurfaceInteraction::camera`).
     pub camera: bool,
+    /// The shift mapping's class of the BSDF here, seen from `wo` (`Bsdf::is_diffuse`),
+    /// kept so that the offsets of one base path do not rebuild the BSDF to ask.
+    pub diffuse: bool,
     /// Unit direction towards the previous vertex (world).
     pub wo: Vec3,
     /// Path throughput arriving at this vertex (product of f·cos/pdf and 1/RR so far).
@@ -150,7 +153,7 @@ impl Vertex {
     /// with throughput `throughput` by a sample of pdf `pdf_in`; its outgoing half is filled
     /// in when the path continues.
     #[inline]
-    fn at(si: &SurfaceInteraction, wo: Vec3, throughput: Spectrum, pdf_in: f32) -> Vertex {
+    fn at(si: &SurfaceInteraction, wo: Vec3, throughput: Spectrum, pdf_in: f32, diffuse: bool) -> Vertex {
         Vertex {
             p: si.p,
             ng: si.ng,
@@ -162,6 +165,7 @@ impl Vertex {
             color: si.color,
             unmapped: si.unmapped,
             camera: si.camera,
+            diffuse,
             wo,
             throughput,
             pdf_in,
@@ -235,7 +239,7 @@ impl Event {
         if self.as_cycles_light {
             bsdf.eval_light_sample(wo, wi, true, (!self.delta).then_some(pdf_l))
         } else {
-            (bsdf.eval(wo, wi), bsdf.pdf(wo, wi))
+            bsdf.eval_pdf(wo, wi)
         }
     }
 }
@@ -392,7 +396,7 @@ pub fn trace_path_from<S: Sampler>(
             }
         }
         if let Some(p) = record.as_deref_mut() {
-            p.vertices.push(Vertex::at(&si, -st.d, st.beta, st.prev_pdf));
+            p.vertices.push(Vertex::at(&si, -st.d, st.beta, st.prev_pdf, bsdf.is_diffuse()));
         }
 
         // 5. this vertex's primary samples, consumed in their fixed order

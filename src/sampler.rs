@@ -74,7 +74,8 @@ pub struct SobolSampler {
     /// The sample's index, bit-reversed once (`sobol::sample_4d_reversed`).
     index_reversed: u32,
     seed: u32,
-    dim: u32,
+    /// The next dimension's component in the current set (`layout`, followed incrementally).
+    in_set: u32,
     set: u32,
     cache: [f32; 4],
     fallback: Option<IndependentSampler>,
@@ -88,15 +89,16 @@ impl SobolSampler {
         SobolSampler {
             index_reversed: (index << 16).reverse_bits(),
             seed: mix64(seed ^ mix64(stream)) as u32,
-            dim: 0,
+            in_set: 4,
             set: u32::MAX,
             cache: [0.0; 4],
             fallback,
         }
     }
 
-    /// The 4-D set and its component that dimension `d` of the stream falls in.
-    #[inline]
+    /// The 4-D set and its component that dimension `d` of the stream falls in (`next_1d`
+    /// follows it incrementally; the tests check the two agree).
+    #[cfg_attr(not(test), allow(dead_code))]
     fn layout(d: u32) -> (u32, usize) {
         if d < PIXEL_DIMENSIONS {
             return (0, d as usize);
@@ -113,14 +115,19 @@ impl Sampler for SobolSampler {
         if let Some(f) = &mut self.fallback {
             return f.next_1d();
         }
-        let (set, k) = Self::layout(self.dim);
-        self.dim += 1;
-        if set != self.set {
+        // `layout` followed incrementally: the sets come in order, set 0 and every odd set
+        // 4 dimensions long, every even set after 0 3 (a vertex's second set)
+        let mut k = self.in_set;
+        let len = if self.set != 0 && self.set.is_multiple_of(2) { 3 } else { 4 };
+        if k >= len {
+            let set = self.set.wrapping_add(1);
             let set_seed = mix64(((self.seed as u64) << 32) | set as u64) as u32;
             self.cache = crate::sobol::sample_4d_reversed(self.index_reversed, set_seed);
             self.set = set;
+            k = 0;
         }
-        self.cache[k].min(1.0 - f32::EPSILON / 2.0)
+        self.in_set = k + 1;
+        self.cache[k as usize].min(1.0 - f32::EPSILON / 2.0)
     }
 }
 
@@ -350,6 +357,22 @@ mod pss_tests {
         for h in hist {
             let p = h as f64 / n as f64;
             assert!((p - 0.1).abs() < 0.01, "{hist:?}");
+        }
+    }
+
+    /// `next_1d` walks the sets as `layout` defines them: dimension d is component
+    /// layout(d).1 of set layout(d).0's point, for the first 100 dimensions of many samples.
+    #[test]
+    fn sobol_stream_follows_its_layout() {
+        for i in [0u32, 1, 5, 77, 4095] {
+            let mut s = SobolSampler::new(3, 9, i);
+            let seed = s.seed;
+            for d in 0..100 {
+                let (set, k) = SobolSampler::layout(d);
+                let set_seed = mix64(((seed as u64) << 32) | set as u64) as u32;
+                let want = crate::sobol::sample_4d_reversed((i << 16).reverse_bits(), set_seed)[k];
+                assert_eq!(s.next_1d(), want.min(1.0 - f32::EPSILON / 2.0), "sample {i}, dimension {d}");
+            }
         }
     }
 

@@ -5,7 +5,7 @@
 //! The offset starts with the camera ray through the neighbour pixel at the same sub-pixel
 //! position and lens sample (J = 1), hitting y0. Then, vertex by vertex, while the offset
 //! is still *free* (has its own vertex y_k):
-//! * x_k, y_k and x_{k+1} all diffuse (roughness above [`SPECULAR_ROUGHNESS_THRESHOLD`]):
+//! * x_k, y_k and x_{k+1} all diffuse (roughness above [`crate::bsdf::SPECULAR_ROUGHNESS_THRESHOLD`]):
 //!   **reconnect** y_k → x_{k+1}; the paths share every vertex after that;
 //! * otherwise **copy the half-vector** of the base's bounce at x_k into y_k's local frame and
 //!   reflect or refract y_k's incoming direction about it, trace to y_{k+1}, and require
@@ -30,7 +30,7 @@
 //! base and offset, which is what makes that rule unbiased.
 
 use crate::accel::TriHit;
-use crate::bsdf::{refraction_half_vector, Bsdf, SPECULAR_ROUGHNESS_THRESHOLD};
+use crate::bsdf::{refraction_half_vector, Bsdf};
 use crate::math::Spectrum;
 use crate::path::{Event, Path, Vertex, CAMERA_VERTEX};
 use crate::scene::{CameraRay, Scene, SurfaceInteraction};
@@ -112,18 +112,6 @@ fn bsdf_seen(scene: &Scene, v: &Vertex, wo: Vec3) -> Bsdf {
     scene.bsdf(v.material, v.front, v.tex, v.color, v.unmapped, wo, v.camera)
 }
 
-/// The shift's vertex class: diffuse (reconnectable) or not.
-#[inline]
-fn is_diffuse(scene: &Scene, v: &Vertex) -> bool {
-    diffuse(&bsdf_at(scene, v))
-}
-
-/// The class of a vertex with BSDF `b`.
-#[inline]
-fn diffuse(b: &Bsdf) -> bool {
-    b.min_roughness() > SPECULAR_ROUGHNESS_THRESHOLD
-}
-
 /// Visibility from a surface point to a point (or, at infinity, along a direction) on a
 /// side the path builder scatters and samples lights towards: on one side of both the
 /// geometric and the shading normal, and on the far side only where the surface transmits
@@ -172,7 +160,7 @@ impl Free {
         let (wo, wi) = (self.y.frame.to_local(self.wo), self.y.frame.to_local(dir));
         match e {
             Some((e, pdf_l)) => e.bsdf_eval(&bsdf, wo, wi, pdf_l),
-            None => (bsdf.eval(wo, wi), bsdf.pdf(wo, wi)),
+            None => bsdf.eval_pdf(wo, wi),
         }
     }
 }
@@ -240,8 +228,8 @@ impl<'a> Offset<'a> {
             let x0 = base.vertices.first()?;
             let (ray, hit) = primary?;
             let y = SurfaceInteraction { camera: true, ..scene.interaction(&hit?, ray.dir) };
-            let diffuse = is_diffuse(scene, x0);
-            (diffuse == self::diffuse(&scene.bsdf_at(&y))).then_some(State::Free(Free {
+            let diffuse = x0.diffuse;
+            (diffuse == scene.bsdf_at(&y).is_diffuse()).then_some(State::Free(Free {
                 y,
                 wo: -ray.dir,
                 beta: Spectrum::ONE,
@@ -285,19 +273,19 @@ impl<'a> Offset<'a> {
                 if !(x.pdf_out > 0.0) {
                     State::Failed
                 } else {
-                    let fy = bsdf.eval(wo, wi);
-                    State::Same { beta: beta * fy / (x.pdf_out * x.rr), r: r * bsdf.pdf(wo, wi) / x.pdf_out }
+                    let (fy, pdf) = bsdf.eval_pdf(wo, wi);
+                    State::Same { beta: beta * fy / (x.pdf_out * x.rr), r: r * pdf / x.pdf_out }
                 }
             }
             (State::Free(f), Some(xn)) => {
                 let xk = &base.vertices[k];
-                let next_diffuse = is_diffuse(scene, xn);
+                let next_diffuse = xn.diffuse;
                 if f.diffuse && next_diffuse {
                     reconnect(scene, xk, xn, &f).unwrap_or(State::Failed)
                 } else {
                     match self.step(&f) {
                         Some(Step { hit: Some(y), dir, f: fy, pdf, j, .. })
-                            if diffuse(&scene.bsdf_at(&y)) == next_diffuse =>
+                            if scene.bsdf_at(&y).is_diffuse() == next_diffuse =>
                         {
                             State::Free(Free {
                                 y,
@@ -422,7 +410,8 @@ fn half_vector_step(scene: &Scene, x: &Vertex, f: &Free) -> Option<Step> {
     } else {
         let eta_y = if refraction { bsdf.eta() } else { 1.0 };
         let (wi, j) = half_vector_copy(wo_x, wi_x, x.eta_out, wo_y, eta_y)?;
-        (wi, bsdf.eval(wo_y, wi), bsdf.pdf(wo_y, wi), j, eta_y)
+        let (f, pdf) = bsdf.eval_pdf(wo_y, wi);
+        (wi, f, pdf, j, eta_y)
     };
     if !(pdf > 0.0) {
         return None;
@@ -566,7 +555,7 @@ pub fn offset_path(scene: &Scene, base: &Path, offset_raster: Vec2) -> Path {
                     pdf_in: own_pdf_in,
                     ..x
                 };
-                let next_diffuse = base.vertices.get(offset.k + 1).map(|n| is_diffuse(scene, n));
+                let next_diffuse = base.vertices.get(offset.k + 1).map(|n| n.diffuse);
                 if !(f.diffuse && next_diffuse == Some(true)) {
                     if let Some(s) = offset.step(&f) {
                         v.wi = s.dir;
@@ -594,8 +583,7 @@ pub fn offset_path(scene: &Scene, base: &Path, offset_raster: Vec2) -> Path {
                 let bsdf = bsdf_seen(scene, &x, wo);
                 let wo_world = x.frame.to_world(wo);
                 let wi = x.frame.to_local(x.wi);
-                let (fv, pdf) =
-                    if x.pdf_out > 0.0 { (bsdf.eval(wo, wi), bsdf.pdf(wo, wi)) } else { (Spectrum::ZERO, 0.0) };
+                let (fv, pdf) = if x.pdf_out > 0.0 { bsdf.eval_pdf(wo, wi) } else { (Spectrum::ZERO, 0.0) };
                 out.vertices.push(Vertex {
                     wo: wo_world,
                     throughput: own_beta,
@@ -831,7 +819,7 @@ mod tests {
             trace_path(&scene, &cfg, raster, &mut smp, Some(&mut base));
             for e in base.events.iter().filter(|e| !e.nee && e.vertex != CAMERA_VERTEX && !e.delta) {
                 let x = &base.vertices[e.vertex as usize];
-                if x.delta_out || is_diffuse(&scene, x) || !scene.is_triangle_light(e.light) {
+                if x.delta_out || x.diffuse || !scene.is_triangle_light(e.light) {
                     continue;
                 }
                 let as_light_sample = Event { nee: true, ..*e };
@@ -858,6 +846,29 @@ mod tests {
             }
         }
         assert!(compared > 50, "only {compared} light hits from free non-diffuse vertices");
+    }
+
+    /// The class a base vertex keeps (`Vertex::diffuse`, set by the path builder) is the
+    /// class of its BSDF rebuilt from the vertex, on paths through diffuse, glossy, mirror and
+    /// glass surfaces.
+    #[test]
+    fn kept_vertex_classes_are_their_bsdfs_classes() {
+        use crate::path::{trace_path, PathSettings};
+        use crate::sampler::{IndependentSampler, Sampler};
+        let scene = Scene::build(&crate::scene::builtin::cornell_spheres(32, 32)).unwrap();
+        let cfg = PathSettings::new(6, true);
+        let mut base = Path::default();
+        let mut seen = [0usize; 2];
+        for i in 0..2000u64 {
+            let mut smp = IndependentSampler::new(5, i);
+            let raster = Vec2::new((i % 32) as f32, ((i / 32) % 32) as f32) + smp.next_2d();
+            trace_path(&scene, &cfg, raster, &mut smp, Some(&mut base));
+            for v in &base.vertices {
+                assert_eq!(v.diffuse, bsdf_at(&scene, v).is_diffuse(), "sample {i} at {}", v.p);
+                seen[usize::from(v.diffuse)] += 1;
+            }
+        }
+        assert!(seen[0] > 100 && seen[1] > 1000, "vertices (specular, diffuse): {seen:?}");
     }
 
     #[test]

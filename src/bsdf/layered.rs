@@ -135,7 +135,7 @@ impl Layered {
     /// f·cos θi and the sampling density together, for the layer albedo `e` = s·E(θo): the
     /// table is read and the microfacet terms evaluated once for both.
     #[inline]
-    fn eval_pdf(&self, wo: Vec3, wi: Vec3, e: Spectrum) -> (Spectrum, f32) {
+    fn eval_pdf_with(&self, wo: Vec3, wi: Vec3, e: Spectrum) -> (Spectrum, f32) {
         if wi.z <= 0.0 {
             return (Spectrum::ZERO, 0.0);
         }
@@ -152,11 +152,17 @@ impl Layered {
     }
 
     pub fn eval(&self, wo: Vec3, wi: Vec3) -> Spectrum {
-        self.eval_pdf(wo, wi, self.layer_albedo(wo.z)).0
+        self.eval_pdf(wo, wi).0
     }
 
     pub fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
-        self.eval_pdf(wo, wi, self.layer_albedo(wo.z)).1
+        self.eval_pdf(wo, wi).1
+    }
+
+    /// (`eval`, `pdf`) from one evaluation.
+    #[inline]
+    pub fn eval_pdf(&self, wo: Vec3, wi: Vec3) -> (Spectrum, f32) {
+        self.eval_pdf_with(wo, wi, self.layer_albedo(wo.z))
     }
 
     pub fn sample(&self, wo: Vec3, u_lobe: f32, u: Vec2) -> Option<BsdfSample> {
@@ -179,7 +185,7 @@ impl Layered {
         } else {
             self.base.sample(wo, u)?.wi
         };
-        let (f, pdf) = self.eval_pdf(wo, wi, e);
+        let (f, pdf) = self.eval_pdf_with(wo, wi, e);
         if wi.z <= 0.0 || !(pdf > 0.0) {
             return None;
         }

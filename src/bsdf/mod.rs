@@ -198,6 +198,41 @@ impl Bsdf {
         }
     }
 
+    /// (`eval`, `pdf`) together, the same values bit for bit: a lobe that shares work
+    /// between the two (the layered base's table read and microfacet terms, the coat's)
+    /// does it once.
+    #[inline]
+    pub fn eval_pdf(&self, wo: Vec3, wi: Vec3) -> (Spectrum, f32) {
+        match self {
+            Bsdf::Layered(b) => b.eval_pdf(wo, wi),
+            Bsdf::Principled { diffuse, metal, glass, w, pass, coat, translucent, .. } => {
+                let mut f = translucent.eval(wi);
+                let mut p = translucent.weight * translucent.pdf(wi);
+                if w[0] > 0.0 {
+                    let (fd, pd) = diffuse.eval_pdf(wo, wi);
+                    f += fd * w[0];
+                    p += pd * w[0];
+                }
+                if w[1] > 0.0 {
+                    f += metal.eval(wo, wi) * w[1];
+                    p += metal.pdf(wo, wi) * w[1];
+                }
+                if w[2] > 0.0 {
+                    f += glass.eval(wo, wi) * w[2];
+                    p += glass.pdf(wo, wi) * w[2];
+                }
+                if coat.is_some() {
+                    let (fc, pdf_c) = coat.eval_pdf(wo, wi);
+                    f = f * coat.factor(wo.z) + Spectrum::splat(fc * (1.0 - pass));
+                    let pc = self.coat_choice(wo);
+                    p = p * (1.0 - pc) + pc * (1.0 - pass) * pdf_c;
+                }
+                (f, p)
+            }
+            _ => (self.eval(wo, wi), self.pdf(wo, wi)),
+        }
+    }
+
     /// (f·|cos θi|, BSDF pdf) of a light sample's direction, whose light pdf is `pdf_l` (None:
     /// a delta light, for which the pdf is not needed and is 0, as where f is 0). With
     /// `as_cycles`, f gains what Cycles' evaluation of rough glass adds beyond the BSDF — its value on pairs no microfacet connects (`Dielectric::eval_light`),
@@ -210,9 +245,9 @@ impl Bsdf {
     /// own weight, where Cycles weighs them with the glass lobe's extended pdf too.)
     #[inline]
     pub fn eval_light_sample(&self, wo: Vec3, wi: Vec3, as_cycles: bool, pdf_l: Option<f32>) -> (Spectrum, f32) {
-        let f = self.eval(wo, wi);
+        let (f, p_b) = if pdf_l.is_some() { self.eval_pdf(wo, wi) } else { (self.eval(wo, wi), 0.0) };
         // (the pdf is only asked for where a light sample of a non-delta light carries light)
-        let pdf = |f: Spectrum| if pdf_l.is_some() && f.max_element() > 0.0 { self.pdf(wo, wi) } else { 0.0 };
+        let pdf = |f: Spectrum| if pdf_l.is_some() && f.max_element() > 0.0 { p_b } else { 0.0 };
         if !as_cycles || wi.z >= 0.0 {
             return (f, pdf(f)); // (reflection pairs are evaluated alike)
         }
@@ -261,11 +296,11 @@ impl Bsdf {
                             scatter: Scatter::Glossy,
                         });
                     }
-                    let pdf = self.pdf(wo, wi);
+                    let (f, pdf) = self.eval_pdf(wo, wi);
                     if !(pdf > 0.0) {
                         return None;
                     }
-                    let weight = self.eval(wo, wi) / pdf;
+                    let weight = f / pdf;
                     return Some(BsdfSample {
                         wi,
                         weight,
@@ -327,11 +362,11 @@ impl Bsdf {
                         bs.weight = bs.weight * coat.factor(wo.z) / (1.0 - pc);
                     }
                 } else {
-                    let pdf = self.pdf(wo, bs.wi);
+                    let (f, pdf) = self.eval_pdf(wo, bs.wi);
                     if !(pdf > 0.0) {
                         return None;
                     }
-                    bs.weight = self.eval(wo, bs.wi) / pdf;
+                    bs.weight = f / pdf;
                     bs.pdf = pdf;
                 }
                 Some(bs)
@@ -388,6 +423,13 @@ impl Bsdf {
             }
             _ => false,
         }
+    }
+
+    /// The shift mapping's vertex class: diffuse (reconnectable) when every lobe that carries
+    /// weight is rougher than [`SPECULAR_ROUGHNESS_THRESHOLD`].
+    #[inline]
+    pub fn is_diffuse(&self) -> bool {
+        self.min_roughness() > SPECULAR_ROUGHNESS_THRESHOLD
     }
 
     /// Smallest roughness over the lobes that carry weight (delta lobes count as 0); the
@@ -573,6 +615,53 @@ mod tests {
             coat: Coat::NONE,
             translucent: Translucent::NONE,
         }
+    }
+
+    /// `eval_pdf` is `eval` and `pdf`, bit for bit, for every kind of BSDF (a layered base,
+    /// rough metal and glass, a Principled mixture of all its lobes under a rough coat), on
+    /// reflection and transmission pairs.
+    #[test]
+    fn eval_pdf_is_eval_and_pdf() {
+        let layered = |roughness: f32| Layered {
+            base: Lambert::new(Spectrum::new(0.7, 0.5, 0.3)),
+            eta: 1.5,
+            roughness,
+            coverage: 1.0,
+            tint: Spectrum::ONE,
+        };
+        let bsdfs = [
+            Bsdf::Lambert(Lambert::new(Spectrum::splat(0.5))),
+            Bsdf::Conductor(Conductor::new(Spectrum::new(0.9, 0.6, 0.3), 0.3, true)),
+            Bsdf::Dielectric(Dielectric::clear(1.5, 0.4)),
+            Bsdf::Layered(layered(0.35)),
+            Bsdf::Layered(layered(0.0)),
+            Bsdf::Principled {
+                diffuse: layered(0.35),
+                metal: Conductor::new(Spectrum::ONE, 0.4, false),
+                glass: Dielectric::clear(1.45, 0.3),
+                w: [0.3, 0.2, 0.2],
+                pass: 0.1,
+                pass_tint: Spectrum::ONE,
+                coat: Coat { weight: 0.7, eta: 1.5, roughness: 0.2, tint: Spectrum::new(0.9, 0.8, 1.0) },
+                translucent: Translucent { weight: 0.2, albedo: Spectrum::ONE, ..Translucent::NONE },
+            },
+        ];
+        let mut s = crate::sampler::IndependentSampler::new(17, 0);
+        use crate::sampler::Sampler;
+        let mut nonzero = 0;
+        for b in &bsdfs {
+            for _ in 0..2000 {
+                let (u, v) = (s.next_2d(), s.next_2d());
+                // wo above the surface, wi anywhere
+                let wo = crate::math::square_to_uniform_sphere(u);
+                let wo = Vec3::new(wo.x, wo.y, wo.z.abs().max(0.05)).normalize();
+                let wi = crate::math::square_to_uniform_sphere(v);
+                let (f, p) = b.eval_pdf(wo, wi);
+                assert!(f == b.eval(wo, wi) && p.to_bits() == b.pdf(wo, wi).to_bits(), "{b:?} {wo} {wi}");
+                nonzero += usize::from(p > 0.0);
+            }
+        }
+        assert!(nonzero > 5000, "{nonzero} pairs with a density");
     }
 
     /// The mixture's sample/pdf/eval agree (chi-square over its non-delta part).

@@ -16,7 +16,7 @@ use crate::path::{trace_path_from, Path, Primary};
 use crate::reconstruct::{
     chosen_alpha, gradient_domain_image, gradient_domain_layers, HalfDifference, IrlsParams, Norm, Problem, RowPlanar,
 };
-use crate::sampler::Sampler;
+use crate::sampler::{Sampler, SobolSampler};
 use crate::scene::{CameraRay, Scene};
 use crate::shift::shift_from;
 use glam::Vec2;
@@ -141,6 +141,11 @@ fn acc_rgb(row: &mut [f32], x: usize, v: Spectrum) {
 /// (dx, dy) of the four shifts.
 pub const SHIFTS: [(i32, i32); 4] = [(1, 0), (-1, 0), (0, 1), (0, -1)];
 
+/// Camera rays of this many samples of a pixel are traced together, one packet per shift
+/// (the base's rays, then each neighbour's): a packet of the eight rays of one direction
+/// costs about what one of a sample's five rays did, and five packets serve eight samples.
+const PACKET: usize = 8;
+
 /// Renders samples [from, to) of the base pixels of row `y`; `win` holds rows lo..lo+len.
 #[allow(clippy::too_many_arguments)]
 fn render_row(
@@ -154,55 +159,66 @@ fn render_row(
 ) {
     let (w, h) = (scene.camera.width as i32, scene.camera.height as i32);
     let mut path = Path::default();
+    let mut samplers: Vec<SobolSampler> = Vec::with_capacity(PACKET);
+    let mut lenses = [Vec2::ZERO; PACKET];
+    // rays[0] the bases' camera rays, rays[1 + i] their offsets' of SHIFTS[i] (neighbour
+    // pixels, the same sub-pixel position and lens sample)
+    let mut rays = [[CameraRay::default(); PACKET]; 1 + SHIFTS.len()];
     for x in 0..w as usize {
-        for s in from..to {
-            let mut sampler = super::pt::pixel_sampler(settings.seed, y * w as usize + x, s);
-            let sign = HalfDifference::sign(s.into());
-            let raster = scene.camera.pixel_raster(x as f32, y as f32, sampler.next_2d());
-            // the base's camera ray and its four offsets' (neighbour pixels, same lens sample)
-            // traced as one packet: ray 0 the base, ray 1 + i the offset of SHIFTS[i]
-            let lens = sampler.next_2d();
-            let mut rays = [CameraRay::default(); 1 + SHIFTS.len()];
-            for (ray, (dx, dy)) in rays.iter_mut().zip(std::iter::once((0, 0)).chain(SHIFTS)) {
-                *ray = scene.camera.generate_ray(raster + Vec2::new(dx as f32, dy as f32), lens);
-            }
-            let hits = scene.intersect_camera_rays(&rays);
-            let (ray, hit) = (rays[0], hits[0]);
-            let c = trace_path_from(scene, &settings.path, Primary { lens, ray, hit }, &mut sampler, Some(&mut path));
-            let me = &mut win[y - lo];
-            if !is_finite_spectrum(c.radiance) {
-                *me.invalid += 1;
-                continue;
-            }
-            acc_rgb(me.direct, x, c.very_direct);
-            acc_rgb(me.albedo, x, c.albedo);
-            acc_rgb(me.normal, x, c.normal);
-            me.transparent[x] += c.transparent;
-            for (i, (dx, dy)) in SHIFTS.into_iter().enumerate() {
-                let (nx, ny) = (x as i32 + dx, y as i32 + dy);
-                let inside = nx >= 0 && ny >= 0 && nx < w && ny < h;
-                let pc = shift_from(scene, &path, inside.then(|| (rays[1 + i], hits[1 + i])));
-                if !is_finite_spectrum(pc.base) || !is_finite_spectrum(pc.offset) {
-                    *win[y - lo].invalid += 1;
-                    continue;
+        for first in (from..to).step_by(PACKET) {
+            // 1. the camera rays of up to PACKET samples, and what they hit
+            let n = (to - first).min(PACKET as u32) as usize;
+            samplers.clear();
+            for (k, s) in (first..first + n as u32).enumerate() {
+                let mut sampler = super::pt::pixel_sampler(settings.seed, y * w as usize + x, s);
+                let raster = scene.camera.pixel_raster(x as f32, y as f32, sampler.next_2d());
+                lenses[k] = sampler.next_2d();
+                for (shift, (dx, dy)) in rays.iter_mut().zip(std::iter::once((0, 0)).chain(SHIFTS)) {
+                    shift[k] = scene.camera.generate_ray(raster + Vec2::new(dx as f32, dy as f32), lenses[k]);
                 }
+                samplers.push(sampler);
+            }
+            let hits = rays.map(|r| scene.intersect_camera_rays(&r[..n]));
+            // 2. each sample's base path and its four shifts
+            for (k, sampler) in samplers.iter_mut().enumerate() {
+                let sign = HalfDifference::sign((first + k as u32).into());
+                let primary = Primary { lens: lenses[k], ray: rays[0][k], hit: hits[0][k] };
+                let c = trace_path_from(scene, &settings.path, primary, sampler, Some(&mut path));
                 let me = &mut win[y - lo];
-                acc_split(me.primal, me.halves[0], x, pc.base, 0.25, sign);
-                if !inside {
+                if !is_finite_spectrum(c.radiance) {
+                    *me.invalid += 1;
                     continue;
                 }
-                let (nx, ny) = (nx as usize, ny as usize);
-                // the forward difference at the left or upper pixel of the pair
-                let g = pc.offset - pc.base;
-                let (at, row, side) = if dx + dy > 0 { (x, y, 1.0) } else { (nx, ny, -1.0) };
-                let to = &mut win[row - lo];
-                if dx != 0 {
-                    acc_split(to.dx, to.halves[1], at, g, side, sign);
-                } else {
-                    acc_split(to.dy, to.halves[2], at, g, side, sign);
+                acc_rgb(me.direct, x, c.very_direct);
+                acc_rgb(me.albedo, x, c.albedo);
+                acc_rgb(me.normal, x, c.normal);
+                me.transparent[x] += c.transparent;
+                for (i, (dx, dy)) in SHIFTS.into_iter().enumerate() {
+                    let (nx, ny) = (x as i32 + dx, y as i32 + dy);
+                    let inside = nx >= 0 && ny >= 0 && nx < w && ny < h;
+                    let pc = shift_from(scene, &path, inside.then(|| (rays[1 + i][k], hits[1 + i][k])));
+                    if !is_finite_spectrum(pc.base) || !is_finite_spectrum(pc.offset) {
+                        *win[y - lo].invalid += 1;
+                        continue;
+                    }
+                    let me = &mut win[y - lo];
+                    acc_split(me.primal, me.halves[0], x, pc.base, 0.25, sign);
+                    if !inside {
+                        continue;
+                    }
+                    let (nx, ny) = (nx as usize, ny as usize);
+                    // the forward difference at the left or upper pixel of the pair
+                    let g = pc.offset - pc.base;
+                    let (at, row, side) = if dx + dy > 0 { (x, y, 1.0) } else { (nx, ny, -1.0) };
+                    let to = &mut win[row - lo];
+                    if dx != 0 {
+                        acc_split(to.dx, to.halves[1], at, g, side, sign);
+                    } else {
+                        acc_split(to.dy, to.halves[2], at, g, side, sign);
+                    }
+                    let n = &mut win[ny - lo];
+                    acc_split(n.primal, n.halves[0], nx, pc.offset, 0.25, sign);
                 }
-                let n = &mut win[ny - lo];
-                acc_split(n.primal, n.halves[0], nx, pc.offset, 0.25, sign);
             }
         }
     }
