@@ -455,7 +455,9 @@ impl Problem {
     /// = α(I^g − x), e_x = I^dx − D_x x, e_y = I^dy − D_y x; 0 where a difference does not
     /// exist), into `wts`, then `solve_in` under them from x. The reweighting and the CG's
     /// set-up are one pass: the same residuals give r = b − A·x = α²W_g(I^g − x) + D_xᵀW_x e_x
-    /// + D_yᵀW_y e_y.
+    /// + D_yᵀW_y e_y. ‖b‖² (the stopping rule's scale) costs a second product per row, so it is
+    /// summed only for a positive `tol`; with `tol` 0 a channel stops where its residual is
+    /// exactly zero.
     #[allow(clippy::too_many_arguments)]
     pub fn solve_reweighted_in(
         &self,
@@ -577,13 +579,16 @@ impl Problem {
                         for (ri, (&k, &e)) in rr[1..].iter_mut().zip(xr.iter().zip(exc)) {
                             *ri += k * e;
                         }
-                        for (i, bi) in bb.iter_mut().enumerate() {
-                            *bi = a2 * gr[i] * p[i] - xr[i] * gx[i] + wy_up[i] * gu[i] - yr[i] * gy[i];
+                        if tol > 0.0 {
+                            // ‖b‖², for the stopping rule alone
+                            for (i, bi) in bb.iter_mut().enumerate() {
+                                *bi = a2 * gr[i] * p[i] - xr[i] * gx[i] + wy_up[i] * gu[i] - yr[i] * gy[i];
+                            }
+                            for (bi, (&k, &v)) in bb[1..].iter_mut().zip(xr.iter().zip(gx)) {
+                                *bi += k * v;
+                            }
+                            s[0][c] += dot(&bb, &bb);
                         }
-                        for (bi, (&k, &v)) in bb[1..].iter_mut().zip(xr.iter().zip(gx)) {
-                            *bi += k * v;
-                        }
-                        s[0][c] += dot(&bb, &bb);
                         s[1][c] += dot_weighted(rr, m);
                     }
                     std::mem::swap(&mut ey, &mut ey_up);

@@ -135,7 +135,9 @@ pub fn solve_l1(p: &Problem, params: &IrlsParams, stop: &(dyn Fn() -> bool + Syn
             break;
         }
         let regf = reg as f32;
-        p.solve_reweighted_in(&mut ws, &mut wts, &mut sol, |n| irls_weight(n, regf), params.cg_iterations, 1e-10, stop);
+        // tolerance 0: a few CG steps never reach a relative residual of any use as a stop,
+        // and without one the set-up need not sum ‖b‖² (measured 2.5 ms of its 21 at 1080p)
+        p.solve_reweighted_in(&mut ws, &mut wts, &mut sol, |n| irls_weight(n, regf), params.cg_iterations, 0.0, stop);
         reg *= params.decay;
     }
     drop((wts, ws));
