@@ -150,17 +150,19 @@ struct Free {
     r: f32,
     /// Class of x_k and y_k (they are equal, or the shift has failed).
     diffuse: bool,
+    /// The BSDF at y seen from `wo`: built once, to compare the classes, and kept for the
+    /// vertex's light events, its bounce and its reconnection.
+    bsdf: Bsdf,
 }
 
 impl Free {
     /// f·|cos θ| and solid-angle pdf of the offset's BSDF at y towards world direction `dir`
     /// (for light event `e` of light pdf p_l at y, if any: as the base evaluated it).
-    fn scatter(&self, scene: &Scene, dir: Vec3, e: Option<(&Event, f32)>) -> (Spectrum, f32) {
-        let bsdf = scene.bsdf_at(&self.y);
+    fn scatter(&self, dir: Vec3, e: Option<(&Event, f32)>) -> (Spectrum, f32) {
         let (wo, wi) = (self.y.frame.to_local(self.wo), self.y.frame.to_local(dir));
         match e {
-            Some((e, pdf_l)) => e.bsdf_eval(&bsdf, wo, wi, pdf_l),
-            None => bsdf.eval_pdf(wo, wi),
+            Some((e, pdf_l)) => e.bsdf_eval(&self.bsdf, wo, wi, pdf_l),
+            None => self.bsdf.eval_pdf(wo, wi),
         }
     }
 }
@@ -228,13 +230,14 @@ impl<'a> Offset<'a> {
             let x0 = base.vertices.first()?;
             let (ray, hit) = primary?;
             let y = SurfaceInteraction { camera: true, ..scene.interaction(&hit?, ray.dir) };
-            let diffuse = x0.diffuse;
-            (diffuse == scene.bsdf_at(&y).is_diffuse()).then_some(State::Free(Free {
+            let (diffuse, bsdf) = (x0.diffuse, scene.bsdf_at(&y));
+            (diffuse == bsdf.is_diffuse()).then_some(State::Free(Free {
                 y,
                 wo: -ray.dir,
                 beta: Spectrum::ONE,
                 r: 1.0,
                 diffuse,
+                bsdf,
             }))
         })();
         Offset { scene, base, k: 0, state: state.unwrap_or(State::Failed), step: None }
@@ -284,16 +287,20 @@ impl<'a> Offset<'a> {
                     reconnect(scene, xk, xn, &f).unwrap_or(State::Failed)
                 } else {
                     match self.step(&f) {
-                        Some(Step { hit: Some(y), dir, f: fy, pdf, j, .. })
-                            if scene.bsdf_at(&y).is_diffuse() == next_diffuse =>
-                        {
-                            State::Free(Free {
-                                y,
-                                wo: -dir,
-                                beta: f.beta * fy * (j / (xk.pdf_out * xk.rr)),
-                                r: f.r * pdf * j / xk.pdf_out,
-                                diffuse: next_diffuse,
-                            })
+                        Some(Step { hit: Some(y), dir, f: fy, pdf, j, .. }) => {
+                            let bsdf = scene.bsdf_at(&y);
+                            if bsdf.is_diffuse() == next_diffuse {
+                                State::Free(Free {
+                                    y,
+                                    wo: -dir,
+                                    beta: f.beta * fy * (j / (xk.pdf_out * xk.rr)),
+                                    r: f.r * pdf * j / xk.pdf_out,
+                                    diffuse: next_diffuse,
+                                    bsdf,
+                                })
+                            } else {
+                                State::Failed
+                            }
                         }
                         _ => State::Failed,
                     }
@@ -395,7 +402,7 @@ fn half_vector_step(scene: &Scene, x: &Vertex, f: &Free) -> Option<Step> {
     if !(x.pdf_out > 0.0) {
         return None;
     }
-    let bsdf = scene.bsdf_at(&f.y);
+    let bsdf = &f.bsdf;
     let (wo_x, wi_x) = (x.frame.to_local(x.wo), x.frame.to_local(x.wi));
     let wo_y = f.y.frame.to_local(f.wo);
     let refraction = wi_x.z < 0.0;
@@ -442,7 +449,7 @@ fn reconnect(scene: &Scene, xk: &Vertex, xn: &Vertex, f: &Free) -> Option<State>
     if !(j > 0.0 && j.is_finite() && xk.pdf_out > 0.0) {
         return None;
     }
-    let (fy, pdf) = f.scatter(scene, dir, None);
+    let (fy, pdf) = f.scatter(dir, None);
     Some(State::Joined {
         wo: xn.frame.to_local(-dir),
         beta: f.beta * fy * (j / (xk.pdf_out * xk.rr)),
@@ -464,7 +471,7 @@ fn reconnect_event(scene: &Scene, e: &Event, xk: Vec3, f: &Free) -> Option<(Spec
     let dir = if e.at_infinity { e.z } else { (e.z - f.y.p).normalize() };
     let (le, pdf_l) = scene.light_eval(e.light, f.y.p, e.z)?;
     let pdf_l = if e.pdf_l > 0.0 { pdf_l } else { 0.0 }; // same strategies as the base
-    let (fy, pdf) = f.scatter(scene, dir, Some((e, pdf_l)));
+    let (fy, pdf) = f.scatter(dir, Some((e, pdf_l)));
     let pdf_b = if e.delta { 0.0 } else { pdf };
     let j = if e.at_infinity || e.delta {
         1.0
@@ -568,7 +575,7 @@ pub fn offset_path(scene: &Scene, base: &Path, offset_raster: Vec2) -> Path {
                     }
                 } else if let Some(n) = base.vertices.get(offset.k + 1) {
                     let dir = (n.p - f.y.p).normalize();
-                    let (fv, pdf) = f.scatter(scene, dir, None);
+                    let (fv, pdf) = f.scatter(dir, None);
                     v.wi = dir;
                     v.f_out = fv;
                     v.pdf_out = pdf;
