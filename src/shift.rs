@@ -185,6 +185,8 @@ struct Step {
 
 /// Where the offset stands relative to base vertex k.
 #[derive(Clone, Copy, Debug)]
+// (Free carries its BSDF: the state lives in one Offset on the stack, so it is not boxed)
+#[allow(clippy::large_enum_variant)]
 enum State {
     Failed,
     Free(Free),

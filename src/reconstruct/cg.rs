@@ -455,9 +455,10 @@ impl Problem {
     /// = α(I^g − x), e_x = I^dx − D_x x, e_y = I^dy − D_y x; 0 where a difference does not
     /// exist), into `wts`, then `solve_in` under them from x. The reweighting and the CG's
     /// set-up are one pass: the same residuals give r = b − A·x = α²W_g(I^g − x) + D_xᵀW_x e_x
-    /// + D_yᵀW_y e_y. ‖b‖² (the stopping rule's scale) costs a second product per row, so it is
-    /// summed only for a positive `tol`; with `tol` 0 a channel stops where its residual is
-    /// exactly zero.
+    /// + D_yᵀW_y e_y.
+    ///
+    /// ‖b‖² (the stopping rule's scale) costs a second product per row, so it is summed only
+    /// for a positive `tol`; with `tol` 0 a channel stops where its residual is exactly zero.
     #[allow(clippy::too_many_arguments)]
     pub fn solve_reweighted_in(
         &self,
