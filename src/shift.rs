@@ -150,19 +150,17 @@ struct Free {
     r: f32,
     /// Class of x_k and y_k (they are equal, or the shift has failed).
     diffuse: bool,
-    /// The BSDF at y seen from `wo`: built once, to compare the classes, and kept for the
-    /// vertex's light events, its bounce and its reconnection.
-    bsdf: Bsdf,
 }
 
 impl Free {
-    /// f·|cos θ| and solid-angle pdf of the offset's BSDF at y towards world direction `dir`
-    /// (for light event `e` of light pdf p_l at y, if any: as the base evaluated it).
-    fn scatter(&self, dir: Vec3, e: Option<(&Event, f32)>) -> (Spectrum, f32) {
+    /// f·|cos θ| and solid-angle pdf of the offset's BSDF at y (`bsdf`, `Offset::bsdf`)
+    /// towards world direction `dir` (for light event `e` of light pdf p_l at y, if any: as
+    /// the base evaluated it).
+    fn scatter(&self, bsdf: &Bsdf, dir: Vec3, e: Option<(&Event, f32)>) -> (Spectrum, f32) {
         let (wo, wi) = (self.y.frame.to_local(self.wo), self.y.frame.to_local(dir));
         match e {
-            Some((e, pdf_l)) => e.bsdf_eval(&self.bsdf, wo, wi, pdf_l),
-            None => self.bsdf.eval_pdf(wo, wi),
+            Some((e, pdf_l)) => e.bsdf_eval(bsdf, wo, wi, pdf_l),
+            None => bsdf.eval_pdf(wo, wi),
         }
     }
 }
@@ -185,8 +183,6 @@ struct Step {
 
 /// Where the offset stands relative to base vertex k.
 #[derive(Clone, Copy, Debug)]
-// (Free carries its BSDF: the state lives in one Offset on the stack, so it is not boxed)
-#[allow(clippy::large_enum_variant)]
 enum State {
     Failed,
     Free(Free),
@@ -215,7 +211,15 @@ struct Offset<'a> {
     state: State,
     /// Cached half-vector step of the current free vertex.
     step: Option<Option<Step>>,
+    /// The BSDF at the current free vertex y_k seen from its `wo` (while the state is
+    /// `Free`): built once, to compare its class with the base's, and kept for the vertex's
+    /// light events, its bounce and its reconnection. (Here rather than in `Free`, so that
+    /// the state stays small to copy.)
+    bsdf: Bsdf,
 }
+
+/// `Offset::bsdf` while the state is not `Free`.
+const NO_BSDF: Bsdf = Bsdf::Lambert(crate::bsdf::Lambert { albedo: Spectrum::ZERO, roughness: 0.0, unmapped: Vec3::Z });
 
 impl<'a> Offset<'a> {
     fn new(scene: &'a Scene, base: &'a Path, offset_raster: Option<Vec2>) -> Offset<'a> {
@@ -228,21 +232,16 @@ impl<'a> Offset<'a> {
 
     /// The offset path from its traced camera ray (with the base's lens sample) and what it hit.
     fn from_primary(scene: &'a Scene, base: &'a Path, primary: Option<(CameraRay, Option<TriHit>)>) -> Offset<'a> {
-        let state = (|| {
-            let x0 = base.vertices.first()?;
-            let (ray, hit) = primary?;
-            let y = SurfaceInteraction { camera: true, ..scene.interaction(&hit?, ray.dir) };
-            let (diffuse, bsdf) = (x0.diffuse, scene.bsdf_at(&y));
-            (diffuse == bsdf.is_diffuse()).then_some(State::Free(Free {
-                y,
-                wo: -ray.dir,
-                beta: Spectrum::ONE,
-                r: 1.0,
-                diffuse,
-                bsdf,
-            }))
-        })();
-        Offset { scene, base, k: 0, state: state.unwrap_or(State::Failed), step: None }
+        let mut offset = Offset { scene, base, k: 0, state: State::Failed, step: None, bsdf: NO_BSDF };
+        if let (Some(x0), Some((ray, Some(hit)))) = (base.vertices.first(), primary) {
+            let y = SurfaceInteraction { camera: true, ..scene.interaction(&hit, ray.dir) };
+            offset.bsdf = scene.bsdf_at(&y);
+            if x0.diffuse == offset.bsdf.is_diffuse() {
+                let diffuse = x0.diffuse;
+                offset.state = State::Free(Free { y, wo: -ray.dir, beta: Spectrum::ONE, r: 1.0, diffuse });
+            }
+        }
+        offset
     }
 
     /// The half-vector bounce of the free vertex `f` at base vertex k, traced (cached).
@@ -250,7 +249,7 @@ impl<'a> Offset<'a> {
         if let Some(s) = self.step {
             return s;
         }
-        let s = half_vector_step(self.scene, &self.base.vertices[self.k], f);
+        let s = half_vector_step(self.scene, &self.base.vertices[self.k], f, &self.bsdf);
         self.step = Some(s);
         s
     }
@@ -286,19 +285,18 @@ impl<'a> Offset<'a> {
                 let xk = &base.vertices[k];
                 let next_diffuse = xn.diffuse;
                 if f.diffuse && next_diffuse {
-                    reconnect(scene, xk, xn, &f).unwrap_or(State::Failed)
+                    reconnect(scene, xk, xn, &f, &self.bsdf).unwrap_or(State::Failed)
                 } else {
                     match self.step(&f) {
                         Some(Step { hit: Some(y), dir, f: fy, pdf, j, .. }) => {
-                            let bsdf = scene.bsdf_at(&y);
-                            if bsdf.is_diffuse() == next_diffuse {
+                            self.bsdf = scene.bsdf_at(&y);
+                            if self.bsdf.is_diffuse() == next_diffuse {
                                 State::Free(Free {
                                     y,
                                     wo: -dir,
                                     beta: f.beta * fy * (j / (xk.pdf_out * xk.rr)),
                                     r: f.r * pdf * j / xk.pdf_out,
                                     diffuse: next_diffuse,
-                                    bsdf,
                                 })
                             } else {
                                 State::Failed
@@ -350,13 +348,15 @@ impl<'a> Offset<'a> {
             State::Free(_) if e.through_transparent => None,
             // a light sampled or hit from a free diffuse vertex, and a delta light (no ray
             // can hit it), reconnect to the same light point
-            State::Free(f) if f.diffuse || e.delta => reconnect_event(scene, e, base.vertices[k].p, &f),
+            State::Free(f) if f.diffuse || e.delta => reconnect_event(scene, e, base.vertices[k].p, &f, &self.bsdf),
             // at a free non-diffuse vertex a light sample is shifted as a BSDF sample of the
             // same direction is (half-vector copy, then whatever light the offset's ray
             // finds): one base path has one offset whichever strategy found it, so the pair's
             // MIS weights over both strategies on both sides sum to one (a light sample used
             // to reconnect while a BSDF hit of the same path copied the half-vector)
-            State::Free(f) if e.nee => light_along(scene, e, &f, &nee_step(scene, &base.vertices[k], &f, e)?),
+            State::Free(f) if e.nee => {
+                light_along(scene, e, &f, &nee_step(scene, &base.vertices[k], &f, &self.bsdf, e)?)
+            }
             State::Free(f) => light_along(scene, e, &f, &self.step(&f)?),
         }
     }
@@ -388,7 +388,7 @@ fn light_along(scene: &Scene, e: &Event, f: &Free, s: &Step) -> Option<(Spectrum
 
 /// The half-vector step of a light sample taken at base vertex `x`: the bounce the BSDF
 /// would have sampled towards the light (its non-delta lobes, reflection or transmission).
-fn nee_step(scene: &Scene, x: &Vertex, f: &Free, e: &Event) -> Option<Step> {
+fn nee_step(scene: &Scene, x: &Vertex, f: &Free, bsdf: &Bsdf, e: &Event) -> Option<Step> {
     if !(e.pdf_b > 0.0) {
         return None; // no lobe samples that direction: nothing to copy
     }
@@ -396,15 +396,15 @@ fn nee_step(scene: &Scene, x: &Vertex, f: &Free, e: &Event) -> Option<Step> {
     let through = wi.dot(x.ng) < 0.0;
     let eta = if through { bsdf_at(scene, x).eta() } else { 1.0 };
     let as_sampled = Vertex { wi, f_out: e.f, pdf_out: e.pdf_b, delta_out: false, eta_out: eta, ..*x };
-    half_vector_step(scene, &as_sampled, f)
+    half_vector_step(scene, &as_sampled, f, bsdf)
 }
 
-/// The offset's half-vector bounce at free vertex `f` against base vertex `x`, traced.
-fn half_vector_step(scene: &Scene, x: &Vertex, f: &Free) -> Option<Step> {
+/// The offset's half-vector bounce at free vertex `f` (its BSDF `bsdf`) against base vertex
+/// `x`, traced.
+fn half_vector_step(scene: &Scene, x: &Vertex, f: &Free, bsdf: &Bsdf) -> Option<Step> {
     if !(x.pdf_out > 0.0) {
         return None;
     }
-    let bsdf = &f.bsdf;
     let (wo_x, wi_x) = (x.frame.to_local(x.wo), x.frame.to_local(x.wi));
     let wo_y = f.y.frame.to_local(f.wo);
     let refraction = wi_x.z < 0.0;
@@ -439,7 +439,7 @@ fn half_vector_step(scene: &Scene, x: &Vertex, f: &Free) -> Option<Step> {
 }
 
 /// Reconnection y_k → x_{k+1} (x_k, y_k, x_{k+1} diffuse).
-fn reconnect(scene: &Scene, xk: &Vertex, xn: &Vertex, f: &Free) -> Option<State> {
+fn reconnect(scene: &Scene, xk: &Vertex, xn: &Vertex, f: &Free, bsdf: &Bsdf) -> Option<State> {
     if !visible(scene, &f.y, xn.p, false, Blocking::Path) {
         return None;
     }
@@ -451,7 +451,7 @@ fn reconnect(scene: &Scene, xk: &Vertex, xn: &Vertex, f: &Free) -> Option<State>
     if !(j > 0.0 && j.is_finite() && xk.pdf_out > 0.0) {
         return None;
     }
-    let (fy, pdf) = f.scatter(dir, None);
+    let (fy, pdf) = f.scatter(bsdf, dir, None);
     Some(State::Joined {
         wo: xn.frame.to_local(-dir),
         beta: f.beta * fy * (j / (xk.pdf_out * xk.rr)),
@@ -461,7 +461,7 @@ fn reconnect(scene: &Scene, xk: &Vertex, xn: &Vertex, f: &Free) -> Option<State>
 
 /// Re-evaluates light event `e` (leaving base vertex at `xk`) from the free offset vertex,
 /// reconnected to the same light point (or direction, for lights at infinity).
-fn reconnect_event(scene: &Scene, e: &Event, xk: Vec3, f: &Free) -> Option<(Spectrum, f32)> {
+fn reconnect_event(scene: &Scene, e: &Event, xk: Vec3, f: &Free, bsdf: &Bsdf) -> Option<(Spectrum, f32)> {
     let blocking = match (e.nee, scene.casts_shadow(e.light)) {
         (false, _) => Blocking::Path,
         (true, true) => Blocking::Shadow,
@@ -473,7 +473,7 @@ fn reconnect_event(scene: &Scene, e: &Event, xk: Vec3, f: &Free) -> Option<(Spec
     let dir = if e.at_infinity { e.z } else { (e.z - f.y.p).normalize() };
     let (le, pdf_l) = scene.light_eval(e.light, f.y.p, e.z)?;
     let pdf_l = if e.pdf_l > 0.0 { pdf_l } else { 0.0 }; // same strategies as the base
-    let (fy, pdf) = f.scatter(dir, Some((e, pdf_l)));
+    let (fy, pdf) = f.scatter(bsdf, dir, Some((e, pdf_l)));
     let pdf_b = if e.delta { 0.0 } else { pdf };
     let j = if e.at_infinity || e.delta {
         1.0
@@ -577,7 +577,7 @@ pub fn offset_path(scene: &Scene, base: &Path, offset_raster: Vec2) -> Path {
                     }
                 } else if let Some(n) = base.vertices.get(offset.k + 1) {
                     let dir = (n.p - f.y.p).normalize();
-                    let (fv, pdf) = f.scatter(dir, None);
+                    let (fv, pdf) = f.scatter(&offset.bsdf, dir, None);
                     v.wi = dir;
                     v.f_out = fv;
                     v.pdf_out = pdf;
