@@ -151,22 +151,7 @@ impl Bsdf {
             Bsdf::Conductor(b) => b.eval(wo, wi),
             Bsdf::Dielectric(b) => b.eval(wo, wi),
             Bsdf::Layered(b) => b.eval(wo, wi),
-            Bsdf::Principled { diffuse, metal, glass, w, pass, coat, translucent, .. } => {
-                let mut f = translucent.eval(wi);
-                if w[0] > 0.0 {
-                    f += diffuse.eval(wo, wi) * w[0];
-                }
-                if w[1] > 0.0 {
-                    f += metal.eval(wo, wi) * w[1];
-                }
-                if w[2] > 0.0 {
-                    f += glass.eval(wo, wi) * w[2];
-                }
-                if coat.is_some() {
-                    f = f * coat.factor(wo.z) + Spectrum::splat(coat.eval_pdf(wo, wi).0 * (1.0 - pass));
-                }
-                f
-            }
+            Bsdf::Principled { .. } => self.mixture_eval_pdf(wo, wi, false).0,
         }
     }
 
@@ -178,23 +163,7 @@ impl Bsdf {
             Bsdf::Conductor(b) => b.pdf(wo, wi),
             Bsdf::Dielectric(b) => b.pdf(wo, wi),
             Bsdf::Layered(b) => b.pdf(wo, wi),
-            Bsdf::Principled { diffuse, metal, glass, w, pass, coat, translucent, .. } => {
-                let mut p = translucent.weight * translucent.pdf(wi);
-                if w[0] > 0.0 {
-                    p += diffuse.pdf(wo, wi) * w[0];
-                }
-                if w[1] > 0.0 {
-                    p += metal.pdf(wo, wi) * w[1];
-                }
-                if w[2] > 0.0 {
-                    p += glass.pdf(wo, wi) * w[2];
-                }
-                if coat.is_some() {
-                    let pc = self.coat_choice(wo);
-                    p = p * (1.0 - pc) + pc * (1.0 - pass) * coat.eval_pdf(wo, wi).1;
-                }
-                p
-            }
+            Bsdf::Principled { .. } => self.mixture_eval_pdf(wo, wi, true).1,
         }
     }
 
@@ -205,32 +174,47 @@ impl Bsdf {
     pub fn eval_pdf(&self, wo: Vec3, wi: Vec3) -> (Spectrum, f32) {
         match self {
             Bsdf::Layered(b) => b.eval_pdf(wo, wi),
-            Bsdf::Principled { diffuse, metal, glass, w, pass, coat, translucent, .. } => {
-                let mut f = translucent.eval(wi);
-                let mut p = translucent.weight * translucent.pdf(wi);
-                if w[0] > 0.0 {
-                    let (fd, pd) = diffuse.eval_pdf(wo, wi);
-                    f += fd * w[0];
-                    p += pd * w[0];
-                }
-                if w[1] > 0.0 {
-                    f += metal.eval(wo, wi) * w[1];
-                    p += metal.pdf(wo, wi) * w[1];
-                }
-                if w[2] > 0.0 {
-                    f += glass.eval(wo, wi) * w[2];
-                    p += glass.pdf(wo, wi) * w[2];
-                }
-                if coat.is_some() {
-                    let (fc, pdf_c) = coat.eval_pdf(wo, wi);
-                    f = f * coat.factor(wo.z) + Spectrum::splat(fc * (1.0 - pass));
-                    let pc = self.coat_choice(wo);
-                    p = p * (1.0 - pc) + pc * (1.0 - pass) * pdf_c;
-                }
-                (f, p)
-            }
+            Bsdf::Principled { .. } => self.mixture_eval_pdf(wo, wi, true),
             _ => (self.eval(wo, wi), self.pdf(wo, wi)),
         }
+    }
+
+    /// The Principled mixture's f·|cos θi| and, `with_pdf`, its pdf (else 0): each lobe's
+    /// weighted sum, under the coat. One body for `eval`, `pdf` and `eval_pdf`, so they agree
+    /// bit for bit.
+    #[inline]
+    fn mixture_eval_pdf(&self, wo: Vec3, wi: Vec3, with_pdf: bool) -> (Spectrum, f32) {
+        let Bsdf::Principled { diffuse, metal, glass, w, pass, coat, translucent, .. } = self else {
+            return (Spectrum::ZERO, 0.0);
+        };
+        let mut f = translucent.eval(wi);
+        let mut p = if with_pdf { translucent.weight * translucent.pdf(wi) } else { 0.0 };
+        if w[0] > 0.0 {
+            let (fd, pd) = diffuse.eval_pdf(wo, wi);
+            f += fd * w[0];
+            p += pd * w[0];
+        }
+        if w[1] > 0.0 {
+            f += metal.eval(wo, wi) * w[1];
+            if with_pdf {
+                p += metal.pdf(wo, wi) * w[1];
+            }
+        }
+        if w[2] > 0.0 {
+            f += glass.eval(wo, wi) * w[2];
+            if with_pdf {
+                p += glass.pdf(wo, wi) * w[2];
+            }
+        }
+        if coat.is_some() {
+            let (fc, pdf_c) = coat.eval_pdf(wo, wi);
+            f = f * coat.factor(wo.z) + Spectrum::splat(fc * (1.0 - pass));
+            if with_pdf {
+                let pc = self.coat_choice(wo);
+                p = p * (1.0 - pc) + pc * (1.0 - pass) * pdf_c;
+            }
+        }
+        (f, if with_pdf { p } else { 0.0 })
     }
 
     /// (f·|cos θi|, BSDF pdf) of a light sample's direction, whose light pdf is `pdf_l` (None:
