@@ -12,6 +12,7 @@ pub mod bsdf;
 pub mod distribution;
 pub mod error;
 pub mod film;
+pub mod guiding;
 pub mod integrator;
 pub mod math;
 pub mod output;

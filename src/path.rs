@@ -12,6 +12,7 @@
 
 use crate::accel::TriHit;
 use crate::bsdf::{Guide, Scatter};
+use crate::guiding::{self, DTree, Guiding, PathRecords};
 use crate::math::{is_finite_spectrum, power_heuristic, Frame, Spectrum};
 use crate::sampler::Sampler;
 use crate::scene::{CameraRay, Scene, SurfaceInteraction, TexCoord};
@@ -309,7 +310,22 @@ pub fn trace_path_from<S: Sampler>(
     cfg: &PathSettings,
     primary: Primary,
     sampler: &mut S,
+    record: Option<&mut Path>,
+) -> PathContribution {
+    trace_path_guided(scene, cfg, primary, sampler, record, None)
+}
+
+/// [`trace_path_from`] with path guiding (`guiding`): at a guidable vertex whose region has
+/// learned where light comes from, the continuation is drawn from the guide or the BSDF
+/// (`guiding::sample_mixture`; both the BSDF sample and the light sample's MIS see the
+/// mixture's density), and in a training iteration the path records what it brings back.
+pub fn trace_path_guided<S: Sampler>(
+    scene: &Scene,
+    cfg: &PathSettings,
+    primary: Primary,
+    sampler: &mut S,
     mut record: Option<&mut Path>,
+    guiding: Option<Guiding>,
 ) -> PathContribution {
     if let Some(p) = record.as_deref_mut() {
         p.vertices.clear();
@@ -323,6 +339,8 @@ pub fn trace_path_from<S: Sampler>(
     let mut st = PathState::new(primary.ray, cfg.nee && scene.has_lights(), !cfg.strict_glass_nee);
     let mut pending_hit = Some(primary.hit); // the camera ray's, traced by the caller
     let mut guide = Some(Spectrum::ONE); // the denoising guides' throughput, until they are written
+                                         // what the path brings back through its guidable vertices, for the guide's training
+    let mut learn = guiding.filter(|g| g.record).map(|_| PathRecords::default());
     loop {
         // 1. the segment
         let hit = match pending_hit.take() {
@@ -348,7 +366,7 @@ pub fn trace_path_from<S: Sampler>(
             crossed += le * st.mis(pdf_light);
             st.record_emission(&mut record, li, z, inf, le, pdf_light);
         });
-        add(&mut out, cfg.clamp(st.beta * crossed, st.depth), camera_ray, st.direct_emission());
+        add(&mut out, &mut learn, cfg.clamp(st.beta * crossed, st.depth), camera_ray, st.direct_emission());
 
         // 3. a miss: the world, or the film's transparency
         let Some(hit) = hit else {
@@ -361,13 +379,14 @@ pub fn trace_path_from<S: Sampler>(
             if let Some(backdrop) = scene.backdrop.as_ref().filter(|_| camera_visibility) {
                 // what the camera sees instead of the world (no light sampling finds it)
                 let le = backdrop.eval(&scene.textures, st.d);
-                add(&mut out, cfg.clamp(st.beta * le, st.depth), camera_ray, st.direct_emission());
+                add(&mut out, &mut learn, cfg.clamp(st.beta * le, st.depth), camera_ray, st.direct_emission());
                 st.record_emission(&mut record, scene.env_light(), st.d, true, le, 0.0);
                 break;
             }
             let (le, pdf_light) = scene.world_eval(st.prev_p, st.d);
             if le.max_element() > 0.0 {
-                add(&mut out, cfg.clamp(st.beta * le * st.mis(pdf_light), st.depth), camera_ray, st.direct_emission());
+                let c = cfg.clamp(st.beta * le * st.mis(pdf_light), st.depth);
+                add(&mut out, &mut learn, c, camera_ray, st.direct_emission());
                 st.record_emission(&mut record, scene.env_light(), st.d, true, le, pdf_light);
             }
             break;
@@ -376,7 +395,13 @@ pub fn trace_path_from<S: Sampler>(
         // 4. the surface: its emission, the vertex
         let si = SurfaceInteraction { camera: camera_visibility, ..scene.interaction(&hit, st.d) };
         if let Some((le, pdf_light)) = scene.surface_emission(&si, st.prev_p, st.d) {
-            add(&mut out, cfg.clamp(st.beta * le * st.mis(pdf_light), st.depth), camera_ray, st.direct_emission());
+            add(
+                &mut out,
+                &mut learn,
+                cfg.clamp(st.beta * le * st.mis(pdf_light), st.depth),
+                camera_ray,
+                st.direct_emission(),
+            );
             let li = scene.triangle_light(si.prim).unwrap_or(u32::MAX);
             st.record_emission(&mut record, li, si.p, false, le, pdf_light);
         }
@@ -412,14 +437,21 @@ pub fn trace_path_from<S: Sampler>(
         }
         let wo = si.frame.to_local(-st.d);
         // The continuation is sampled first: it does not depend on the light sample, so the
-        // processor overlaps the two computations before the shadow ray's traversal.
-        let sampled = bsdf.sample(wo, u_lobe, u_bsdf);
+        // processor overlaps the two computations before the shadow ray's traversal. At a
+        // guided vertex, from the guide or the BSDF.
+        let guided = guiding.filter(|_| bsdf.guidable()).map(|g| g.field.at(si.p));
+        let dist = guided.and_then(|g| g.dist);
+        let sampled = match dist {
+            Some(d) => guiding::sample_mixture(&bsdf, &si.frame, d, wo, u_lobe, u_bsdf),
+            None => bsdf.sample(wo, u_lobe, u_bsdf),
+        };
 
         // 7. next-event estimation
         if st.use_nee && !bsdf.is_delta() {
-            let nee = next_event(scene, &si, &bsdf, wo, u_light_select, u_light, st.as_cycles_light);
+            let nee = next_event(scene, &si, &bsdf, wo, u_light_select, u_light, st.as_cycles_light, dist);
             if let Some(e) = nee {
-                add(&mut out, cfg.clamp(st.beta * e.f * e.le * (e.weight / e.pdf_l), st.depth), false, st.depth == 0);
+                let c = cfg.clamp(st.beta * e.f * e.le * (e.weight / e.pdf_l), st.depth);
+                add(&mut out, &mut learn, c, false, st.depth == 0);
                 let numerator = st.beta * e.f * e.le;
                 if let (Some(p), true) = (record.as_deref_mut(), numerator.max_element() > 0.0) {
                     p.events.push(Event { vertex: st.nvert, numerator, direct: st.depth == 0, ..e.event });
@@ -434,6 +466,14 @@ pub fn trace_path_from<S: Sampler>(
         if !st.scatter(&si, wo, &bs, u_rr, cfg, record.as_deref_mut()) {
             break;
         }
+        if let (Some(l), Some(g)) = (learn.as_mut(), guided) {
+            if bs.lobe != crate::bsdf::LobeKind::Specular {
+                l.push(g.leaf, st.d, bs.pdf, st.beta);
+            }
+        }
+    }
+    if let (Some(l), Some(g)) = (learn.as_ref(), guiding) {
+        l.flush(g.field);
     }
     out
 }
@@ -648,8 +688,10 @@ struct NextEvent {
 
 /// Next-event estimation at `si`: one light sample (`u_select`, `u_light`), unoccluded and on
 /// a side BSDF sampling may continue to, or None. `as_cycles`: with what Cycles' evaluation
-/// adds through rough glass (`Bsdf::eval_light_sample`).
+/// adds through rough glass (`Bsdf::eval_light_sample`). `guide`: the distribution a guided
+/// vertex samples beside its BSDF, whose mixture density the MIS weight then uses.
 #[inline]
+#[allow(clippy::too_many_arguments)]
 fn next_event(
     scene: &Scene,
     si: &SurfaceInteraction,
@@ -658,6 +700,7 @@ fn next_event(
     u_select: f32,
     u_light: Vec2,
     as_cycles: bool,
+    guide: Option<&DTree>,
 ) -> Option<NextEvent> {
     let (li, ls) = scene.sample_light(si.p, u_select, u_light)?;
     let wi = si.frame.to_local(ls.wi);
@@ -673,6 +716,10 @@ fn next_event(
     let (tr, crossed_transparent) =
         if scene.casts_shadow(li) { scene.transmittance(si, &ls)? } else { (Spectrum::ONE, false) };
     let radiance = ls.radiance * tr;
+    let pdf_b = match guide.filter(|_| !ls.is_delta) {
+        Some(d) => guiding::mixture_pdf(d, ls.wi, pdf_b), // (BSDF sampling draws from the mixture here)
+        None => pdf_b,
+    };
     let weight = if ls.is_delta { 1.0 } else { power_heuristic(ls.pdf, pdf_b) };
     let at_infinity = !ls.dist.is_finite();
     let event = Event {
@@ -755,7 +802,10 @@ pub fn camera_transparency(scene: &Scene, cam: &CameraRay, hit: Option<TriHit>, 
 }
 
 #[inline]
-fn add(out: &mut PathContribution, c: Spectrum, very_direct: bool, direct: bool) {
+fn add(out: &mut PathContribution, learn: &mut Option<PathRecords>, c: Spectrum, very_direct: bool, direct: bool) {
+    if let Some(l) = learn.as_mut() {
+        l.add(c);
+    }
     out.radiance += c;
     if very_direct {
         out.very_direct += c;

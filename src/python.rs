@@ -866,7 +866,7 @@ fn numpy_to_image(obj: &Bound<'_, PyAny>) -> PyResult<Image> {
 /// the calling thread; if it returns True the render stops and keeps what it has. Every
 /// setting left out (or None) takes `RenderSettings::default()`'s value (`DEFAULT_SETTINGS`).
 #[pyfunction]
-#[pyo3(signature = (scene, method=None, spp=None, time_limit=None, max_bounces=None, nee=None, seed=None, threads=None, reconstruction=None, alpha_rec=None, large_step_probability=None, alpha_target=None, chains=None, progress=None, preview=None, diffuse_bounces=None, glossy_bounces=None, transmission_bounces=None, transparent_bounces=None, clamp_direct=None, clamp_indirect=None, data_passes=None, adaptive_threshold=None, adaptive_min_samples=None))]
+#[pyo3(signature = (scene, method=None, spp=None, time_limit=None, max_bounces=None, nee=None, seed=None, threads=None, reconstruction=None, alpha_rec=None, large_step_probability=None, alpha_target=None, chains=None, progress=None, preview=None, diffuse_bounces=None, glossy_bounces=None, transmission_bounces=None, transparent_bounces=None, clamp_direct=None, clamp_indirect=None, data_passes=None, adaptive_threshold=None, adaptive_min_samples=None, guiding=None))]
 #[allow(clippy::too_many_arguments)]
 fn render<'py>(
     py: Python<'py>,
@@ -894,6 +894,7 @@ fn render<'py>(
     data_passes: Option<bool>,
     adaptive_threshold: Option<f32>,
     adaptive_min_samples: Option<u32>,
+    guiding: Option<bool>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let d = RenderSettings::default();
     let method = match method {
@@ -930,6 +931,7 @@ fn render<'py>(
         data_passes: data_passes.unwrap_or(d.data_passes),
         adaptive_threshold: adaptive_threshold.unwrap_or(d.adaptive_threshold),
         adaptive_min_samples: adaptive_min_samples.unwrap_or(d.adaptive_min_samples),
+        guiding: guiding.unwrap_or(d.guiding),
         ..d
     };
     settings.validate().map_err(|e| verr(e.to_string()))?;
@@ -1020,6 +1022,8 @@ fn render<'py>(
     stats.set_item("chains", st.chains)?;
     stats.set_item("direct_pass", st.direct_pass)?;
     stats.set_item("direct_relative_variance", st.direct_relative_variance)?;
+    stats.set_item("guide_iterations", st.guide_iterations)?;
+    stats.set_item("guide_regions", st.guide_regions)?;
     stats.set_item("alpha_rec", st.alpha_rec)?;
     dict.set_item("stats", stats)?;
     Ok(dict)
@@ -1061,6 +1065,7 @@ fn default_settings(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
     out.set_item("data_passes", d.data_passes)?;
     out.set_item("adaptive_threshold", shortest(d.adaptive_threshold))?;
     out.set_item("adaptive_min_samples", d.adaptive_min_samples)?;
+    out.set_item("guiding", d.guiding)?;
     Ok(out)
 }
 

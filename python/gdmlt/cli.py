@@ -129,6 +129,12 @@ def build_parser():
     nee = r.add_mutually_exclusive_group()
     nee.add_argument("--nee", dest="nee", action="store_true", default=None, help="next-event estimation with MIS (default)")
     nee.add_argument("--no-nee", dest="nee", action="store_false", help="naive path tracing: lights found only by hitting them")
+    guide = r.add_mutually_exclusive_group()
+    guide.add_argument("--guiding", dest="guiding", action="store_true", default=None,
+                       help="pt: path guiding, learned during the render (Mueller et al. 2017); off by default: "
+                            "it lowers the error per sample on rooms lit through gaps but costs about a third more "
+                            "per sample, so far more than it gains at equal time (docs/benchmarks.md)")
+    guide.add_argument("--no-guiding", dest="guiding", action="store_false", help="pt: no path guiding (default)")
     r.add_argument("--seed", type=_seed, help=f"random seed (default {D['seed']})")
     den = r.add_mutually_exclusive_group()
     den.add_argument("--denoise", dest="denoise", action="store_true", default=None,
@@ -181,7 +187,7 @@ BOUNCE_KINDS = ("diffuse", "glossy", "transmission", "transparent")
 def _settings(args):
     return {k: v for k, v in {
         "method": args.method, "spp": args.spp, "time_limit": args.time_limit, "max_bounces": args.max_bounces,
-        "nee": args.nee, "seed": args.seed, "threads": args.threads,
+        "nee": args.nee, "guiding": args.guiding, "seed": args.seed, "threads": args.threads,
         "reconstruction": args.reconstruction, "alpha_rec": args.alpha_rec,
         "alpha_target": args.alpha_target, "large_step_probability": args.large_step_probability,
         "chains": args.chains, "clamp_direct": args.clamp_direct, "clamp_indirect": args.clamp_indirect,
@@ -218,7 +224,7 @@ def _flag(s):
 # parsers (argparse), and so do the settings a USD stage stores (customLayerData "gdmlt"),
 # which no CLI parser saw. The core validates again (gdmlt.render raises ValueError).
 SETTING_PARSERS = {"method": _choice(*RENDER_METHODS), "spp": _positive_int, "time_limit": _nonneg_float,
-                   "max_bounces": _bounces, "nee": _flag, "seed": _seed, "threads": _threads,
+                   "max_bounces": _bounces, "nee": _flag, "guiding": _flag, "seed": _seed, "threads": _threads,
                    **{f"{k}_bounces": _bounces for k in BOUNCE_KINDS},
                    "clamp_direct": _nonneg_float, "clamp_indirect": _nonneg_float,
                    "reconstruction": _choice("l1", "l2"), "alpha_rec": _nonneg_float, "alpha_target": _pos_float,

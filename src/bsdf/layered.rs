@@ -151,6 +151,16 @@ impl Layered {
         (f, p)
     }
 
+    /// The density with which `sample` returns `wi` through the base (the Diffuse-labelled
+    /// share of `pdf`).
+    #[inline]
+    pub fn base_pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
+        if wi.z <= 0.0 {
+            return 0.0;
+        }
+        (1.0 - self.layer_probability(self.layer_albedo(wo.z).max_element())) * self.base.pdf(wo, wi)
+    }
+
     pub fn eval(&self, wo: Vec3, wi: Vec3) -> Spectrum {
         self.eval_pdf(wo, wi).0
     }

@@ -33,6 +33,12 @@ use glam::{Vec2, Vec3};
 /// (the public GDPT code uses 0.001; docs/algorithm.md §4).
 pub const SPECULAR_ROUGHNESS_THRESHOLD: f32 = 1e-3;
 
+/// Lobes at least this rough may be sampled by path guiding (`Bsdf::guidable`): below it a
+/// lobe is narrow enough that BSDF sampling alone does better than a share of its samples
+/// spent on the incident light (Cycles guides every non-delta closure, weighing the guide by
+/// roughness; here the choice is all or none per vertex).
+pub const GUIDE_MIN_ROUGHNESS: f32 = 0.25;
+
 /// What kind of lobe a sample came from.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum LobeKind {
@@ -409,6 +415,50 @@ impl Bsdf {
         }
     }
 
+    /// Whether path guiding may sample this BSDF (`guiding`): opaque (no glass, translucent
+    /// or pass-through lobe) and every lobe with weight at least [`GUIDE_MIN_ROUGHNESS`]
+    /// rough, so that a direction drawn from the incident light is worth its sample.
+    #[inline]
+    pub fn guidable(&self) -> bool {
+        let rough = |r: f32| r >= GUIDE_MIN_ROUGHNESS;
+        match self {
+            Bsdf::Lambert(_) => true,
+            Bsdf::Conductor(b) => rough(b.roughness),
+            Bsdf::Dielectric(_) => false,
+            Bsdf::Layered(b) => !b.has_layer() || rough(b.roughness),
+            Bsdf::Principled { diffuse, metal, w, pass, coat, translucent, .. } => {
+                w[2] <= 0.0
+                    && *pass <= 0.0
+                    && !translucent.is_some()
+                    && (w[0] <= 0.0 || !diffuse.has_layer() || rough(diffuse.roughness))
+                    && (w[1] <= 0.0 || rough(metal.roughness))
+                    && (!coat.is_some() || rough(coat.roughness))
+            }
+        }
+    }
+
+    /// Of a guidable BSDF's sampling density towards `wi` (`pdf`), the share of the lobes that
+    /// label their samples Diffuse (the rest are Glossy): the probability that `sample`,
+    /// having returned `wi`, labelled it Diffuse. A guided direction takes its label with this
+    /// probability, so the per-kind bounce limits apply as to BSDF samples.
+    #[inline]
+    pub fn diffuse_share(&self, wo: Vec3, wi: Vec3) -> f32 {
+        let total = self.pdf(wo, wi);
+        if !(total > 0.0) {
+            return 0.0;
+        }
+        let diffuse = match self {
+            Bsdf::Lambert(_) => return 1.0,
+            Bsdf::Conductor(_) | Bsdf::Dielectric(_) => return 0.0,
+            Bsdf::Layered(b) => b.base_pdf(wo, wi),
+            Bsdf::Principled { diffuse, w, coat, .. } => {
+                let pc = if coat.is_some() { self.coat_choice(wo) } else { 0.0 };
+                w[0] * diffuse.base_pdf(wo, wi) * (1.0 - pc)
+            }
+        };
+        (diffuse / total).clamp(0.0, 1.0)
+    }
+
     /// The shift mapping's vertex class: diffuse (reconnectable) when every lobe that carries
     /// weight is rougher than [`SPECULAR_ROUGHNESS_THRESHOLD`].
     #[inline]
@@ -552,6 +602,7 @@ impl Bsdf {
 mod tests {
     use super::testing::{chi2_test, white_furnace};
     use super::*;
+    use crate::sampler::Sampler;
 
     /// The denoising guides look through a surface when its mirror-like lobes (roughness ≤
     /// 0.075) carry at least 75% of its weight, tinted by their colour; else it is the guide.
@@ -703,6 +754,62 @@ mod tests {
         assert!((mix - expect).abs() < 0.01, "mixture {mix} vs weighted lobes {expect}");
         // smooth glass without radiance scaling (as Cycles): F + (1−F) = 1 (0.46–0.5 before)
         assert!((glass - 1.0).abs() < 0.01, "{glass}");
+    }
+
+    /// A guided direction takes the Diffuse label with probability `diffuse_share`, which must
+    /// be the probability that BSDF sampling labels its direction Diffuse: over BSDF samples,
+    /// the mean of `diffuse_share(wo, wi)` equals the share of samples labelled Diffuse (for a
+    /// layered plastic, a diffuse-metal mix under a rough coat, a rough metal, a Lambertian).
+    /// `guidable` is false for glass, pass-through and near-mirror lobes.
+    #[test]
+    fn diffuse_share_is_the_label_probability() {
+        let plastic = Layered {
+            base: Lambert::new(Spectrum::new(0.6, 0.4, 0.2)),
+            eta: 1.5,
+            roughness: 0.4,
+            coverage: 1.0,
+            tint: Spectrum::ONE,
+        };
+        let mut mix = coated(
+            Spectrum::splat(0.5),
+            [0.6, 0.4, 0.0],
+            0.0,
+            Coat { weight: 0.5, eta: 1.5, roughness: 0.35, tint: Spectrum::ONE },
+        );
+        if let Bsdf::Principled { diffuse, .. } = &mut mix {
+            *diffuse = plastic;
+        }
+        let cases = [
+            Bsdf::Layered(plastic),
+            mix,
+            Bsdf::Conductor(Conductor::new(Spectrum::ONE, 0.5, false)),
+            Bsdf::Lambert(Lambert::new(Spectrum::ONE)),
+        ];
+        let mut sampler = crate::sampler::IndependentSampler::new(17, 0);
+        for (i, b) in cases.iter().enumerate() {
+            assert!(b.guidable(), "case {i}");
+            for wo in [Vec3::Z, Vec3::new(0.7, 0.1, 0.5).normalize()] {
+                let n = 200_000;
+                let (mut labelled, mut share, mut m) = (0.0f64, 0.0f64, 0.0f64);
+                for _ in 0..n {
+                    let Some(bs) = b.sample(wo, sampler.next_1d(), sampler.next_2d()) else { continue };
+                    m += 1.0;
+                    labelled += (bs.scatter == Scatter::Diffuse) as u32 as f64;
+                    share += b.diffuse_share(wo, bs.wi) as f64;
+                }
+                let (p, q) = (labelled / m, share / m);
+                // binomial standard error of the labelled share, and 5 of them
+                let tol = 5.0 * (p * (1.0 - p) / m).sqrt() + 1e-9;
+                assert!((p - q).abs() <= tol, "case {i}, wo {wo}: {p} labelled Diffuse, mean share {q}");
+                if i == 1 {
+                    assert!(p > 0.2 && p < 0.8, "the mix has both labels: {p}");
+                }
+            }
+        }
+        assert!(!principled([0.0, 0.0, 1.0], 0.3).guidable(), "glass");
+        assert!(!coated(Spectrum::ONE, [1.0, 0.0, 0.0], 0.3, Coat::NONE).guidable(), "pass-through");
+        assert!(!principled([0.0, 1.0, 0.0], 0.1).guidable(), "a near-mirror metal");
+        assert!(!Bsdf::Dielectric(Dielectric::clear(1.5, 0.5)).guidable());
     }
 
     fn coated(base: Spectrum, w: [f32; 3], pass: f32, coat: Coat) -> Bsdf {

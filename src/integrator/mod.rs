@@ -78,6 +78,8 @@ pub struct RenderSettings {
     /// `spp`) and the samples every pixel takes before any stops (0 = automatic).
     pub adaptive_threshold: f32,
     pub adaptive_min_samples: u32,
+    /// `pt`: path guiding (guiding/mod.rs), learned during the render.
+    pub guiding: bool,
 }
 
 /// Where Metropolis chains start.
@@ -109,6 +111,7 @@ impl Default for RenderSettings {
             data_passes: false,
             adaptive_threshold: 0.0,
             adaptive_min_samples: 0,
+            guiding: false,
         }
     }
 }
@@ -294,6 +297,9 @@ pub struct RenderStats {
     pub direct_relative_variance: f64,
     /// Gradient-domain methods: the reconstruction's α (the setting, or the measured one).
     pub alpha_rec: f64,
+    /// `pt` with path guiding: training iterations completed and the guide's spatial regions.
+    pub guide_iterations: u32,
+    pub guide_regions: usize,
 }
 
 /// Named images: "Combined" first, then passes.
