@@ -439,7 +439,8 @@ pub fn trace_path_guided<S: Sampler>(
         // The continuation is sampled first: it does not depend on the light sample, so the
         // processor overlaps the two computations before the shadow ray's traversal. At a
         // guided vertex, from the guide or the BSDF.
-        let guided = guiding.filter(|_| bsdf.guidable()).map(|g| g.field.at(si.p));
+        let guided =
+            guiding.filter(|_| st.depth < guiding::MAX_GUIDED_DEPTH && bsdf.guidable()).map(|g| g.field.at(si.p));
         let dist = guided.and_then(|g| g.dist);
         let sampled = match dist {
             Some(d) => guiding::sample_mixture(&bsdf, &si.frame, d, wo, u_lobe, u_bsdf),

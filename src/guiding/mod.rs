@@ -10,7 +10,8 @@
 //!   are a third of the samples);
 //! - a spatial leaf splits above [`SPLIT_C`]·√(2^k) records in iteration k;
 //! - a directional quadrant splits above [`RHO`] = 1% of its leaf's energy;
-//! - at a guidable vertex (`Bsdf::guidable`) with a learned distribution of at least
+//! - at a guidable vertex (`Bsdf::guidable`) among a path's first [`MAX_GUIDED_DEPTH`]
+//!   scattering vertices, with a learned distribution of at least
 //!   [`MIN_RECORDS`] records, one-sample MIS of the guide (probability
 //!   [`GUIDE_PROBABILITY`]) and the BSDF; the density of the mixture is what MIS with
 //!   next-event estimation sees;
@@ -36,6 +37,11 @@ use glam::{Vec2, Vec3};
 pub const SPLIT_C: f64 = 3000.0;
 /// Energy share above which a directional quadrant splits.
 pub const RHO: f32 = 0.01;
+/// Scattering vertices guided (and recorded) per path: the first two. Deeper vertices carry
+/// less of the image and cost as much: on the door-ajar room, guiding every vertex cost 26%
+/// more time per sample for −9% relMSE (−21% block error after OIDN) at equal samples; the
+/// first two, 11% for −7% (−17%); the first alone 5% for −3% (−14%).
+pub const MAX_GUIDED_DEPTH: u32 = 2;
 /// Records a distribution needs before it is sampled.
 pub const MIN_RECORDS: u64 = 128;
 /// Probability of sampling the guide rather than the BSDF at a guided vertex (the paper's ½
@@ -144,8 +150,8 @@ pub fn mixture_pdf(dist: &DTree, wi_world: Vec3, pdf_b: f32) -> f32 {
     GUIDE_PROBABILITY * dist.pdf(wi_world) + (1.0 - GUIDE_PROBABILITY) * pdf_b
 }
 
-/// Most guidable vertices a path records (deeper ones are not recorded).
-pub const MAX_RECORDED: usize = 16;
+/// Most vertices a path records: its guided ones.
+const MAX_RECORDED: usize = MAX_GUIDED_DEPTH as usize;
 
 /// The vertices of one path that will record what it brings back.
 #[derive(Clone, Copy, Debug)]

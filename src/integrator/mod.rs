@@ -338,6 +338,9 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl)
     } else {
         settings
     };
+    if settings.guiding && settings.method != Method::Pt {
+        warnings.push(format!("path guiding applies to pt only; {} renders without it", settings.method.name()));
+    }
     if !settings.path.nee {
         let delta = scene.delta_lights();
         if !delta.is_empty() {

@@ -319,3 +319,24 @@ def test_data_passes_are_the_same_for_every_method(method):
     np.testing.assert_array_equal(layers["Position"], ref["Position"])
     assert (layers["Depth"] == 1e10).any() and (layers["Depth"] < 10).any()
     assert "Depth" not in gdmlt.render(scene, method=method, spp=1)["layers"]
+
+
+def test_path_guiding_from_the_api_and_the_cli(tmp_path):
+    """Path guiding (opt-in) learns during a pt render: iterations ending at 1, 3, 7, 15 spp,
+    several regions, a finite image that differs from the unguided one; another method says
+    it renders without it; the CLI takes --guiding."""
+    scene = gdmlt.Scene(gdmlt.builtin_scene("gap", 48, 40))
+    guided = gdmlt.render(scene, method="pt", spp=15, guiding=True, seed=2)
+    plain = gdmlt.render(scene, method="pt", spp=15, seed=2)
+    st = guided["stats"]
+    assert st["guide_iterations"] == 4 and st["guide_regions"] > 1, st
+    assert plain["stats"]["guide_iterations"] == 0
+    img = guided["layers"]["Combined"]
+    assert np.isfinite(img).all() and not np.array_equal(img, plain["layers"]["Combined"])
+    other = gdmlt.render(scene, method="gdpt", spp=2, guiding=True)["stats"]
+    assert any("guiding applies to pt only" in w for w in other["warnings"]), other["warnings"]
+    out = tmp_path / "g.exr"
+    r = _cli("render", "gap", "-o", str(out), "--spp", "7", "--width", "24", "--height", "20", "--method", "pt",
+             "--guiding")
+    assert r.returncode == 0, r.stderr
+    assert np.isfinite(read_exr(out)).all()
