@@ -133,7 +133,8 @@ def build_parser():
     guide.add_argument("--guiding", dest="guiding", action="store_true", default=None,
                        help="pt: path guiding, learned during the render (Mueller et al. 2017); off by default: "
                             "on a room lit through a door left ajar it lowers the block error after denoising by 7-9%% "
-                            "at equal time; on directly lit scenes it costs more than it gains (docs/benchmarks.md)")
+                            "at equal time; on directly lit scenes and the built-in gap it costs more than it gains "
+                            "(docs/benchmarks.md)")
     guide.add_argument("--no-guiding", dest="guiding", action="store_false", help="pt: no path guiding (default)")
     r.add_argument("--seed", type=_seed, help=f"random seed (default {D['seed']})")
     den = r.add_mutually_exclusive_group()
