@@ -440,10 +440,10 @@ impl Bsdf {
     /// Of a guidable BSDF's sampling density towards `wi` (`pdf`), the share of the lobes that
     /// label their samples Diffuse (the rest are Glossy): the probability that `sample`,
     /// having returned `wi`, labelled it Diffuse. A guided direction takes its label with this
-    /// probability, so the per-kind bounce limits apply as to BSDF samples.
+    /// probability, so the per-kind bounce limits apply as to BSDF samples. `total` is
+    /// `pdf(wo, wi)`, which the caller has already evaluated.
     #[inline]
-    pub fn diffuse_share(&self, wo: Vec3, wi: Vec3) -> f32 {
-        let total = self.pdf(wo, wi);
+    pub fn diffuse_share(&self, wo: Vec3, wi: Vec3, total: f32) -> f32 {
         if !(total > 0.0) {
             return 0.0;
         }
@@ -795,7 +795,7 @@ mod tests {
                     let Some(bs) = b.sample(wo, sampler.next_1d(), sampler.next_2d()) else { continue };
                     m += 1.0;
                     labelled += (bs.scatter == Scatter::Diffuse) as u32 as f64;
-                    share += b.diffuse_share(wo, bs.wi) as f64;
+                    share += b.diffuse_share(wo, bs.wi, b.pdf(wo, bs.wi)) as f64;
                 }
                 let (p, q) = (labelled / m, share / m);
                 // binomial standard error of the labelled share, and 5 of them

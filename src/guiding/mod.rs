@@ -23,7 +23,7 @@
 mod quadtree;
 mod spatial;
 
-pub use quadtree::{dir_to_square, square_to_dir, DTree};
+pub use quadtree::DTree;
 use spatial::STree;
 
 use crate::bsdf::{Bsdf, BsdfSample, LobeKind, Scatter};
@@ -131,7 +131,7 @@ pub fn sample_mixture(bsdf: &Bsdf, frame: &Frame, dist: &DTree, wo: Vec3, u_lobe
             return None;
         }
         // (the rest of u_lobe labels it, as the BSDF's lobes would have)
-        let diffuse = u_lobe / a < bsdf.diffuse_share(wo, wi);
+        let diffuse = u_lobe / a < bsdf.diffuse_share(wo, wi, pdf_b);
         let scatter = if diffuse { Scatter::Diffuse } else { Scatter::Glossy };
         return Some(BsdfSample { wi, weight: f / pdf, pdf, lobe: LobeKind::Diffuse, eta: 1.0, scatter });
     }

@@ -11,6 +11,7 @@
 //! (`DTreeRecorder::collect`), and `DTree::refined` lays out the next recorder: a quadrant
 //! holding more than `rho` of the energy is subdivided, one holding less is merged (§4.2).
 
+use crate::math::{atan2, sin_cos_turns};
 use glam::{Vec2, Vec3};
 use std::f32::consts::PI;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -28,7 +29,7 @@ const MAX_RECORD: f64 = 1e6;
 pub fn square_to_dir(p: Vec2) -> Vec3 {
     let cos_t = 2.0 * p.x - 1.0;
     let sin_t = (1.0 - cos_t * cos_t).max(0.0).sqrt();
-    let (s, c) = (2.0 * PI * p.y).sin_cos();
+    let (s, c) = sin_cos_turns(p.y);
     Vec3::new(sin_t * c, sin_t * s, cos_t)
 }
 
@@ -43,47 +44,6 @@ pub fn dir_to_square(d: Vec3) -> Vec2 {
     let v = phi / (2.0 * PI);
     let below_one = 1.0 - f32::EPSILON;
     Vec2::new(u.min(below_one), v.min(below_one))
-}
-
-/// atan2 by a polynomial (|error| < 1e-6 rad, as libm's f32 to a few ulps; libm's call costs more than the rest
-/// of a density lookup).
-#[inline]
-fn atan2(y: f32, x: f32) -> f32 {
-    let (ax, ay) = (x.abs(), y.abs());
-    let (mx, mn) = (ax.max(ay), ax.min(ay));
-    if mx == 0.0 {
-        return 0.0;
-    }
-    let a = mn / mx;
-    let s = a * a;
-    // atan(a) on [0, 1]: a + a·s·P(s), least squares on Chebyshev nodes (|error| < 1e-8
-    // in exact arithmetic; f32 rounding dominates)
-    const C: [f32; 8] = [
-        -0.333_329_8,
-        0.199_902_07,
-        -0.141_844_21,
-        0.105_678_22,
-        -0.073_537_6,
-        0.040_970_22,
-        -0.015_040_09,
-        0.002_599_34,
-    ];
-    let mut p = C[7];
-    for c in C[..7].iter().rev() {
-        p = p * s + c;
-    }
-    let mut r = a + a * s * p;
-    if ay > ax {
-        r = std::f32::consts::FRAC_PI_2 - r;
-    }
-    if x < 0.0 {
-        r = PI - r;
-    }
-    if y < 0.0 {
-        -r
-    } else {
-        r
-    }
 }
 
 /// The quadrant of `p` (in a node's unit square) and `p` in the quadrant's own unit square.
@@ -306,18 +266,6 @@ mod tests {
     use crate::sampler::{Sampler, SobolSampler};
 
     #[test]
-    fn fast_atan2_is_atan2() {
-        for i in 0..10000 {
-            let a = i as f32 * 0.000_628_3 * 1.0001;
-            for r in [1e-3f32, 1.0, 7.0] {
-                let (y, x) = (r * a.sin(), r * a.cos());
-                let e = (atan2(y, x) - y.atan2(x)).abs();
-                assert!(e < 1e-6, "atan2({y}, {x}): {} vs {}", atan2(y, x), y.atan2(x));
-            }
-        }
-    }
-
-    #[test]
     fn cylindrical_map_round_trips() {
         for i in 0..64 {
             for j in 0..64 {
@@ -331,18 +279,16 @@ mod tests {
     /// A learned tree: records from a sharp lobe around `peak` and a dim uniform rest.
     fn learned(peak: Vec3, passes: u32) -> DTree {
         let mut tree = DTree::default();
-        let mut s = SobolSampler::new(3, 1, 0);
         for pass in 0..passes {
             let rec = tree.refined(0.01);
             for k in 0..20000 {
-                s = SobolSampler::new(3, pass as u64, k);
+                let mut s = SobolSampler::new(3, pass as u64, k);
                 let d = square_to_dir(s.next_2d());
                 let v = if d.dot(peak) > 0.95 { 50.0 } else { 1.0 };
                 rec.record(d, v);
             }
             tree = rec.collect();
         }
-        let _ = s;
         tree
     }
 
@@ -372,9 +318,8 @@ mod tests {
         assert!((mass - 1.0).abs() < 1e-3, "the density integrates to {mass}");
         let n = 200_000;
         let mut hist = vec![0.0f64; nu * nv];
-        let mut s = SobolSampler::new(11, 0, 0);
         for i in 0..n {
-            s = SobolSampler::new(11, 7, i);
+            let mut s = SobolSampler::new(11, 7, i);
             let (d, pdf) = tree.sample(s.next_2d());
             let rel = (pdf - tree.pdf(d)).abs() / pdf;
             assert!(rel < 1e-3, "sample reports {pdf}, pdf gives {}", tree.pdf(d));
@@ -382,7 +327,6 @@ mod tests {
             let b = ((p.x * nu as f32) as usize).min(nu - 1) + nu * ((p.y * nv as f32) as usize).min(nv - 1);
             hist[b] += 1.0;
         }
-        let _ = s;
         let (mut chi2, mut dof) = (0.0, 0);
         for (o, e) in hist.iter().zip(&expected) {
             let e = e * n as f64;

@@ -53,16 +53,23 @@ impl STree {
     /// The leaf whose box holds `p` (points outside the cube go to the nearest leaf).
     #[inline]
     pub fn leaf_at(&self, p: Vec3) -> u32 {
+        self.descend(p).0
+    }
+
+    /// The leaf holding `p` and its depth in the tree.
+    #[inline]
+    fn descend(&self, p: Vec3) -> (u32, u32) {
         let mut x = ((p - self.lo) / self.size).clamp(Vec3::ZERO, Vec3::splat(1.0 - f32::EPSILON));
-        let mut node = 0usize;
+        let (mut node, mut depth) = (0usize, 0);
         loop {
             match self.nodes[node] {
-                SNode::Leaf(l) => return l,
+                SNode::Leaf(l) => return (l, depth),
                 SNode::Inner { axis, child } => {
                     let a = axis as usize;
                     let upper = x[a] >= 0.5;
                     x[a] = if upper { x[a] * 2.0 - 1.0 } else { x[a] * 2.0 };
                     node = child[upper as usize] as usize;
+                    depth += 1;
                 }
             }
         }
@@ -105,21 +112,6 @@ impl STree {
             leaf.recorder = leaf.sampling.refined(rho);
         }
     }
-
-    /// The depth of the tree's node path to `p` (for tests).
-    #[cfg(test)]
-    pub fn depth_at(&self, p: Vec3) -> u32 {
-        let mut x = ((p - self.lo) / self.size).clamp(Vec3::ZERO, Vec3::splat(1.0 - f32::EPSILON));
-        let (mut node, mut depth) = (0usize, 0);
-        while let SNode::Inner { axis, child } = self.nodes[node] {
-            let a = axis as usize;
-            let upper = x[a] >= 0.5;
-            x[a] = if upper { x[a] * 2.0 - 1.0 } else { x[a] * 2.0 };
-            node = child[upper as usize] as usize;
-            depth += 1;
-        }
-        depth
-    }
 }
 
 #[cfg(test)]
@@ -145,7 +137,7 @@ mod tests {
         }
         // (the first split ascribes half the records to each half, as the paper does, so the
         // far corner is split too in the first refinement, and only then left alone)
-        let (dn, df) = (t.depth_at(near), t.depth_at(far));
+        let (dn, df) = (t.descend(near).1, t.descend(far).1);
         assert!(dn >= df + 3, "depth near the records {dn}, far from them {df}");
         assert!(t.leaves.len() > 4);
         // every leaf is reached by some point in its box: leaf_at is consistent with the splits
