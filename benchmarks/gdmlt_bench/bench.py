@@ -134,17 +134,22 @@ def run(scene="cornell", size=None, budgets=(1.0, 2.0, 4.0), methods=("pt", "gdp
     out(f"# {label} {cam['resolution_x']}x{cam['resolution_y']}, max bounces {max_bounces}, threads={threads or 'all'}, "
         f"reference: {what}, core {gdmlt.BUILD_TARGET}" + (f", settings {extra}" if extra else ""))
     t0 = time.perf_counter()
+    # The reference is the mean of two independent halves: their difference measures its own
+    # noise, which every error below contains (reference_noise).
     if reference == "cycles":
         # GDMLT's own error then includes any difference from Cycles' answer, not only noise
         from . import peers as _peers
 
         blend = scene if str(scene).lower().endswith(".blend") else None
-        ref = _peers.cycles_render([reference_seconds], max_bounces, True, threads, desc=None if blend else desc,
-                                   blend=blend, size=size, seed=977)[0][0]
+        halves = [_peers.cycles_render([reference_seconds / 2], max_bounces, True, threads,
+                                       desc=None if blend else desc, blend=blend, size=size, seed=s)[0][0]
+                  for s in (977, 978)]
     else:
-        ref = gdmlt.render(sc, method="pt", spp=reference_spp, nee=True, seed=12345, threads=threads,
-                           max_bounces=max_bounces)["layers"]["Combined"]
-    out(f"# reference took {time.perf_counter() - t0:.1f} s")
+        halves = [gdmlt.render(sc, method="pt", spp=max(1, reference_spp // 2), nee=True, seed=s, threads=threads,
+                               max_bounces=max_bounces)["layers"]["Combined"] for s in (12345, 12346)]
+    ref, noise = reference_noise(*halves)
+    out(f"# reference took {time.perf_counter() - t0:.1f} s; its own noise: relMSE {noise[0]:.3g}, block error "
+        f"{noise[1]:.3g} (in every figure below; the tables 'less the reference's noise' take its relMSE out)")
     out(f"{'method':14} {'nee':5} " + " ".join(f"{'relMSE@' + f'{b:g}' + 's':>14} {'SMAPE':>7}" for b in budgets))
     if denoise:
         from gdmlt.oidn import available, denoise_image
@@ -207,16 +212,30 @@ def run(scene="cornell", size=None, budgets=(1.0, 2.0, 4.0), methods=("pt", "gdp
         out(f"# {n}")
     if denoise_time:
         out(f"# denoiser time per image: {np.median(denoise_time):.2f} s (median, not charged to the budget)")
-    summary(rows, budgets, out)
+    summary(rows, budgets, out, noise)
     if plot:
         draw(rows, budgets, f"{label}: relMSE against time", plot)
         out(f"# plot: {plot}")
     return rows
 
 
-def summary(rows, budgets, out=print):
+def reference_noise(a, b):
+    """The reference made of two independent half renders `a` and `b` of the same image, and
+    its own noise: (relMSE, block error) of the mean against the image it estimates, from the
+    halves' difference. Any image x independent of the reference has E[relMSE(x, ref)] =
+    relMSE(x, truth) + the first (the weights 1/(ref² + ε) held fixed); the block error of
+    the mean is about half the halves' against each other (noise of ¼ the variance)."""
+    a, b = np.asarray(a, np.float64), np.asarray(b, np.float64)
+    ref = 0.5 * (a + b)
+    rel = float(np.mean(0.25 * (a - b) ** 2 / (ref ** 2 + EPS)))
+    return ref.astype(np.float32), (rel, 0.5 * block_error(a, b))
+
+
+def summary(rows, budgets, out=print, noise=None):
     """Every metric as its own table, then each row's relMSE and block error as ratios to
-    the Cycles row of the same light mode (Cycles+OIDN for denoised rows), when there is one."""
+    the Cycles row of the same light mode (Cycles+OIDN for denoised rows), when there is one;
+    with `noise` (reference_noise's), also the relMSE ratios less the reference's own noise,
+    which otherwise draws every ratio towards 1 where errors come near it."""
     head = f"{'':14} {'nee':5} " + " ".join(f"{f'{b:g} s':>10}" for b in budgets)
     for k, metric in enumerate(METRICS):
         out(f"## {metric}")
@@ -226,14 +245,23 @@ def summary(rows, budgets, out=print):
     peer = {(name, nee): cells for name, nee, cells in rows if name.startswith("cycles")}
     if not peer:
         return
-    for k, metric in ((0, "relMSE"), (2, "block")):
+    floor = noise[0] if noise else 0.0
+    tables = [(0, "relMSE", 0.0), (2, "block", 0.0)] + ([(0, "relMSE less the reference's noise", floor)] if noise else [])
+    for k, metric, sub in tables:
         out(f"## {metric} ÷ Cycles' (÷ Cycles+OIDN's for denoised rows)")
         out(head)
         for name, nee, cells in rows:
             ref = peer.get(("cycles+oidn" if name.endswith("+oidn") else "cycles", nee))
             if ref is None or name.startswith("cycles"):
                 continue
-            out(f"{name:14} {str(nee):5} " + " ".join(f"{c[k] / max(r[k], 1e-30):10.3g}" for c, r in zip(cells, ref)))
+            out(f"{name:14} {str(nee):5} " + " ".join(_ratio(c[k] - sub, r[k] - sub) for c, r in zip(cells, ref)))
+
+
+def _ratio(a, b):
+    """a ÷ b, or why not: an error at or under the reference's noise is not measured."""
+    if b <= 0:
+        return f"{'(floor)':>10}"
+    return f"{max(a, 0.0) / b:10.3g}"
 
 
 def draw(rows, budgets, title, path):

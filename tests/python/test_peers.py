@@ -94,3 +94,28 @@ def test_block_error_sees_low_frequencies_that_relmse_weighs_like_noise():
     assert abs(block_error(ref + blotch, ref) - 0.01 / 0.51) < 1e-4
     f = flip_error(ref + noise, ref)
     assert np.isnan(f) or f > flip_error(ref, ref)
+
+
+def test_reference_noise_is_what_a_noisy_reference_adds_to_relmse():
+    """A reference averaged from two noisy halves adds its own variance to every image's
+    relMSE; `reference_noise` measures it from the halves, so that relMSE less it is the
+    error against the true image (within the estimate's spread over 64² pixels), for an image
+    noisier than the reference and for one cleaner than it."""
+    from gdmlt_bench.bench import block_error, reference_noise, rel_mse
+
+    rng = np.random.default_rng(7)
+    truth = rng.uniform(0.2, 2.0, (64, 64, 3)).astype(np.float32)
+    sd = 0.05 * truth
+    a, b = truth + sd * rng.standard_normal(truth.shape), truth + sd * rng.standard_normal(truth.shape)
+    ref, (noise, block_noise) = reference_noise(a, b)
+    assert np.allclose(ref, 0.5 * (a + b))
+    expected = float(np.mean((0.5 * sd) ** 2 * 2 / (truth ** 2 + 0.01)))  # Var of the mean of two
+    assert abs(noise / expected - 1) < 0.05
+    for scale in (3.0, 0.3):
+        x = truth + scale * sd * rng.standard_normal(truth.shape)
+        against_truth = rel_mse(x, truth)
+        assert abs((rel_mse(x, ref) - noise) / against_truth - 1) < 0.1, scale
+        # uncorrected, the cleaner image's error would be overstated several times
+        if scale < 1:
+            assert rel_mse(x, ref) > 2 * against_truth
+    assert abs(block_noise / block_error(ref, truth) - 1) < 0.15
