@@ -7,8 +7,8 @@ printed as a ratio to GDMLT's to show that all three render the same scene. It m
 not pass or fail.
 
 Same path length: samples/s only compare when every renderer ends its paths alike, so Mitsuba
-runs with GDMLT's Russian roulette (from bounce `gdmlt.RR_START_DEPTH`, q = min(max
-throughput, 1); see `peers.mitsuba_integrator`). Mitsuba's defaults (roulette from depth 5 with
+runs with GDMLT's Russian roulette (from bounce `gdmlt.RR_START_DEPTH`, q = min((max
+throughput)^RR_EXPONENT, 1); see `peers.mitsuba_integrator`). Mitsuba's defaults (roulette from depth 5 with
 `path`, none with `prb_basic`) trace longer paths per sample; the column `mi default` gives
 that rate for reference. LuxCore keeps its own roulette (from depth 3 on the local BSDF weight,
 survival at least 0.5), so its paths run longer than GDMLT's.

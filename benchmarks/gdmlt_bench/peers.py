@@ -143,7 +143,8 @@ _BSDF_RR = "gdmlt_bsdf_sampling_rr"
 def _register_bsdf_sampling_rr(mi, dr):
     """Registers a Mitsuba integrator that finds light by BSDF sampling only (as `prb_basic`)
     but with GDMLT's Russian roulette: after `rr_depth` bounces a path goes on with probability
-    q = min(max throughput, 1) and its throughput is divided by q (`src/path.rs`). Mitsuba's
+    q = min((max throughput)^gdmlt.RR_EXPONENT, 1) and its throughput is divided by q
+    (`src/path.rs`). Mitsuba's
     `prb_basic` has no roulette at all, so its paths run to `max_depth` and cost more each."""
     if _BSDF_RR in getattr(_register_bsdf_sampling_rr, "done", set()):
         return
@@ -158,8 +159,10 @@ def _register_bsdf_sampling_rr(mi, dr):
         def sample(self, scene, sampler, ray, medium=None, active=True):
             # (dr.syntax recompiles this body without its closure: the modules come by import)
             import drjit as dr
+            import gdmlt
             import mitsuba as mi
 
+            exponent = gdmlt.RR_EXPONENT
             ctx = mi.BSDFContext()
             ray = mi.Ray3f(ray)
             radiance = mi.Spectrum(0.0)
@@ -175,7 +178,7 @@ def _register_bsdf_sampling_rr(mi, dr):
                 ray = si.spawn_ray(si.to_world(bs.wo))
                 depth += 1
                 beta_max = dr.max(mi.unpolarized_spectrum(beta))
-                q = dr.minimum(beta_max, 1.0)
+                q = dr.minimum(dr.power(beta_max, exponent), 1.0)
                 roulette = depth >= self.rr_depth
                 survive = sampler.next_1d() < q
                 beta[roulette] *= dr.rcp(q)
