@@ -59,6 +59,11 @@ pub struct FilmRow {
     /// samples (its 2nd, 4th, …), and whether it goes on sampling (integrator/adaptive.rs).
     pub half: Vec<[f32; 3]>,
     pub active: Vec<bool>,
+    /// `pt` only (empty otherwise): each pixel's running mean and sum of squared deviations
+    /// of its samples' brightness — the mean of R, G and B, which weighs the channels alike as
+    /// the denoiser's restore step does — (Welford's update, stable in f32), for the
+    /// "Variance" layer.
+    pub moments: Vec<[f32; 2]>,
 }
 
 impl FilmRow {
@@ -73,6 +78,7 @@ impl FilmRow {
             invalid: 0,
             half: Vec::new(),
             active: Vec::new(),
+            moments: Vec::new(),
         }
     }
 
@@ -95,6 +101,12 @@ impl FilmRow {
             }
         };
         acc(&mut self.color[x], c);
+        if let Some(m) = self.moments.get_mut(x) {
+            let l = (c.x + c.y + c.z) / 3.0;
+            let delta = l - m[0];
+            m[0] += delta / (self.count[x] + 1) as f32;
+            m[1] += delta * (l - m[0]);
+        }
         if !self.half.is_empty() && self.count[x] & 1 == 1 {
             acc(&mut self.half[x], c);
         }
@@ -109,6 +121,10 @@ impl FilmRow {
         self.count[x] += 1;
     }
 }
+
+/// The "Variance" layer's value where it cannot be estimated (fewer than two samples): large
+/// and finite, so that whatever reads it trusts the pixel least.
+pub const VARIANCE_UNKNOWN: f32 = 1e30;
 
 /// The whole film: one `FilmRow` per image row.
 #[derive(Clone, Debug)]
@@ -129,6 +145,27 @@ impl Film {
             r.half = vec![[0.0; 3]; self.width];
             r.active = vec![true; self.width];
         }
+    }
+
+    /// Keeps each pixel's luminance moments for [`Film::variance`]: 8 bytes a pixel.
+    pub fn enable_variance(&mut self) {
+        for r in &mut self.rows {
+            r.moments = vec![[0.0; 2]; self.width];
+        }
+    }
+
+    /// The "Variance" layer (one channel): the estimated variance of each pixel's mean
+    /// brightness ((R + G + B)/3), s²/n with s² the samples' unbiased variance; [`VARIANCE_UNKNOWN`] where a
+    /// pixel has fewer than two samples. Zero everywhere unless `enable_variance` was called.
+    pub fn variance(&self) -> Image {
+        let mut img = Image::new(self.width, self.height, 1);
+        for (y, row) in self.rows.iter().enumerate() {
+            for (x, (m, &n)) in row.moments.iter().zip(&row.count).enumerate() {
+                img.data[y * self.width + x] =
+                    if n >= 2 { m[1].max(0.0) / ((n - 1) as f32 * n as f32) } else { VARIANCE_UNKNOWN };
+            }
+        }
+        img
     }
 
     pub fn invalid_samples(&self) -> u64 {
@@ -183,5 +220,45 @@ impl Film {
             }
         }
         img
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The "Variance" layer is the unbiased sample variance of each pixel's brightness over
+    /// its count, as computed in f64 from the same samples — also for a bright pixel whose
+    /// spread is tiny beside its mean (where Σx² − (Σx)²/n in f32 would cancel), and for
+    /// samples a NaN replaced by black; a pixel of one sample is "unknown".
+    #[test]
+    fn variance_layer_is_the_variance_of_the_pixel_mean() {
+        let mut film = Film::new(3, 1);
+        film.enable_variance();
+        let grey = |v: f32| PathContribution { radiance: Spectrum::splat(v), ..Default::default() };
+        let pixel0: Vec<f32> = (0..200).map(|i| ((i * 37) % 101) as f32 / 50.0).collect();
+        let pixel1: Vec<f32> = (0..500).map(|i| 1000.0 + ((i * 13) % 7) as f32 * 0.01).collect();
+        let row = &mut film.rows[0];
+        for &v in &pixel0 {
+            row.add(0, &grey(v));
+        }
+        for &v in &pixel1 {
+            row.add(1, &grey(v));
+        }
+        row.add(0, &grey(f32::NAN)); // counts as a black sample
+        row.add(2, &grey(3.0));
+        let var = film.variance();
+        let expected = |xs: &[f32]| {
+            let n = xs.len() as f64;
+            let m = xs.iter().map(|&x| x as f64).sum::<f64>() / n;
+            xs.iter().map(|&x| (x as f64 - m).powi(2)).sum::<f64>() / (n - 1.0) / n
+        };
+        let mut p0 = pixel0.clone();
+        p0.push(0.0);
+        for (x, xs) in [(0usize, p0.as_slice()), (1, pixel1.as_slice())] {
+            let e = expected(xs);
+            assert!(((var.data[x] as f64) - e).abs() <= 2e-3 * e, "pixel {x}: {} against {e}", var.data[x]);
+        }
+        assert_eq!(var.data[2], VARIANCE_UNKNOWN);
     }
 }

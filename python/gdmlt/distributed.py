@@ -198,7 +198,10 @@ def merge(partials, alpha_rec=None, reconstruction=None) -> dict:
     merged = {}
     for name in names:
         if all(name in p for p in partials):
-            merged[name[6:]] = sum(w * p[name].astype(np.float64) for w, p in zip(weights, partials)).astype(np.float32)
+            # a weighted mean of independent estimates: its variance is Σ w² · each variance
+            power = 2 if name == "layer:Variance" else 1
+            merged[name[6:]] = sum(w ** power * p[name].astype(np.float64)
+                                   for w, p in zip(weights, partials)).astype(np.float32)
     if method in GD_METHODS:
         direct = merged["Very Direct"]
         merged["Combined"] = gdmlt.reconstruct(

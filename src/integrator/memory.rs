@@ -5,7 +5,8 @@
 //! throughout, plus the reconstruction's workspace (peak resident memory above the built
 //! scene, `gdmlt_bench scalebench --memory`, 1024² and 1920×1080 Cornell box, one sample,
 //! L1; 2026-12-02, gradient-domain methods 2026-12-04 with the α halves): `pt` 105 B (+13 B
-//! with adaptive sampling), `gdpt` 157 B, `pssmlt` 69 B, `gdpssmlt` 175 B per pixel,
+//! with adaptive sampling; +12 B since 2026-12-05 for the luminance moments and the
+//! "Variance" layer), `gdpt` 157 B, `pssmlt` 69 B, `gdpssmlt` 175 B per pixel,
 //! the same on 1 and 2 threads (the Metropolis methods keep one image whatever the thread
 //! count; their bootstrap (≤ 4 MB) and splat logs (≤ 6 MB on up to 16 threads) do not grow
 //! with the image).
@@ -16,7 +17,7 @@ use crate::error::RenderError;
 /// Bytes per pixel each method allocates (rounded up from the measurements above).
 pub fn bytes_per_pixel(method: Method) -> u64 {
     match method {
-        Method::Pt => 120,
+        Method::Pt => 135,
         Method::Gdpt => 170,
         Method::Pssmlt => 90,
         Method::Gdpssmlt => 190,

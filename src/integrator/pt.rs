@@ -78,6 +78,7 @@ fn render_row(
 pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl) -> RenderOutput {
     let (w, h) = (scene.camera.width as usize, scene.camera.height as usize);
     let mut film = Film::new(w, h);
+    film.enable_variance(); // the denoiser's "Variance" layer (python/gdmlt/oidn.py)
     let adaptive = AdaptiveSampling::new(settings.adaptive_threshold, settings.adaptive_min_samples);
     if adaptive.is_some() {
         film.enable_adaptive();
@@ -134,6 +135,7 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl)
         ("Denoising Albedo".into(), film.albedo()),
         ("Denoising Normal".into(), film.normal()),
         ("Very Direct".into(), film.direct()),
+        ("Variance".into(), film.variance()),
     ];
     if scene.camera.film_transparent {
         layers.push(("Alpha".into(), film.alpha()));

@@ -172,3 +172,16 @@ def test_merge_command_exits_1_on_a_bad_partial(cornell, tmp_path):
                        capture_output=True, text=True, cwd=ROOT)
     assert r.returncode == 1 and "same partial" in r.stderr and "Traceback" not in r.stderr, r.stderr
     assert not (tmp_path / "m.exr").exists()
+
+
+def test_merged_variance_layer_is_the_variance_of_the_weighted_mean(cornell):
+    """`pt`'s "Variance" layer (what the denoiser's restore step trusts) merges as the
+    variance of a work-weighted mean of independent partials, Σ w²·v (a plain weighted mean
+    would overstate it by 1/w), while the colour merges as the weighted mean."""
+    a = dist.render_partial(cornell, 0, 2, {"method": "pt", "spp": 4})
+    b = dist.render_partial(cornell, 1, 2, {"method": "pt", "spp": 4})
+    wa, wb = a["work"] / (a["work"] + b["work"]), b["work"] / (a["work"] + b["work"])
+    va, vb = a["layer:Variance"].astype(np.float64), b["layer:Variance"].astype(np.float64)
+    merged = dist.merge([a, b])
+    assert np.allclose(merged["Variance"], wa ** 2 * va + wb ** 2 * vb, rtol=1e-5)
+    assert np.allclose(merged["Combined"], wa * a["layer:Combined"] + wb * b["layer:Combined"], rtol=1e-5, atol=1e-7)
