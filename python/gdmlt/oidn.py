@@ -32,12 +32,12 @@ render did not produce are not used. Inputs are never modified.
 
 Parameters (defaults once, here): ``prefilter=True`` (step 1), ``threads=0`` (all cores;
 the render's thread setting), ``quality="high"``, ``restore=True`` (step 3) with
-``RESTORE_RADIUS = 2`` and ``RESTORE_CAUTION = 4`` (c). Measured (2026-12-05, 128², 8
-bounces, `pt`, relMSE less the reference's noise, variance from 8 independent renders
-standing in for the layer): area + point + sun + world at 256 spp −7% against OIDN alone,
-world colour at 512 spp −29%; door ajar at 128 spp, gap at 256, glass box at 128: equal
-to OIDN alone (c = 1 was 2.5–7× worse on the door: too little caution; c = 2 equal but
-for the door, +1–4%).
+``RESTORE_RADIUS = 2`` and ``RESTORE_CAUTION = 4`` (c). Measured with `pt`'s layer
+(2026-12-05, 128², 8 bounces, 2 seeds, relMSE less the reference's noise, against OIDN
+alone): world colour at 512 spp −30%, area + point + sun + world at 256 spp −6%, the
+built-in lights scene at 256 spp −24%; door ajar at 128 spp, gap at 256, glass box at
+128, the 64-lamp hall at 64: equal. c = 1 was 2.5–7× worse on the door (too little
+caution), c = 2 equal but for the door (+1–4%); docs/denoising.md.
 
 The binding is the `pyoidn` package (it bundles the OIDN library). Without it, `available()`
 is False and `denoise` raises `DenoiserUnavailable`; the CLI and Blender then write the raw
