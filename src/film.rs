@@ -147,7 +147,7 @@ impl Film {
         }
     }
 
-    /// Keeps each pixel's luminance moments for [`Film::variance`]: 8 bytes a pixel.
+    /// Keeps each pixel's brightness moments for [`Film::variance`]: 8 bytes a pixel.
     pub fn enable_variance(&mut self) {
         for r in &mut self.rows {
             r.moments = vec![[0.0; 2]; self.width];

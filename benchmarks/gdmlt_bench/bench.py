@@ -225,10 +225,10 @@ def reference_noise(a, b):
     halves' difference. Any image x independent of the reference has E[relMSE(x, ref)] =
     relMSE(x, truth) + the first (the weights 1/(ref² + ε) held fixed); the block error of
     the mean is about half the halves' against each other (noise of ¼ the variance)."""
+    from gdmlt.auto import relative_variance  # one half's relative variance; the mean's is half
+
     a, b = np.asarray(a, np.float64), np.asarray(b, np.float64)
-    ref = 0.5 * (a + b)
-    rel = float(np.mean(0.25 * (a - b) ** 2 / (ref ** 2 + EPS)))
-    return ref.astype(np.float32), (rel, 0.5 * block_error(a, b))
+    return (0.5 * (a + b)).astype(np.float32), (0.5 * relative_variance(a, b), 0.5 * block_error(a, b))
 
 
 def summary(rows, budgets, out=print, noise=None):
