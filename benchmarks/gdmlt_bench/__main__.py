@@ -66,6 +66,8 @@ def build_parser():
     b.add_argument("--max-bounces", type=_nonneg_int, default=8)
     b.add_argument("--alpha-target", type=float, help="GDPSSMLT's α_target for every run")
     b.add_argument("--threads", type=_nonneg_int, default=0)
+    b.add_argument("--runs", type=_positive_int, default=1,
+                   help="renders per cell, seeds 1…N for GDMLT and Cycles alike; each figure their mean (default 1)")
     b.add_argument("--plot", help="write a PNG of relMSE against time (needs matplotlib)")
     b.add_argument("--adaptive", type=_unit_float, default=0.0, metavar="THRESHOLD",
                    help="adaptive sampling at this noise threshold for GDMLT's pt and auto and for Cycles, as "
@@ -122,7 +124,7 @@ def main(argv=None):
             run(args.scene, size, budgets, methods, modes, reference_spp=args.reference_spp,
                 max_bounces=args.max_bounces, threads=args.threads, plot=args.plot, extra=extra,
                 denoise=args.denoise, peers=peers, reference=args.reference,
-                reference_seconds=args.reference_seconds)
+                reference_seconds=args.reference_seconds, runs=args.runs)
         except (ValueError, RuntimeError, FileNotFoundError) as e:
             print(f"gdmlt: error: {e}", file=sys.stderr)
             return 1

@@ -68,9 +68,10 @@ def scene_desc(scene: str, size):
 PEERS = ("cycles", "luxcore", "luxcore-mlt", "mitsuba")
 
 
-def peer_rows(peer, scene, desc, budgets, nee, max_bounces, threads, size, denoise=False, adaptive=0.0):
+def peer_rows(peer, scene, desc, budgets, nee, max_bounces, threads, size, denoise=False, adaptive=0.0, runs=1):
     """(images at each budget, denoised images or None, note), or (None, None, the reason it
-    was skipped). Cycles renders the .blend itself (or the built-in scene rebuilt in Blender);
+    was skipped); each budget's entry a list of `runs` images (Cycles: seeds 1…runs; the
+    other peers render once). Cycles renders the .blend itself (or the built-in scene rebuilt in Blender);
     LuxCore and Mitsuba render the translation of the scene arrays (gdmlt.peers), when the
     scene is simple enough. With `denoise`, Cycles also returns its own denoised images of the
     same renders; the other peers never do. `adaptive`: Cycles' noise threshold (0 = off)."""
@@ -84,17 +85,25 @@ def peer_rows(peer, scene, desc, budgets, nee, max_bounces, threads, size, denoi
         blend = scene if str(scene).lower().endswith(".blend") else None
         if blend is None and simple is None:
             return None, None, f"skipped: {why}"
-        imgs, times, _, *den = peers.cycles_render(budgets, max_bounces, nee, threads, desc=None if blend else desc,
-                                                   blend=blend, size=size, denoise=denoise, adaptive=adaptive)
-        note = f"cycles wall time per budget (sync included): {', '.join(f'{t:.2f}' for t in times)} s"
-        return imgs, (den[0] if denoise else None), note
+        imgs, dens, times = [[] for _ in budgets], [[] for _ in budgets], []
+        for seed in range(1, runs + 1):
+            raw, t, _, *den = peers.cycles_render(budgets, max_bounces, nee, threads, desc=None if blend else desc,
+                                                  blend=blend, size=size, seed=seed, denoise=denoise, adaptive=adaptive)
+            for i in range(len(budgets)):
+                imgs[i].append(raw[i])
+                if denoise:
+                    dens[i].append(den[0][i])
+            times.append(t)
+        note = ("cycles wall time per budget (sync included): "
+                f"{', '.join(f'{t:.2f}' for t in np.mean(times, axis=0))} s" + (f" (mean of {runs} runs)" if runs > 1 else ""))
+        return imgs, (dens if denoise else None), note
     if simple is None:
         return None, None, f"skipped: {why}"
     if peer.startswith("luxcore"):
         imgs, times, samples = peers.luxcore_render(simple, budgets, max_bounces, nee,
                                                     sampler="METROPOLIS" if peer == "luxcore-mlt" else "SOBOL",
                                                     threads=threads)
-        return imgs, None, None
+        return [[i] for i in imgs], None, None
     mi, dr = peers.import_mitsuba(threads)
     msc = peers.mitsuba_scene(mi, simple, max_bounces, nee)
     peers.mitsuba_render(mi, msc, 2)  # compile the kernels
@@ -112,14 +121,16 @@ def peer_rows(peer, scene, desc, budgets, nee, max_bounces, threads, size, denoi
         imgs.append(peers.mitsuba_render(mi, msc, spp, seed=1))
         used.append(time.perf_counter() - t)
         per_spp = used[-1] / spp  # Mitsuba has no time limit: refine the rate as it goes
-    return imgs, None, f"mitsuba time used per budget: {', '.join(f'{u:.2f}' for u in used)} s (spp set from a timed run)"
+    return [[i] for i in imgs], None, f"mitsuba time used per budget: {', '.join(f'{u:.2f}' for u in used)} s (spp set from a timed run)"
 
 
 def run(scene="cornell", size=None, budgets=(1.0, 2.0, 4.0), methods=("pt", "gdpt", "pssmlt", "gdpssmlt"),
         modes=(True, False), reference_spp=8192, max_bounces=8, threads=0, plot=None, extra=None, denoise=False,
-        peers=(), out=print, reference="pt", reference_seconds=60.0):
+        peers=(), out=print, reference="pt", reference_seconds=60.0, runs=1):
     """extra: more render settings for every run (alpha_target, reconstruction, ...).
-    peers: any of PEERS, rendered at the same budgets and compared with the same reference."""
+    peers: any of PEERS, rendered at the same budgets and compared with the same reference.
+    runs: renders per cell (seeds 1…runs, GDMLT and Cycles alike), each metric their mean —
+    one run's ratio to Cycles moves by up to ±30% between runs on this machine."""
     import gdmlt
 
     desc, label = scene_desc(scene, size)
@@ -150,6 +161,8 @@ def run(scene="cornell", size=None, budgets=(1.0, 2.0, 4.0), methods=("pt", "gdp
     ref, noise = reference_noise(*halves)
     out(f"# reference took {time.perf_counter() - t0:.1f} s; its own noise: relMSE {noise[0]:.3g}, block error "
         f"{noise[1]:.3g} (in every figure below; the tables 'less the reference's noise' take its relMSE out)")
+    if runs > 1:
+        out(f"# every cell is the mean of {runs} runs (seeds 1…{runs}; LuxCore and Mitsuba render once)")
     out(f"{'method':14} {'nee':5} " + " ".join(f"{'relMSE@' + f'{b:g}' + 's':>14} {'SMAPE':>7}" for b in budgets))
     if denoise:
         from gdmlt.oidn import available, denoise as denoise_layers
@@ -168,28 +181,31 @@ def run(scene="cornell", size=None, budgets=(1.0, 2.0, 4.0), methods=("pt", "gdp
         for m in methods:
             cells, dcells = [], []
             for b in budgets:
-                opts = dict(spp=10 ** 7, time_limit=b, nee=nee, seed=1, threads=threads, max_bounces=max_bounces,
-                            **extra)
-                if m == "auto":  # the pilot's time is part of the budget
-                    from gdmlt.auto import render as auto_render
+                imgs, dimgs = [], []
+                for seed in range(1, runs + 1):
+                    opts = dict(spp=10 ** 7, time_limit=b, nee=nee, seed=seed, threads=threads,
+                                max_bounces=max_bounces, **extra)
+                    if m == "auto":  # the pilot's time is part of the budget
+                        from gdmlt.auto import render as auto_render
 
-                    res = auto_render(desc, opts)
-                    notes.append(f"auto at {b:g} s chose {res['stats']['auto']['method']}")
-                else:
-                    res = gdmlt.render(sc, method=m, **opts)
-                layers = res["layers"]
-                img = layers["Combined"]
-                cells.append(metrics(img, ref))
-                if denoise and m == "auto":
-                    # as the product renders with its denoiser on: the pilot chooses for that
-                    res = auto_render(desc, opts, denoise=True)
-                    notes.append(f"auto for denoising at {b:g} s chose {res['stats']['auto']['method']}")
+                        res = auto_render(desc, opts)
+                        notes.append(f"auto at {b:g} s (seed {seed}) chose {res['stats']['auto']['method']}")
+                    else:
+                        res = gdmlt.render(sc, method=m, **opts)
                     layers = res["layers"]
+                    imgs.append(layers["Combined"])
+                    if denoise and m == "auto":
+                        # as the product renders with its denoiser on: the pilot chooses for that
+                        res = auto_render(desc, opts, denoise=True)
+                        notes.append(f"auto for denoising at {b:g} s (seed {seed}) chose {res['stats']['auto']['method']}")
+                        layers = res["layers"]
+                    if denoise:
+                        t1 = time.perf_counter()
+                        dimgs.append(denoise_layers(layers)["Combined"])  # as the product denoises
+                        denoise_time.append(time.perf_counter() - t1)
+                cells.append(mean_metrics(imgs, ref))
                 if denoise:
-                    t1 = time.perf_counter()
-                    d = denoise_layers(layers)["Combined"]  # as the product denoises
-                    denoise_time.append(time.perf_counter() - t1)
-                    dcells.append(metrics(d, ref))
+                    dcells.append(mean_metrics(dimgs, ref))
             add_row(m, nee, cells)
             if denoise:
                 add_row(m + "+oidn", nee, dcells)
@@ -197,15 +213,15 @@ def run(scene="cornell", size=None, budgets=(1.0, 2.0, 4.0), methods=("pt", "gdp
             try:
                 raw, den, note = peer_rows(peer, scene, desc, budgets, nee, max_bounces, threads, size,
                                            denoise=denoise and peer == "cycles",
-                                           adaptive=extra.get("adaptive_threshold", 0.0))
+                                           adaptive=extra.get("adaptive_threshold", 0.0), runs=runs)
             except Exception as e:  # noqa: BLE001 — a peer that fails is reported, the bench goes on
                 raw, den, note = None, None, f"failed: {e}"
             if raw is None:
                 out(f"# {peer} ({'NEE' if nee else 'naive'}): {note}")
                 continue
-            add_row(peer, nee, [metrics(i, ref) for i in raw])
+            add_row(peer, nee, [mean_metrics(i, ref) for i in raw])
             if den is not None:  # Cycles' own denoiser on the same renders
-                add_row(peer + "+oidn", nee, [metrics(i, ref) for i in den])
+                add_row(peer + "+oidn", nee, [mean_metrics(i, ref) for i in den])
             if note:
                 out(f"# {note}")
     for n in notes:
@@ -217,6 +233,11 @@ def run(scene="cornell", size=None, budgets=(1.0, 2.0, 4.0), methods=("pt", "gdp
         draw(rows, budgets, f"{label}: relMSE against time", plot)
         out(f"# plot: {plot}")
     return rows
+
+
+def mean_metrics(images, ref):
+    """`metrics` of each image (runs of one cell), averaged metric by metric."""
+    return tuple(float(v) for v in np.mean([metrics(i, ref) for i in images], axis=0))
 
 
 def reference_noise(a, b):

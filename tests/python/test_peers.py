@@ -119,3 +119,40 @@ def test_reference_noise_is_what_a_noisy_reference_adds_to_relmse():
         if scale < 1:
             assert rel_mse(x, ref) > 2 * against_truth
     assert abs(block_noise / block_error(ref, truth) - 1) < 0.15
+
+
+def test_bench_runs_average_each_cell_over_seeds_for_gdmlt_and_cycles(monkeypatch):
+    """`bench --runs N`: every cell is the mean over seeds 1…N of the metrics of N renders,
+    GDMLT's and Cycles' alike (one run's ratio moves by up to ±30%). The renderers are
+    replaced by images whose error is known per seed, so the mean is checked exactly."""
+    from gdmlt_bench import bench
+
+    desc = gdmlt.builtin_scene("cornell", 16, 16)
+    truth = gdmlt.render(gdmlt.Scene(desc), method="pt", spp=4, seed=9, max_bounces=2)["layers"]["Combined"]
+    seen = {"gdmlt": [], "cycles": []}
+
+    def fake_render(scene, method="pt", seed=1, **kw):
+        if kw.get("spp", 0) < 10 ** 6:  # the reference halves: the truth itself
+            return {"layers": {"Combined": truth.copy()}, "stats": {}}
+        seen["gdmlt"].append(seed)
+        return {"layers": {"Combined": truth * (1 + 0.1 * seed)}, "stats": {}}
+
+    def fake_cycles(budgets, max_bounces, nee, threads=0, seed=1, **kw):
+        seen["cycles"].append(seed)
+        return [truth * (1 - 0.05 * seed) for _ in budgets], [0.1 for _ in budgets], [1 for _ in budgets]
+
+    monkeypatch.setattr(gdmlt, "render", fake_render)
+    monkeypatch.setattr(peers, "cycles_render", fake_cycles)
+    monkeypatch.setattr(peers, "simple_scene", lambda d: d)
+    lines = []
+    rows = bench.run("cornell", (16, 16), budgets=(0.5, 1.0), methods=("pt",), modes=(True,), reference_spp=4,
+                     max_bounces=2, peers=("cycles",), out=lines.append, runs=3)
+    assert seen["gdmlt"] == [1, 2, 3, 1, 2, 3] and seen["cycles"] == [1, 2, 3]
+    cells = {name: c for name, _, c in rows}
+    for name, images in (("pt", [truth * (1 + 0.1 * s) for s in (1, 2, 3)]),
+                         ("cycles", [truth * (1 - 0.05 * s) for s in (1, 2, 3)])):
+        want = np.mean([bench.rel_mse(i, truth) for i in images])
+        for cell in cells[name]:
+            assert abs(cell[0] / want - 1) < 1e-5, name
+            assert cell[0] != bench.rel_mse(images[0], truth)
+    assert any("mean of 3 runs" in ln for ln in lines)
