@@ -169,11 +169,12 @@ def test_pt_variance_layer_bounds_its_error_and_restoring_beats_oidn_where_the_i
     the denoised image is 24% closer (7.2e-5); on the spheres (noisier) it changes nothing."""
     pytest.importorskip("pyoidn")
     scene = gdmlt.Scene(gdmlt.builtin_scene("cornell", 24, 24))
-    renders = [gdmlt.render(scene, method="pt", spp=16, seed=s)["layers"] for s in range(1, 13)]
+    renders = [gdmlt.render(scene, method="pt", spp=gdmlt.VARIANCE_MIN_SAMPLES, seed=s)["layers"]
+               for s in range(1, 13)]
     across = np.stack([r["Combined"].mean(-1) for r in renders]).var(0, ddof=1).mean()
     layer = np.mean([r["Variance"].mean() for r in renders])
     assert renders[0]["Variance"].shape == (24, 24, 1)
-    assert across < layer < 20 * across, (across, layer)
+    assert across < layer < 40 * across, (across, layer)  # measured 19.6× at 64 spp (7× at 16)
     for name, gain in (("lights", 0.9), ("spheres", None)):
         scene = gdmlt.Scene(gdmlt.builtin_scene(name, 48, 48))
         ref = gdmlt.render(scene, method="pt", spp=4096, seed=77)["layers"]["Combined"]
@@ -185,3 +186,21 @@ def test_pt_variance_layer_bounds_its_error_and_restoring_beats_oidn_where_the_i
             assert restored < gain * plain and restored < rel_mse(layers["Combined"], ref)
         else:
             assert restored <= 1.01 * plain
+
+
+def test_below_the_minimum_samples_the_restore_step_leaves_oidn_image():
+    """pt's Variance layer is unknown below `VARIANCE_MIN_SAMPLES`, so the restore step keeps
+    OIDN's image there: a few samples' variance misses the rare bright paths of a hard-lit
+    room, and trusting it took the door-ajar room's denoised error to 1.6× OIDN's alone at
+    16 spp (docs/denoising.md). From the minimum on, the layer is the samples' variance."""
+    pytest.importorskip("pyoidn")
+    n = gdmlt.VARIANCE_MIN_SAMPLES
+    scene = gdmlt.Scene(gdmlt.builtin_scene("lights", 32, 32))
+    few = gdmlt.render(scene, method="pt", spp=n // 4, seed=5)["layers"]
+    assert np.all(few["Variance"] >= 1e29)
+    plain = dn.denoise(few, restore=False)["Combined"]
+    assert np.array_equal(dn.denoise(few)["Combined"], np.maximum(plain, 0.0))
+    enough = gdmlt.render(scene, method="pt", spp=n, seed=5)["layers"]
+    assert np.all(enough["Variance"] < 1e29) and np.all(enough["Variance"] >= 0)
+    plain = dn.denoise(enough, restore=False)["Combined"]
+    assert not np.array_equal(dn.denoise(enough)["Combined"], np.maximum(plain, 0.0))
