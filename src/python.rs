@@ -1312,6 +1312,7 @@ fn init_module(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("RR_START_DEPTH", crate::path::RR_START_DEPTH)?;
     m.add("RR_EXPONENT", crate::path::RR_EXPONENT)?;
     m.add("VARIANCE_MIN_SAMPLES", crate::film::VARIANCE_MIN_SAMPLES)?;
+    m.add("VARIANCE_UNKNOWN", crate::film::VARIANCE_UNKNOWN)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add("BUILD_TARGET", if cfg!(target_feature = "avx2") { "x86-64-v3" } else { "portable" })?;
     m.add("SOURCE_HASH", env!("GDMLT_SOURCE_HASH"))?;

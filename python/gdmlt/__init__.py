@@ -38,7 +38,7 @@ write_exr, write_png, reconstruct = _impl.write_exr, _impl.write_png, _impl.reco
 METHODS, __version__, BUILD_TARGET = _impl.METHODS, _impl.__version__, _impl.BUILD_TARGET
 RR_START_DEPTH, RR_EXPONENT = _impl.RR_START_DEPTH, _impl.RR_EXPONENT
 # samples a pixel needs before pt's Variance layer (and so the denoiser's restore step) trusts it
-VARIANCE_MIN_SAMPLES = _impl.VARIANCE_MIN_SAMPLES
+VARIANCE_MIN_SAMPLES, VARIANCE_UNKNOWN = _impl.VARIANCE_MIN_SAMPLES, _impl.VARIANCE_UNKNOWN
 check_memory, bootstrap_paths = _impl.check_memory, _impl.bootstrap_paths
 procedural_range = _impl.procedural_range
 from .addon import enable_addon, addon_dir
@@ -46,4 +46,4 @@ from .oidn import denoise
 
 __all__ = ["Scene", "render", "builtin_scene", "denoise", "write_exr", "write_png", "reconstruct", "METHODS", "enable_addon", "addon_dir",
            "__version__", "BUILD_TARGET", "RR_START_DEPTH", "RR_EXPONENT",
-           "VARIANCE_MIN_SAMPLES"]
+           "VARIANCE_MIN_SAMPLES", "VARIANCE_UNKNOWN"]

@@ -18,6 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .oidn import VARIANCE_UNKNOWN
+
 GD_METHODS = ("gdpt", "gdpssmlt")
 # 2: partials carry what identifies them (scene and settings hashes, seed, K/N), checked by merge
 FORMAT = 2
@@ -202,6 +204,9 @@ def merge(partials, alpha_rec=None, reconstruction=None) -> dict:
             power = 2 if name == "layer:Variance" else 1
             merged[name[6:]] = sum(w ** power * p[name].astype(np.float64)
                                    for w, p in zip(weights, partials)).astype(np.float32)
+            if name == "layer:Variance":  # unknown in any partial (too few samples): unknown
+                unknown = np.any([p[name] >= 0.5 * VARIANCE_UNKNOWN for p in partials], axis=0)
+                merged["Variance"][unknown] = VARIANCE_UNKNOWN
     if method in GD_METHODS:
         direct = merged["Very Direct"]
         merged["Combined"] = gdmlt.reconstruct(

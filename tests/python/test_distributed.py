@@ -177,11 +177,21 @@ def test_merge_command_exits_1_on_a_bad_partial(cornell, tmp_path):
 def test_merged_variance_layer_is_the_variance_of_the_weighted_mean(cornell):
     """`pt`'s "Variance" layer (what the denoiser's restore step trusts) merges as the
     variance of a work-weighted mean of independent partials, Σ w²·v (a plain weighted mean
-    would overstate it by 1/w), while the colour merges as the weighted mean."""
-    a = dist.render_partial(cornell, 0, 2, {"method": "pt", "spp": 4})
-    b = dist.render_partial(cornell, 1, 2, {"method": "pt", "spp": 4})
+    would overstate it by 1/w), while the colour merges as the weighted mean. A pixel that
+    is unknown in any partial (too few samples there) stays unknown."""
+    n = gdmlt.VARIANCE_MIN_SAMPLES
+    a = dist.render_partial(cornell, 0, 2, {"method": "pt", "spp": n})
+    b = dist.render_partial(cornell, 1, 2, {"method": "pt", "spp": n})
+    assert a["layer:Variance"].max() < 1e29 and b["layer:Variance"].max() < 1e29
     wa, wb = a["work"] / (a["work"] + b["work"]), b["work"] / (a["work"] + b["work"])
     va, vb = a["layer:Variance"].astype(np.float64), b["layer:Variance"].astype(np.float64)
     merged = dist.merge([a, b])
     assert np.allclose(merged["Variance"], wa ** 2 * va + wb ** 2 * vb, rtol=1e-5)
     assert np.allclose(merged["Combined"], wa * a["layer:Combined"] + wb * b["layer:Combined"], rtol=1e-5, atol=1e-7)
+    few = dict(b, **{"layer:Variance": b["layer:Variance"].copy()})
+    few["layer:Variance"][::3, ::2] = gdmlt.VARIANCE_UNKNOWN  # as where b had too few samples
+    v = dist.merge([a, few])["Variance"]
+    lattice = np.zeros(v.shape, bool)
+    lattice[::3, ::2] = True
+    assert np.all(v[lattice] == np.float32(gdmlt.VARIANCE_UNKNOWN))
+    assert np.allclose(v[~lattice], (wa ** 2 * va + wb ** 2 * vb)[~lattice], rtol=1e-5)
