@@ -28,7 +28,8 @@ What it does, for every method:
    more than noise, the raw image's detail comes back. A pixel of fewer than
    ``gdmlt.VARIANCE_MIN_SAMPLES`` (64) samples has an unknown variance in the layer and
    keeps D: so few samples miss a hard-lit room's rare bright paths (restoring them took
-   the door-ajar room to 1.6× OIDN's error at 16 spp).
+   the door-ajar room to 1.6× OIDN's error at 16 spp); so does every window that holds such
+   a pixel.
 
 The raw Combined layer is kept as "Noisy Image" (Cycles' pass of that name). Guides that a
 render did not produce are not used. Inputs are never modified.
