@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .oidn import VARIANCE_UNKNOWN
+from . import VARIANCE_UNKNOWN
 
 GD_METHODS = ("gdpt", "gdpssmlt")
 # 2: partials carry what identifies them (scene and settings hashes, seed, K/N), checked by merge

@@ -50,10 +50,11 @@ image with a warning.
 
 import numpy as np
 
+# the Variance layer's value where a pixel has too few samples: the core's own (film.rs)
+from . import VARIANCE_UNKNOWN
+
 NOISY = "Noisy Image"
 VARIANCE = "Variance"
-# the layer's value where a pixel has too few samples (the core's VARIANCE_UNKNOWN, film.rs)
-VARIANCE_UNKNOWN = 1e30
 RESTORE_RADIUS = 2
 RESTORE_CAUTION = 4.0
 ALBEDO = "Denoising Albedo"
