@@ -146,6 +146,9 @@ def load_partial(path) -> dict:
             d[k] = int(d[k])
     except KeyError as e:
         raise ValueError(f"{path}: a GDMLT partial without its {e} field") from None
+    if not (d["n"] >= 1 and 0 <= d["k"] < d["n"]):
+        raise ValueError(f"{path}: its header says partial {d['k']} of {d['n']}, and a partial K/N needs "
+                         "0 ≤ K < N: not a partial GDMLT wrote (damaged or edited)")
     shape = d["layer:Combined"].shape
     for name, a in d.items():
         if name.startswith("layer:") and (a.dtype != np.float32 or a.shape[:2] != shape[:2] or a.ndim != 3):
@@ -160,13 +163,21 @@ def check_partials(partials):
     finite positive number, non-finite pixels."""
     first = partials[0]
     name = lambda p: p.get("path", f"partial {p.get('k')}/{p.get('n')}")  # noqa: E731
+    size = lambda p: "{1}×{0}".format(*p["layer:Combined"].shape[:2])  # noqa: E731
+    split = "partials must be one render split K/N"
     for p in partials:
-        for key in ("scene_hash", "settings_hash", "method", "n"):
-            if key in first and p.get(key) != first.get(key):
-                raise ValueError(f"{name(p)} is of another {key.replace('_hash', '')} than {name(first)} "
-                                 f"({p.get(key)} vs {first.get(key)}): partials must be one render split K/N")
+        if "k" in p and "n" in p and not (p["n"] >= 1 and 0 <= p["k"] < p["n"]):
+            raise ValueError(f"{name(p)} says it is partial {p['k']} of {p['n']}: a partial K/N needs 0 ≤ K < N")
+        # what differs, most telling first: the image size and the method before the hashes
+        # (a resolution or a method is also in the scene's or the settings' hash)
         if p["layer:Combined"].shape != first["layer:Combined"].shape:
-            raise ValueError(f"{name(p)} is {p['layer:Combined'].shape}, {name(first)} {first['layer:Combined'].shape}")
+            raise ValueError(f"{name(p)} is {size(p)} pixels, {name(first)} {size(first)}: {split}")
+        for key, what in (("method", "rendered with method {} where {} used {}"),
+                          ("n", "is one of {} partials where {} is one of {}"),
+                          ("scene_hash", "is of another scene (hash {}) than {} (hash {})"),
+                          ("settings_hash", "was rendered with other settings (hash {}) than {} (hash {})")):
+            if key in first and p.get(key) != first.get(key):
+                raise ValueError(f"{name(p)} " + what.format(p.get(key), name(first), first.get(key)) + f": {split}")
         w = p["work"]
         if not (np.isfinite(w) and w > 0):
             raise ValueError(f"{name(p)}: its work ({w}) must be a finite number > 0")

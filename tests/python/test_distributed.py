@@ -81,7 +81,7 @@ def test_partials_have_distinct_seeds_and_refuse_mismatched_merges(cornell):
     b = dist.render_partial(cornell, 1, 2, {"method": "pt", "spp": 4})
     assert not np.array_equal(a["layer:Combined"], b["layer:Combined"])
     c = dist.render_partial(cornell, 1, 2, {"method": "gdpt", "spp": 4})
-    with pytest.raises(ValueError, match="another settings"):
+    with pytest.raises(ValueError, match="rendered with method gdpt where .* used pt"):
         dist.merge([a, c])
     with pytest.raises(ValueError):
         dist.render_partial(cornell, 2, 2, {"method": "pt", "spp": 4})
@@ -195,3 +195,23 @@ def test_merged_variance_layer_is_the_variance_of_the_weighted_mean(cornell):
     lattice[::3, ::2] = True
     assert np.all(v[lattice] == np.float32(gdmlt.VARIANCE_UNKNOWN))
     assert np.allclose(v[~lattice], (wa ** 2 * va + wb ** 2 * vb)[~lattice], rtol=1e-5)
+
+
+def test_merge_says_what_differs_and_refuses_a_tampered_index(cornell, tmp_path):
+    """Issue 50 [4, 5]: a partial whose header says k = 5 of n = 2 was merged (failed before);
+    partials of another resolution were refused as "of another scene" with two hashes, and of
+    other settings as "of another settings" (failed before: the size and the words)."""
+    a = dist.render_partial(cornell, 0, 2, {"method": "pt", "spp": 2})
+    b = dist.render_partial(cornell, 1, 2, {"method": "pt", "spp": 2})
+    tampered = dict(b, k=np.int64(5))
+    with pytest.raises(ValueError, match="partial 5 of 2"):
+        dist.load_partial(_saved(tmp_path, "tampered", tampered))
+    with pytest.raises(ValueError, match="0 ≤ K < N"):
+        dist.merge([a, dict(b, k=5)])
+    small = gdmlt.builtin_scene("cornell", SIZE // 2, SIZE // 2)
+    c = dist.render_partial(small, 1, 2, {"method": "pt", "spp": 2})
+    with pytest.raises(ValueError, match=f"is {SIZE // 2}×{SIZE // 2} pixels, .* {SIZE}×{SIZE}"):
+        dist.merge([a, c])
+    d = dist.render_partial(cornell, 1, 2, {"method": "pt", "spp": 3})
+    with pytest.raises(ValueError, match="rendered with other settings"):
+        dist.merge([a, d])
