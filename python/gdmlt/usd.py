@@ -737,11 +737,27 @@ def stored_settings(path) -> dict:
     """The GDMLT render settings that `gdmlt export` stored in the stage (customLayerData
     "gdmlt"), or {}."""
     pxr = _pxr()
-    layer = pxr.Sdf.Layer.FindOrOpen(str(path))
+    try:
+        layer = pxr.Sdf.Layer.FindOrOpen(str(path))
+    except pxr.Tf.ErrorException as e:
+        raise ValueError(f"'{path}' is not a valid USD stage: {parse_error(e)}") from None
     if layer is None:
         return {}
     data = layer.customLayerData.get("gdmlt", {})
     return {str(k): (v if not isinstance(v, str) else str(v)) for k, v in dict(data).items()}
+
+
+def parse_error(e) -> str:
+    """The line of a USD error a user needs (file:line:col: the parser's message) out of the
+    C++ call stack pxr reports, its internal namespace removed; else the last message."""
+    import re
+
+    text = re.sub(r"pxrInternal_\w+?__pxrReserved__::", "", str(e))
+    found = re.search(r"'([^'\n]+:\d+:\d+: [^\n]*?)'?\s*$", text, re.MULTILINE)
+    if found:
+        return found.group(1).strip().rstrip("'")
+    quoted = re.findall(r" : '([^']*)'", text)
+    return quoted[-1].strip() if quoted else text.strip() or type(e).__name__
 
 
 def load(path, frame=None, width=None, height=None, camera=None):
@@ -752,7 +768,10 @@ def load(path, frame=None, width=None, height=None, camera=None):
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"file not found: {path}")
-    stage = pxr.Usd.Stage.Open(str(path))
+    try:
+        stage = pxr.Usd.Stage.Open(str(path))
+    except pxr.Tf.ErrorException as e:
+        raise ValueError(f"'{path}' is not a valid USD stage: {parse_error(e)}") from None
     if stage is None:
         raise ValueError(f"'{path}' could not be opened as a USD stage")
     time = pxr.Usd.TimeCode(frame) if frame is not None else pxr.Usd.TimeCode.Default()

@@ -23,6 +23,8 @@ pub(super) struct Shading {
     pub has_perturbed_normals: bool,
     /// Each material's Pass Index (the IndexMA pass).
     pub pass_index: Vec<u32>,
+    /// Inputs clamped into range (`material::range_warnings`), for the scene's report.
+    pub warnings: Vec<String>,
 }
 
 impl Shading {
@@ -49,7 +51,8 @@ impl Shading {
         let has_transparency = !shortcuts || materials.iter().any(|m| m.is_transparent());
         let has_perturbed_normals = materials.iter().any(|m| m.normal_texture.is_some() || m.bump_texture.is_some());
         let pass_index = desc.materials.iter().map(|m| m.pass_index).collect();
-        Ok(Shading { textures, materials, has_transparency, has_perturbed_normals, pass_index })
+        let warnings = desc.materials.iter().flat_map(super::material::range_warnings).collect();
+        Ok(Shading { textures, materials, has_transparency, has_perturbed_normals, pass_index, warnings })
     }
 }
 

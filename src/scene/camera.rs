@@ -1,4 +1,4 @@
-//! Blender's camera framing, reproduced exactly (BLENDER.md "Camera"): sensor fit, shift,
+//! Blender's camera framing, reproduced exactly (docs/blender.md, "Camera framing"): sensor fit, shift,
 //! resolution percentage, pixel aspect, clipping, orthographic scale and thin-lens depth
 //! of field (aperture radius = lens·1e-3 / (2·fstop), Cycles' convention).
 
@@ -73,6 +73,37 @@ fn mat_from_rows(m: &[[f32; 4]; 4]) -> Mat4 {
 
 pub(crate) fn matrix_from_rows(m: &[[f32; 4]; 4]) -> Mat4 {
     mat_from_rows(m)
+}
+
+/// The clipping range used: Clip Start ≥ 0; a Clip End before it read as the two swapped (a
+/// range that clips everything would render a black frame), one equal to it or negative, and
+/// NaN or Inf, as none.
+fn clip_range(d: &CameraDesc) -> (f32, f32) {
+    let start = if d.clip_start.is_finite() { d.clip_start.max(0.0) } else { 0.0 };
+    let end = if d.clip_end.is_finite() { d.clip_end } else { f32::INFINITY };
+    if end < start && end >= 0.0 {
+        (end, start)
+    } else if end <= start {
+        (start, f32::INFINITY)
+    } else {
+        (start, end)
+    }
+}
+
+/// The warnings for the camera's inputs read in another way than given (`clip_range`).
+pub fn range_warnings(d: &CameraDesc) -> Vec<String> {
+    let mut out = Vec::new();
+    if d.clip_start.is_finite() && d.clip_start < 0.0 {
+        out.push(format!("camera: clip start {} is negative; 0 is used", d.clip_start));
+    }
+    let (start, end) = clip_range(d);
+    if d.clip_end.is_finite() && d.clip_end <= d.clip_start.max(0.0) {
+        out.push(format!(
+            "camera: clip start {} is not before clip end {} (everything would be clipped); {start} to {end} is used",
+            d.clip_start, d.clip_end
+        ));
+    }
+    out
 }
 
 impl Camera {
@@ -163,8 +194,7 @@ impl Camera {
         }
         let to_world =
             Mat4::from_cols(x.normalize().extend(0.0), y.normalize().extend(0.0), z.normalize().extend(0.0), m.w_axis);
-        let clip_start = if d.clip_start.is_finite() { d.clip_start.max(0.0) } else { 0.0 };
-        let clip_end = if d.clip_end.is_finite() && d.clip_end > clip_start { d.clip_end } else { f32::INFINITY };
+        let (clip_start, clip_end) = clip_range(d);
         let aperture_radius = if d.projection == Projection::Perspective && d.fstop > 0.0 && d.fstop.is_finite() {
             d.lens * 1e-3 / (2.0 * d.fstop)
         } else {

@@ -1,4 +1,4 @@
-//! Lights with Cycles' radiometric conventions (BLENDER.md "Radiance conventions"), their
+//! Lights with Cycles' radiometric conventions (docs/blender.md, "Radiance conventions of Cycles"), their
 //! sampling for next-event estimation, and their intersection by BSDF-sampled rays.
 //!
 //! Analytic lights are transparent: they never occlude, a ray that crosses one picks up its
@@ -194,6 +194,34 @@ pub struct LightSample {
     pub is_delta: bool,
 }
 
+/// The warnings for a light's inputs that `Light::from_desc` reads in another way than
+/// given: a negative area light size (its magnitude is used) and a spot cone outside 0…180°.
+pub fn range_warnings(d: &LightDesc) -> Vec<String> {
+    let mut out = Vec::new();
+    match d {
+        LightDesc::Area { name, size_x, size_y, shape, .. } => {
+            let sizes: &[(&str, f32)] = match shape {
+                AreaShape::Square | AreaShape::Disk => &[("size", *size_x)],
+                _ => &[("size x", *size_x), ("size y", *size_y)],
+            };
+            for &(what, x) in sizes {
+                if x.is_finite() && x < 0.0 {
+                    out.push(format!("light '{name}': {what} {x} is negative; {} is used", -x));
+                }
+            }
+        }
+        LightDesc::Spot { name, spot_size, .. } if spot_size.is_finite() && !(0.0..=PI).contains(spot_size) => {
+            out.push(format!(
+                "light '{name}': spot size {:.1}° is outside 0…180°; {:.1}° is used",
+                spot_size.to_degrees(),
+                spot_size.clamp(0.0, PI).to_degrees()
+            ));
+        }
+        _ => {}
+    }
+    out
+}
+
 impl Light {
     pub fn from_desc(d: &LightDesc) -> Result<Light, SceneError> {
         Ok(Light { cast_shadow: d.cast_shadow(), ..Self::shape_from_desc(d)? })
@@ -218,6 +246,7 @@ impl Light {
             | LightDesc::Area { power, name, .. } => (power, name),
             LightDesc::Sun { irradiance, name, .. } => (irradiance, name),
         };
+        check(name, strength.iter().all(|x| !x.is_nan()), "NaN power (its strength or colour is not a number)")?;
         check(name, strength.iter().all(|&x| !(x < 0.0)), "negative power (GDMLT does not render negative light)")?;
         check(
             name,

@@ -74,6 +74,45 @@ pub struct Material {
 /// can overflow f32 (Blender stores an infinite strength as f32::MAX, 3.4e38).
 pub const MAX_RADIANCE: f32 = 1e20;
 
+/// The warnings for a material's inputs that `Material::from_desc` clamps: each names the
+/// material, the value given and the value used. Blender's own UI keeps these in range, but
+/// the Python API and USD stages do not.
+pub fn range_warnings(d: &MaterialDesc) -> Vec<String> {
+    let mut out = Vec::new();
+    let mut unit = |what: &str, x: f32| {
+        if x.is_finite() && !(0.0..=1.0).contains(&x) {
+            out.push(format!("material '{}': {what} {x} is outside 0…1; {} is used", d.name, x.clamp(0.0, 1.0)));
+        }
+    };
+    for (what, x) in [
+        ("roughness", d.roughness),
+        ("diffuse roughness", d.diffuse_roughness),
+        ("metallic", d.metallic),
+        ("transmission", d.transmission),
+        ("specular", d.specular),
+        ("coat weight", d.coat),
+        ("coat roughness", d.coat_roughness),
+        ("translucency", d.translucency),
+        ("transparency", d.transparency),
+    ] {
+        unit(what, x);
+    }
+    for (i, x) in d.base_color.iter().enumerate() {
+        if x.is_finite() && !(0.0..=1.0).contains(x) {
+            let used = Vec3::from_array(d.base_color).clamp(Vec3::ZERO, Vec3::ONE);
+            out.push(format!(
+                "material '{}': base colour {:?} has channel {i} outside 0…1 (an albedo); ({}, {}, {}) is used",
+                d.name, d.base_color, used.x, used.y, used.z
+            ));
+            break;
+        }
+    }
+    if d.ior.is_finite() && d.ior <= 0.0 {
+        out.push(format!("material '{}': IOR {} is not above 0; 1.5 is used", d.name, d.ior));
+    }
+    out
+}
+
 impl Material {
     pub fn from_desc(d: &MaterialDesc, textures: usize) -> Result<Material, SceneError> {
         let bad = |what: &str| SceneError::Material { material: d.name.clone(), what: what.to_string() };

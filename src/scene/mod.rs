@@ -146,7 +146,10 @@ impl Scene {
     pub fn build(desc: &SceneDesc) -> Result<Scene, SceneError> {
         let camera = Camera::new(&desc.camera)?;
         let mut report = SceneReport::default();
+        report.warnings.extend(camera::range_warnings(&desc.camera));
+        report.warnings.extend(desc.lights.iter().flat_map(light::range_warnings));
         let shading = Shading::new(desc)?;
+        report.warnings.extend(shading.warnings.iter().cloned());
         let normal_mapped: Vec<bool> = shading.materials.iter().map(|m| m.normal_texture.is_some()).collect();
         let tris = Triangles::from_meshes(&desc.meshes, shading.materials.len(), &normal_mapped, &mut report)?;
         // Bounds (geometry, lights and camera) for sun power estimates and epsilons.

@@ -495,3 +495,98 @@ def test_bad_corner_colours_are_refused_naming_the_mesh():
         gdmlt.Scene(d)
     mesh["colors"][4, 1] = 0.25
     assert not [w for w in gdmlt.Scene(d).warnings if "unknown key" in w]
+
+
+# --- issue 50: the second probe (each failed before its fix) ---------------------------------
+
+def test_a_nan_light_power_is_reported_as_nan_not_as_too_large():
+    """[5] a NaN power was reported as "too large for single precision"."""
+    d = gdmlt.builtin_scene("cornell", 8, 8)
+    d["lights"] = [{"type": "point", "name": "Lamp", "position": [0.0, 0.0, 1.0], "power": [float("nan"), 1.0, 1.0]}]
+    with pytest.raises(ValueError, match="Lamp.*NaN power") as e:
+        gdmlt.Scene(d)
+    assert "too large" not in str(e.value)
+
+
+def test_a_usd_syntax_error_is_one_line_naming_file_line_and_column(tmp_path):
+    """[5] a USD syntax error printed an empty `gdmlt: error:` line and then pxr's C++ call
+    stack (namespaces, the C++ file and line of the parser)."""
+    pytest.importorskip("pxr")
+    bad = tmp_path / "bad.usda"
+    bad.write_text('#usda 1.0\ndef Xform "a" {\n  double3 xformOp:translate = (1, 2\n}\n')
+    r = _cli("render", str(bad), "-o", str(tmp_path / "o.exr"))
+    assert r.returncode != 0 and "Traceback" not in r.stderr
+    errors = [line for line in r.stderr.splitlines() if "error" in line]
+    assert len(errors) == 1, r.stderr
+    assert f"{bad}:4:1:" in errors[0] and "parse error" in errors[0], r.stderr
+    assert "pxrInternal" not in r.stderr and ".cpp" not in r.stderr and ".h :" not in r.stderr, r.stderr
+
+
+def test_the_explanation_never_says_a_method_is_ahead_of_itself():
+    """[5] auto once printed "pt is 1.0× ahead of pt": pt kept (the lead after denoising
+    under the margin) while second in the denoised ranking."""
+    from gdmlt.auto import _explain
+
+    why = _explain("pt", {"pt": 2.0, "gdpt": 1.0}, {"pt": 1.2, "gdpt": 1.0}, "pilot")
+    assert "ahead of pt" not in why and "pt kept though gdpt measured 1.2× ahead" in why, why
+    why = _explain("pt", {"pt": 1.0, "gdpt": 3.0}, {}, "pilot")
+    assert "pt is 3× ahead of gdpt" in why, why
+
+
+def _warnings(desc):
+    return gdmlt.Scene(desc).warnings
+
+
+@pytest.mark.parametrize("key, value, words", [
+    ("roughness", -1.0, "roughness -1 is outside 0…1; 0 is used"),
+    ("roughness", 5.0, "roughness 5 is outside 0…1; 1 is used"),
+    ("metallic", 2.0, "metallic 2 is outside 0…1; 1 is used"),
+    ("ior", 0.0, "IOR 0 is not above 0; 1.5 is used"),
+    ("ior", -1.5, "IOR -1.5 is not above 0; 1.5 is used"),
+    ("base_color", [5.0, 0.5, 0.5], "(1, 0.5, 0.5) is used"),
+    ("base_color", [-1.0, 0.5, 0.5], "(0, 0.5, 0.5) is used"),
+])
+def test_out_of_range_material_inputs_are_clamped_with_a_warning_naming_the_material(key, value, words):
+    """[6] through the Python API (and USD, which reaches the core the same way) these were
+    clamped in silence."""
+    d = gdmlt.builtin_scene("cornell", 8, 8)
+    m = d["materials"][0]
+    m[key] = value
+    warnings = _warnings(d)
+    assert any(m["name"] in w and words in w for w in warnings), warnings
+    ok = gdmlt.builtin_scene("cornell", 8, 8)
+    assert not any("is used" in w for w in _warnings(ok))
+
+
+def test_a_negative_area_light_size_and_a_crossed_clip_range_are_warned_and_rendered():
+    """[6] an area light of size −1 was read as 1 in silence; clip start beyond clip end
+    rendered a black image in silence. Now each is a warning naming the value used, and the
+    crossed clip range is read swapped (the image is the one with the range put right)."""
+    d = gdmlt.builtin_scene("cornell", 16, 16)
+    d["lights"] = [{"type": "area", "name": "Panel", "matrix": np.array([[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0.9], [0, 0, 0, 1]], np.float32),
+                    "size": -1.0, "power": [50.0, 50.0, 50.0]}]
+    assert any("Panel" in w and "size -1 is negative; 1 is used" in w for w in _warnings(d)), _warnings(d)
+    crossed = dict(d, camera=dict(d["camera"], clip_start=100.0, clip_end=0.01))
+    warnings = _warnings(crossed)
+    assert any("clip start 100 is not before clip end 0.01" in w and "0.01 to 100 is used" in w for w in warnings), warnings
+    img = gdmlt.render(gdmlt.Scene(crossed), method="pt", spp=4, seed=1)["layers"]["Combined"]
+    right = dict(d, camera=dict(d["camera"], clip_start=0.01, clip_end=100.0))
+    ref = gdmlt.render(gdmlt.Scene(right), method="pt", spp=4, seed=1)["layers"]["Combined"]
+    assert img.mean() > 0.01 and np.array_equal(img, ref)
+
+
+def test_usd_out_of_range_inputs_reach_the_user_as_warnings(tmp_path):
+    """[6] the same through a USD stage and the command line: roughness 5 on a
+    UsdPreviewSurface is a warning naming the material."""
+    pxr = pytest.importorskip("pxr")
+    from test_usd import _stage
+
+    path = _stage(tmp_path / "s.usda")
+    stage = pxr.Usd.Stage.Open(str(path))
+    shader = pxr.UsdShade.Shader(stage.GetPrimAtPath("/World/Grey/Surface"))
+    shader.CreateInput("roughness", pxr.Sdf.ValueTypeNames.Float).Set(5.0)
+    stage.GetRootLayer().Save()
+    r = _cli("render", str(path), "-o", str(tmp_path / "o.exr"), "--method", "pt", "--spp", "1", "--width", "8",
+             "--height", "8", "--no-png", "--no-denoise")
+    assert r.returncode == 0, r.stderr
+    assert "roughness 5 is outside 0…1; 1 is used" in r.stderr and "Grey" in r.stderr, r.stderr
