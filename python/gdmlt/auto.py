@@ -38,12 +38,16 @@ Cornell box (1.2–3.3× below `gdpt` + OIDN, equal on the box at 4 s), and the 
 denoised variance ranked `pt` first on each (3 seeds: `gdpt`'s 1.2–6× `pt`'s), where the
 raw ranking had chosen `gdpt` on all but the multi-light scene.
 
-Budget: with a time limit, the pilot takes 5% of it (each of the six renders at least 0.01 s)
-and the chosen method renders for the rest. With samples only, the budget is the time `pt`
-would take for that many samples per pixel (measured by the pilot), so `auto` at 64 samples
-takes about as long as `pt` at 64 samples.
+Budget: the render ends at whichever of its limits comes first — the time limit, or the
+samples per pixel (mutations per pixel for the Metropolis methods), whose time a probe of
+`pt` render of `PROBE_SECONDS` on the window estimates. The pilot takes `PILOT_FRACTION` of that
+estimate (each of its six renders at least `MIN_PILOT_RENDER`); a render too short for that
+to stay under `MAX_PILOT_SHARE` of it (about 0.6 s) gets `pt` without a pilot. The chosen
+method then renders the samples asked for, within what is left of the time limit: the frame
+holds the samples the user set, and the pilot costs a small share of the render it plans.
 
-Parameters (defaults once, here): `DENOISE_CROP = 96`, `DENOISED_MARGIN = 2.0`, `PILOT_FRACTION = 0.05`, `MIN_PILOT_RENDER = 0.01` s (measured 2026-12-03, 128² cornell, veil and lights, 3 seeds: the pilot
+Parameters (defaults once, here): `DENOISE_CROP = 96`, `DENOISED_MARGIN = 2.0`, `PILOT_FRACTION = 0.05`,
+`MAX_PILOT_SHARE = 0.1`, `PROBE_SECONDS = 0.02`, `MIN_PILOT_RENDER = 0.01` s (measured 2026-12-03, 128² cornell, veil and lights, 3 seeds: the pilot
 4.4–5.0% of a 1 s budget, where 0.02 s made it 8.5–8.9%, and the same choice in all 9),
 `BOOTSTRAP_MARGIN = 1.5` (gdpssmlt is not tried when its bootstrap, predicted from `gdpt`'s
 pilot speed, would outlast a pilot render by this factor),
@@ -60,6 +64,8 @@ import numpy as np
 CANDIDATES = ("pt", "gdpt", "gdpssmlt")
 PILOT_FRACTION = 0.05
 MIN_PILOT_RENDER = 0.01
+MAX_PILOT_SHARE = 0.1
+PROBE_SECONDS = 0.02
 BOOTSTRAP_MARGIN = 1.5
 DENOISE_CROP = 96
 DENOISED_MARGIN = 2.0
@@ -148,18 +154,37 @@ def _choose_in(scene, desc, settings, cancelled, denoise, candidates, sizes):
 
     w, h, ww, wh = sizes
     limit = float(settings.get("time_limit") or 0.0)
-    t_each = max(MIN_PILOT_RENDER, PILOT_FRACTION * limit / (2 * len(candidates))) if limit else 0.1
+    from .settings import CORE
+
+    spp = settings.get("spp", CORE["spp"])
     common = {k: settings[k] for k in ("max_bounces", "nee", "threads", "reconstruction", "alpha_rec",
                                        "large_step_probability", "alpha_target", "diffuse_bounces", "glossy_bounces",
                                        "transmission_bounces", "transparent_bounces", "clamp_direct",
                                        "clamp_indirect") if k in settings}
     seed = int(settings.get("seed", 0))
     t0 = time.perf_counter()
+    # 3a. the render's length: its time limit, or what pt takes for its samples (a probe of
+    # PROBE_SECONDS on the window), whichever ends it first
+    rate = {}
+    estimate = limit or float("inf")
+    if spp:
+        probe = gdmlt.render(scene, method="pt", spp=10 ** 7, time_limit=PROBE_SECONDS, seed=seed, **common)
+        st = probe["stats"]
+        rate["pt"] = max(st["elapsed"], 1e-6) / (max(st["spp_min"], 1) * ww * wh)
+        estimate = min(estimate, float(spp) * rate["pt"] * w * h)
+    t_each = PILOT_FRACTION * estimate / (2 * len(candidates))
+    if t_each < MIN_PILOT_RENDER * PILOT_FRACTION / MAX_PILOT_SHARE:
+        # even its shortest renders would cost more than MAX_PILOT_SHARE of the render: pt,
+        # the method with the least fixed cost, without a pilot
+        pilot = time.perf_counter() - t0
+        return {"method": "pt", "budget": estimate, "pilot_seconds": pilot, "efficiency": {}, "denoised": {},
+                "why": f"the render (≈{estimate:.2g} s) is too short to pay for a pilot: pt"}
+    t_each = max(MIN_PILOT_RENDER, t_each)
     if denoise:  # loading OIDN's library takes ~0.25 s: during the pilot renders, not after them
         loader = threading.Thread(target=oidn.available, daemon=True)
         loader.start()
-    # 3. two renders per candidate: relative variance × seconds
-    eff, pairs, rate, skipped = {}, {}, {}, ""
+    # 3b. two renders per candidate: relative variance × seconds
+    eff, pairs, skipped = {}, {}, ""
     for m in candidates:
         if m == "gdpssmlt" and "gdpt" in rate:
             # its bootstrap traces bootstrap_paths gradient-domain paths before the first
@@ -193,7 +218,7 @@ def _choose_in(scene, desc, settings, cancelled, denoise, candidates, sizes):
         pairs[m] = (layers, elapsed)
         rate[m] = elapsed / max(samples, 1) / (ww * wh)  # seconds per sample per pixel
     if not eff:
-        return {"method": "pt", "budget": limit, "pilot_seconds": time.perf_counter() - t0, "efficiency": {},
+        return {"method": "pt", "budget": estimate, "pilot_seconds": time.perf_counter() - t0, "efficiency": {},
                 "denoised": {}, "why": "cancelled"}
     best = min(eff, key=eff.get)
     if eff[best] == float("inf"):
@@ -214,14 +239,10 @@ def _choose_in(scene, desc, settings, cancelled, denoise, candidates, sizes):
                     if denoised[best] < denoised["pt"]:
                         note = f"; {best}'s lead after denoising is under {DENOISED_MARGIN:g}×: pt"
                     best = "pt"
-    # 5. the whole render's budget, and why
+    # 5. why
     pilot = time.perf_counter() - t0
-    if limit:
-        budget = limit
-    else:
-        budget = max(pilot, float(settings.get("spp", 64)) * rate.get("pt", 0.0) * w * h)
     why = _explain(best, eff, denoised, f"pilot {pilot:.2f} s on a {ww}×{wh} window") + note + skipped
-    return {"method": best, "budget": budget, "pilot_seconds": pilot, "efficiency": eff, "denoised": denoised,
+    return {"method": best, "budget": estimate, "pilot_seconds": pilot, "efficiency": eff, "denoised": denoised,
             "why": why}
 
 
@@ -250,8 +271,14 @@ def _explain(best: str, eff: dict, denoised: dict, head: str) -> str:
         text, ranked = ranking(denoised)
         why += f"; after denoising {text}"
     final = denoised or eff
-    if len(ranked) > 1 and 0 < final[best] < float("inf"):
-        why += f"; {best} is {final[ranked[1]] / final[best]:.1f}× ahead of {ranked[1]}"
+    others = [m for m in ranked if m != best]
+    if others and 0 < final[best] < float("inf"):
+        # the best of the others: ahead of it, or (pt kept within the margin) behind it
+        ratio = final[others[0]] / final[best]
+        if ratio >= 1.0:
+            why += f"; {best} is {ratio:.2g}× ahead of {others[0]}"
+        else:
+            why += f"; {best} kept though {others[0]} measured {1 / ratio:.2g}× ahead"
     return why
 
 
@@ -262,10 +289,10 @@ def plan(desc: dict, settings: dict, cancelled=lambda: False, denoise=False, sce
     settings = dict(settings)
     settings.pop("method", None)
     pick = choose(desc, settings, cancelled, denoise, scene)
-    rest = max(pick["budget"] - pick["pilot_seconds"], MIN_PILOT_RENDER)
-    opts = dict(settings, method=pick["method"], spp=10 ** 7, time_limit=rest)
-    if settings.get("time_limit") and settings.get("spp"):
-        opts["spp"] = int(settings["spp"])  # whichever comes first, as asked
+    # the frame holds the samples asked for, within what is left of the time limit
+    opts = dict(settings, method=pick["method"])
+    if settings.get("time_limit"):
+        opts["time_limit"] = max(float(settings["time_limit"]) - pick["pilot_seconds"], MIN_PILOT_RENDER)
     return opts, pick
 
 
