@@ -57,6 +57,9 @@ NOISY = "Noisy Image"
 VARIANCE = "Variance"
 RESTORE_RADIUS = 2
 RESTORE_CAUTION = 4.0
+MEAN_RADIUS = 8
+MEAN_CAUTION = RESTORE_CAUTION
+ALPHA = "Alpha"
 ALBEDO = "Denoising Albedo"
 NORMAL = "Denoising Normal"
 
@@ -178,11 +181,82 @@ def denoise(layers: dict, *, prefilter=True, threads=0, quality="high", restore=
         raise ValueError("denoise: the layers have no 'Combined' image")
     out = dict(layers)
     out[NOISY] = layers["Combined"]
-    out["Combined"] = denoise_image(layers["Combined"], layers.get(ALBEDO), layers.get(NORMAL),
+    raw = layers["Combined"]
+    out["Combined"] = denoise_image(raw, layers.get(ALBEDO), layers.get(NORMAL),
                                     prefilter=prefilter, threads=threads, quality=quality)
-    if restore and layers.get(VARIANCE) is not None:
-        out["Combined"] = restore_detail(layers["Combined"], out["Combined"], layers[VARIANCE])
+    variance = layers.get(VARIANCE)
+    if restore and variance is not None:
+        out["Combined"] = restore_detail(raw, out["Combined"], variance)
+    out["Combined"] = keep_mean(raw, out["Combined"], variance)
+    if layers.get(ALPHA) is not None:
+        out["Combined"] = keep_premultiplied(raw, out["Combined"], layers[ALPHA])
     return out
+
+
+def _shifted_max(a, r):
+    """Maximum over the (2r+1)² window around each pixel of an (H, W, C) array (edges
+    repeated), by shifts: memory of two images, whatever the size."""
+    h, w = a.shape[:2]
+    p = np.pad(a, ((r, r), (r, r), (0, 0)), mode="edge")
+    out = np.full_like(a, -np.inf)
+    for dy in range(2 * r + 1):
+        for dx in range(2 * r + 1):
+            np.maximum(out, p[dy:dy + h, dx:dx + w], out=out)
+    return out
+
+
+def keep_premultiplied(noisy, denoised, alpha, radius=RESTORE_RADIUS):
+    """Step 5: the denoised colour made premultiplied by the film's alpha again. OIDN spreads
+    light into pixels the camera saw only the (transparent) world through; composited
+    "over" a plate that adds a glow around every object. So: colour 0 where alpha is 0 (as
+    the raw image has it), and where alpha is partial at most alpha × the largest
+    unpremultiplied raw colour in the pixel's (2r+1)² window (per channel)."""
+    d = np.asarray(denoised, np.float32)[..., :3].copy()
+    a = np.asarray(alpha, np.float32).reshape(d.shape[:2])
+    x = np.asarray(noisy, np.float32)[..., :3]
+    seen = a > 0.0
+    colour = np.where(seen[..., None], x / np.where(seen, a, 1.0)[..., None], -np.inf).astype(np.float32)
+    bound = a[..., None] * np.maximum(_shifted_max(colour, radius), 0.0)
+    partial = (seen & (a < 1.0))[..., None]
+    d = np.where(partial, np.minimum(d, bound), d)
+    d[~seen] = 0.0
+    return d
+
+
+def keep_mean(noisy, denoised, variance=None, radius=MEAN_RADIUS, caution=MEAN_CAUTION):
+    """Step 4: the raw image's mean kept, at the scale of (2r+1)² windows and over the whole
+    image. OIDN (and the restore step) move the image's mean — a room lit through a glazed
+    window by −3.6%, a door-ajar room by +5% — and a 16² frame with one lit pixel by −40%,
+    where the raw image is unbiased. At each scale, per channel, the denoised image is scaled
+    towards the raw one's local mean by the ratio of the two means, weighted by the share of
+    their difference that is not the raw mean's own noise (the restore step's Wiener weight,
+    with the same caution). The raw pixels' noise: pt's Variance layer where known, else
+    their squared difference from the denoised image (larger: it also holds what OIDN
+    removed, so it corrects less). A channel whose raw window is exactly 0 is 0: a black
+    frame stays black."""
+    x = np.asarray(noisy, np.float64)[..., :3]
+    d = np.asarray(denoised, np.float64)[..., :3]
+    if not (np.all(np.isfinite(x)) and np.all(np.isfinite(d))):
+        return np.asarray(denoised, np.float32)
+    noise = (x - d).mean(-1) ** 2
+    if variance is not None:
+        v = np.asarray(variance, np.float64).reshape(x.shape[:2])
+        noise = np.where(np.isfinite(v) & (v < 0.5 * VARIANCE_UNKNOWN), np.maximum(v, 0.0), noise)
+    h, w = x.shape[:2]
+    n_local = min((2 * radius + 1) ** 2, h * w)
+    box = lambda a: np.stack([_box(a[..., c], radius) for c in range(a.shape[2])], -1)  # noqa: E731
+    for scale in ("window", "image"):
+        if scale == "image":
+            mx, md, k = x.mean((0, 1)), d.mean((0, 1)), 1.0  # the raw mean, whose noise is its own
+        else:
+            mx, md, var = box(x), box(d), _box(noise, radius) / n_local
+            delta2 = (mx - md).mean(-1) ** 2
+            k = np.clip(1.0 - caution * var / np.maximum(delta2, 1e-300), 0.0, 1.0)
+            k = np.where(delta2 > 0.0, k, 0.0)[..., None]
+        ratio = np.where(md > 0.0, mx / np.where(md > 0.0, md, 1.0), 1.0)
+        ratio = np.where(mx <= 0.0, 0.0, ratio)  # raw exactly 0 there: no light reached it
+        d = d * np.where(mx <= 0.0, 0.0, 1.0 + k * (ratio - 1.0))
+    return np.maximum(d, 0.0).astype(np.float32)
 
 
 def _box(a, r):
