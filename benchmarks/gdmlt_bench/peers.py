@@ -265,8 +265,8 @@ def _luxcore_child(inp: str, outp: str):
     props.Set(pyluxcore.Property("scene.camera.up", [float(x) for x in up]))
     # LuxCore's field of view is along the shorter image side.
     props.Set(pyluxcore.Property("scene.camera.fieldofview", float(min(cfg["fov_x"], cfg["fov_y"]))))
-    # Its image sits one pixel row low; shift the screen window back (PEERS.md; checked by the
-    # bench against GDMLT's framing).
+    # Its image sits one pixel row low; shift the screen window back (docs/benchmarks.md,
+    # "The peers' framing"; checked by the bench against GDMLT's framing).
     ax, ay = (w / h, 1.0) if w >= h else (1.0, h / w)
     dy = 2.0 * ay / h
     props.Set(pyluxcore.Property("scene.camera.screenwindow", [-ax, ax, -ay - dy, ay - dy]))
@@ -343,7 +343,7 @@ def luxcore_render(simple: dict, budgets, max_bounces: int, nee: bool, sampler="
 
 
 def cycles_unbiased(scene, samples: int, seed: int, bounces: int, threads: int = 0, kinds=None):
-    """Cycles as an unbiased reference (BLENDER.md): no clamping, no glossy filter, no
+    """Cycles as an unbiased reference (docs/blender.md, "Cycles as a reference renderer"): no clamping, no glossy filter, no
     denoiser, no adaptive sampling, no light threshold, the default 1.5-pixel Blackman-Harris filter, caustics on,
     the same bounce limit for every kind — or, with `kinds` ({"diffuse", "glossy",
     "transmission", "transparent"} → limit), those limits (GDMLT's Light Paths)."""
