@@ -1143,6 +1143,12 @@ def _mesh_local_arrays(ob, colour_layer=None, spaces=()):
         cn = np.empty(len(me.loops) * 3, np.float32)
         me.corner_normals.foreach_get("vector", cn)
         normals = cn.reshape(-1, 3)[tl]  # smooth, flat and custom split normals per corner
+        smooth = np.empty(nt, bool)
+        me.loop_triangles.foreach_get("use_smooth", smooth)
+        # a flat face's corners hold its polygon's normal, but Cycles shades each of its
+        # triangles with that triangle's own normal (they differ on a non-planar quad, by 13°
+        # on a rough ground): zero normals tell the core a triangle is flat-shaded
+        normals.reshape(nt, 3, 3)[~smooth] = 0.0
         uvs = None
         uv_layer = next((l for l in me.uv_layers if l.active_render), None) or me.uv_layers.active
         if uv_layer is not None:
@@ -1609,6 +1615,12 @@ def export_scene(depsgraph, test_break=lambda: False, need_camera=True):
         for key in ("visible_camera", "visible_shadow"):  # (Object › Visibility › Ray Visibility)
             if not getattr(ob, key, True):
                 meshes[-1][key] = False
+        # Object › Shading › Shadow Terminator (src/scene/terminator.rs)
+        offset = float(getattr(ob, "shadow_terminator_geometry_offset", 0.1))
+        if abs(offset - 0.1) > 1e-6:
+            meshes[-1]["shadow_terminator_offset"] = min(max(offset, 0.0), 1.0)
+        if getattr(ob, "shadow_terminator_shading_offset", 0.0) > 0.0:
+            warnings.append(f"object '{ob.name}': Shadow Terminator › Shading Offset is not rendered (0 is used)")
     world, world_texture, world_rotation, backdrop = _world(scene, warnings, textures)
     if scene.render.use_motion_blur:
         warnings.append("motion blur is not rendered yet: the frame is rendered at its shutter's start")

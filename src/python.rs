@@ -128,6 +128,14 @@ fn parse_mesh(d: &Bound<'_, PyDict>) -> PyResult<MeshDesc> {
     let pass_index = get_or(d, "pass_index", 0, &ctx)?;
     let camera_invisible = !get_or(d, "visible_camera", true, &ctx)?;
     let shadow_invisible = !get_or(d, "visible_shadow", true, &ctx)?;
+    let shadow_terminator_offset = match item(d, "shadow_terminator_offset")? {
+        Some(v) if !v.is_none() => Some(
+            get(d, "shadow_terminator_offset", &ctx)?
+                .extract::<f32>()
+                .map_err(|_| verr(format!("{ctx}: shadow_terminator_offset must be a number")))?,
+        ),
+        _ => None,
+    };
     Ok(MeshDesc {
         name,
         positions,
@@ -141,6 +149,7 @@ fn parse_mesh(d: &Bound<'_, PyDict>) -> PyResult<MeshDesc> {
         pass_index,
         camera_invisible,
         shadow_invisible,
+        shadow_terminator_offset,
     })
 }
 
@@ -1095,6 +1104,9 @@ fn builtin_scene<'py>(py: Python<'py>, name: &str, width: u32, height: u32) -> P
         md.set_item("indices", PyArray1::from_vec(py, idx).reshape([m.indices.len(), 3])?)?;
         md.set_item("material_ids", PyArray1::from_slice(py, &m.material_ids))?;
         md.set_item("pass_index", m.pass_index)?;
+        if let Some(offset) = m.shadow_terminator_offset {
+            md.set_item("shadow_terminator_offset", offset)?;
+        }
         if !m.corner_normals.is_empty() {
             let n: Vec<f32> = m.corner_normals.iter().flatten().copied().collect();
             md.set_item("normals", PyArray1::from_vec(py, n).reshape([m.corner_normals.len(), 3])?)?;

@@ -113,13 +113,16 @@ fn bsdf_seen(scene: &Scene, v: &Vertex, wo: Vec3) -> Bsdf {
 }
 
 /// Visibility from a surface point to a point (or, at infinity, along a direction) on a
-/// side the path builder scatters and samples lights towards: on one side of both the
-/// geometric and the shading normal, and on the far side only where the surface transmits
-/// through a non-delta lobe (rough glass); and nothing in the way, as `blocking` says.
+/// side the path builder scatters or samples lights towards, and nothing in the way, as
+/// `blocking` says. A path segment (a reconnection) goes where BSDF sampling continues: on
+/// one side of both the geometric and the shading normal, and on the far side only where the
+/// surface transmits through a non-delta lobe (rough glass). A shadow ray goes wherever the
+/// BSDF's value (which its caller weighs) says, as the path builder's light samples do.
 fn visible(scene: &Scene, si: &SurfaceInteraction, z: Vec3, at_infinity: bool, blocking: Blocking) -> bool {
     let dir = if at_infinity { z } else { z - si.p };
     let (cg, cs) = (dir.dot(si.ng), dir.dot(si.frame.n));
-    let side = if cg > 0.0 { cs > 0.0 } else { cg < 0.0 && cs < 0.0 && scene.bsdf_at(si).transmits() };
+    let side = blocking != Blocking::Path
+        || if cg > 0.0 { cs > 0.0 } else { cg < 0.0 && cs < 0.0 && scene.bsdf_at(si).transmits() };
     side && match blocking {
         Blocking::Path => scene.segment_clear(si, z, at_infinity),
         Blocking::Shadow => scene.shadow_clear(si, z, at_infinity),

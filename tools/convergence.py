@@ -770,6 +770,70 @@ def per_object(bpy):
     return scene
 
 
+def _floor_with_posts(n=8, half=2.0, post_h=2.0, amp=0.04, seed=7):
+    """(vertices, faces) of an n × n quad floor over [−half, half]² at z ≈ 0.1 with heights
+    uneven by ±amp, four posts standing on cells of it and a skirt down to z = 0 — posts and
+    skirt share the floor's vertices, so its smooth normals lean by up to 74°."""
+    rng = np.random.default_rng(seed)
+    posts = {(1, 1), (1, n - 2), (n - 2, 1), (n - 2, n - 2)}
+    step = 2 * half / n
+    verts, at = [], {}
+    for j in range(n + 1):
+        for i in range(n + 1):
+            at[i, j] = len(verts)
+            z = 0.1 + (rng.uniform(-amp, amp) if 0 < i < n and 0 < j < n else 0.0)
+            verts.append((-half + i * step, -half + j * step, z))
+    faces = [(at[i, j], at[i + 1, j], at[i + 1, j + 1], at[i, j + 1])
+             for j in range(n) for i in range(n) if (i, j) not in posts]
+    for i, j in sorted(posts):
+        base = [at[i, j], at[i + 1, j], at[i + 1, j + 1], at[i, j + 1]]
+        top = []
+        for k in base:
+            top.append(len(verts))
+            verts.append((*verts[k][:2], post_h))
+        faces += [(base[k], base[(k + 1) % 4], top[(k + 1) % 4], top[k]) for k in range(4)]
+    ring = ([at[i, 0] for i in range(n)] + [at[n, j] for j in range(n)] + [at[i, n] for i in range(n, 0, -1)]
+            + [at[0, j] for j in range(n, 0, -1)])
+    low = []
+    for k in ring:
+        low.append(len(verts))
+        verts.append((*verts[k][:2], 0.0))
+    faces += [(ring[(k + 1) % len(ring)], ring[k], low[k], low[(k + 1) % len(ring)]) for k in range(len(ring))]
+    return verts, faces
+
+
+def veranda(bpy):
+    """Issue 45 §1, the kind of view where GDMLT was dark against Cycles: a low-poly,
+    smooth-shaded floor on posts under a smooth-shaded roof slab (one box: its corner normals
+    lean 55° from its faces), a bright ground outside, lit by a lamp low over the horizon and
+    seen from low outside. Cycles lifts the start of light samples' shadow rays off such
+    triangles towards their smooth surface (Shadow Terminator › Geometry Offset, 0.1 by
+    default); on the slab the lifted start lands outside it, and the floor under the roof
+    gets light GDMLT's flat starts did not: the veranda 5–20% dark in whole blocks, mean −5%.
+    Its naive rows are judged against Cycles' naive image (`NAIVE_REFERENCE`): BSDF-sampled
+    rays are not lifted."""
+    import mathutils
+
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    scene = bpy.context.scene
+    grey = _diffuse(bpy, "Grey", (0.64, 0.64, 0.64))
+    _mesh(bpy, scene, "Floor", *_floor_with_posts(), grey, True)
+    lo, hi = (-2.4, -2.4, 2.0), (2.4, 2.4, 2.25)
+    corners = [(x, y, z) for z in (lo[2], hi[2]) for y in (lo[1], hi[1]) for x in (lo[0], hi[0])]
+    slab = [(0, 2, 3, 1), (4, 5, 7, 6), (0, 1, 5, 4), (2, 6, 7, 3), (0, 4, 6, 2), (1, 3, 7, 5)]
+    _mesh(bpy, scene, "Roof", corners, slab, grey, True)
+    g = 30.0
+    _mesh(bpy, scene, "Ground", [(-g, -g, 0), (g, -g, 0), (g, g, 0), (-g, g, 0)], [(0, 1, 2, 3)], grey, False)
+    e, (cx, cy, cz) = 1.5, (9.0, -9.0, 4.0)
+    _mesh(bpy, scene, "Lamp", [(cx - e, cy - e, cz), (cx - e, cy + e, cz), (cx + e, cy + e, cz), (cx + e, cy - e, cz)],
+          [(0, 1, 2, 3)], _emission(bpy, "Lamp", 60.0), False)
+    _camera_and_world(bpy, scene)
+    scene.camera.data.lens = 28.0
+    scene.camera.location = (0.3, -3.2, 0.45)
+    scene.camera.rotation_euler = mathutils.Euler((math.radians(80.0), 0.0, 0.0))
+    return scene
+
+
 def checked_in(name, keep=None):
     """One of tests/scenes/*.blend (tools/make_test_scenes.py) at this module's size and
     bounce limit; `keep` names the lights left on."""
@@ -867,6 +931,7 @@ SCENES = {
     "mix": (checked_in("mix"), 512, 16),
     "hdri": (hdri, 512, 16),
     "hdri_rotated": (hdri_rotated, 512, 16),
+    "veranda": (veranda, 512, 16),
 }
 
 # Scenes where Cycles' own light sampling finds more light than its BSDF sampling can: light
@@ -877,7 +942,7 @@ SCENES = {
 # only shadow rays pass it. Their naive rows are compared with Cycles rendered without light
 # sampling of emitters and the world (its own naive estimate), the NEE rows with Cycles as it
 # renders by default.
-NAIVE_REFERENCE = {"bulb_rough", "bulb_frosted", "bulb_tinted", "ray_visibility"}
+NAIVE_REFERENCE = {"bulb_rough", "bulb_frosted", "bulb_tinted", "ray_visibility", "veranda"}
 
 # Scenes that only next-event estimation renders as Cycles does: a lamp whose Cast Shadow is
 # off lights what its shadow rays reach, through everything; a path that finds the lamp by

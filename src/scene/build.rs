@@ -4,6 +4,7 @@
 //! object at fault.
 
 use super::environment::Environment;
+use super::terminator::DEFAULT_GEOMETRY_OFFSET;
 use super::{
     light_select, CameraDesc, Light, LightShape, Material, MaterialDesc, MeshDesc, SceneDesc, SceneReport, Texture,
 };
@@ -81,6 +82,9 @@ pub(super) struct Triangles {
     /// Each triangle's ray visibility (`RAY_CAMERA_INVISIBLE`, `RAY_SHADOW_INVISIBLE` bits);
     /// empty when every object is seen by every ray.
     pub ray_mask: Vec<u8>,
+    /// Each triangle's object's Shadow Terminator Geometry Offset; empty when every object
+    /// has the default (`terminator::DEFAULT_GEOMETRY_OFFSET`).
+    pub terminator: Vec<f32>,
 }
 
 /// A `Triangles::ray_mask` bit: camera rays pass through the triangle.
@@ -108,6 +112,7 @@ impl Triangles {
             tangents: Vec::new(),
             pass_index: Vec::new(),
             ray_mask: Vec::new(),
+            terminator: Vec::new(),
         };
         let masked = meshes.iter().any(|m| m.camera_invisible || m.shadow_invisible);
         let colors = meshes.iter().any(|m| !m.corner_colors.is_empty());
@@ -120,6 +125,8 @@ impl Triangles {
         };
         let tangents = meshes.iter().any(wants_tangents);
         let pass_indices = meshes.iter().any(|m| m.pass_index != 0);
+        let terminator_offset = |m: &MeshDesc| m.shadow_terminator_offset.unwrap_or(DEFAULT_GEOMETRY_OFFSET);
+        let terminators = meshes.iter().any(|m| terminator_offset(m) != DEFAULT_GEOMETRY_OFFSET);
         for m in meshes {
             Self::check(m)?;
         }
@@ -144,6 +151,9 @@ impl Triangles {
             }
             if pass_indices {
                 t.pass_index.resize(t.positions.len(), m.pass_index);
+            }
+            if terminators {
+                t.terminator.resize(t.positions.len(), terminator_offset(m));
             }
             if masked {
                 let bits = if m.camera_invisible { RAY_CAMERA_INVISIBLE } else { 0 }
@@ -183,6 +193,9 @@ impl Triangles {
         let bad = |what: String| SceneError::Mesh { mesh: m.name.clone(), what };
         if m.indices.is_empty() || m.positions.is_empty() {
             return Err(bad("is empty (no triangles)".into()));
+        }
+        if let Some(x) = m.shadow_terminator_offset.filter(|x| !(0.0..=1.0).contains(x)) {
+            return Err(bad(format!("shadow terminator geometry offset {x} is not a number in 0…1")));
         }
         if let Some((i, _)) = m.positions.iter().enumerate().find(|(_, p)| p.iter().any(|x| !x.is_finite())) {
             return Err(bad(format!("vertex {i} has a NaN or Inf coordinate")));
@@ -255,7 +268,7 @@ impl Triangles {
                 if ns.iter().all(|n| n.is_finite() && n.length_squared() > 1e-12) {
                     Some(ns.map(|n| n.normalize()))
                 } else {
-                    None // broken normals: fall back to flat shading
+                    None // zero (a flat face, as the exporter marks it) or broken: flat shading
                 }
             };
             self.positions.push(v);

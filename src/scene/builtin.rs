@@ -23,6 +23,7 @@ fn quad(name: &str, p: [[f32; 3]; 4], mat: u32) -> MeshDesc {
         camera_invisible: false,
         shadow_invisible: false,
         pass_index: 0,
+        shadow_terminator_offset: None,
     }
 }
 
@@ -366,5 +367,6 @@ fn flat_mesh(name: &str, positions: Vec<[f32; 3]>, indices: Vec<[u32; 3]>, mat: 
         camera_invisible: false,
         shadow_invisible: false,
         pass_index: 0,
+        shadow_terminator_offset: None,
     }
 }

@@ -11,6 +11,8 @@ pub struct MeshDesc {
     /// Triangle vertex indices.
     pub indices: Vec<[u32; 3]>,
     /// Optional per-corner shading normals (3 per triangle, in triangle order); empty = flat.
+    /// A triangle whose three are zero is flat-shaded (the exporter's mark for Blender's
+    /// flat faces: shaded by each triangle's own normal, as Cycles does).
     pub corner_normals: Vec<[f32; 3]>,
     /// Per-triangle index into the scene material table (empty = all 0).
     pub material_ids: Vec<u32>,
@@ -31,6 +33,10 @@ pub struct MeshDesc {
     /// through the object; shadow rays pass through it (it casts no shadow).
     pub camera_invisible: bool,
     pub shadow_invisible: bool,
+    /// The object's Shadow Terminator › Geometry Offset (0…1; `None`: Cycles' default 0.1),
+    /// which lifts the start of light samples' shadow rays on its smooth-shaded triangles
+    /// (scene/terminator.rs).
+    pub shadow_terminator_offset: Option<f32>,
 }
 
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]

@@ -12,6 +12,7 @@ pub mod light_tree;
 pub mod material;
 pub mod procedural;
 mod tangent;
+pub mod terminator;
 pub mod texture;
 
 pub use camera::{Camera, CameraRay};
@@ -60,6 +61,8 @@ pub struct SurfaceInteraction {
     /// The ray that arrived is the camera's (or its continuation straight through
     /// transparent surfaces): what Light Path › Is Camera Ray reads. Set by the path builder.
     pub camera: bool,
+    /// The hit's barycentric coordinates of the triangle's second and third vertices.
+    pub bary: Vec2,
 }
 
 impl SurfaceInteraction {
@@ -105,6 +108,8 @@ pub struct Scene {
     /// Object Pass Index per triangle (empty: all 0) and material Pass Index per material
     /// (the IndexOB and IndexMA passes).
     tri_pass_index: Vec<u32>,
+    /// Per triangle, its object's Shadow Terminator Geometry Offset (empty: all the default).
+    tri_terminator: Vec<f32>,
     material_pass_index: Vec<u32>,
     /// Per triangle, the rays that pass through it (`build::RAY_CAMERA_INVISIBLE`,
     /// `RAY_SHADOW_INVISIBLE`); empty when every object is seen by every ray.
@@ -179,6 +184,7 @@ impl Scene {
             tangents: tris.tangents,
             tri_material: tris.material,
             tri_pass_index: tris.pass_index,
+            tri_terminator: tris.terminator,
             material_pass_index: Vec::new(),
             has_shadow_invisible: tris.ray_mask.iter().any(|m| m & RAY_SHADOW_INVISIBLE != 0),
             ray_mask: tris.ray_mask,
@@ -224,6 +230,7 @@ impl Scene {
             tangents: Vec::new(),
             pass_index: Vec::new(),
             ray_mask: Vec::new(),
+            terminator: Vec::new(),
         };
         let lighting = match tris.material.iter().max() {
             Some(&m) if m as usize >= shading.materials.len() => Err(SceneError::Mesh {
@@ -328,10 +335,26 @@ impl Scene {
     /// before its end and NEE went dark beside lights: measured on the gap scene, where the
     /// plate under the light lost 99% of its direct light.) None when there is no segment.
     pub fn shadow_ray(&self, si: &SurfaceInteraction, target: Vec3, at_infinity: bool) -> Option<(Vec3, Vec3, f32)> {
-        if at_infinity {
-            return Some((si.spawn_origin(target), target, f32::INFINITY));
+        self.shadow_ray_from(si, target, at_infinity, false)
+    }
+
+    /// `shadow_ray`, its start lifted off a smooth-shaded triangle by the object's shadow
+    /// terminator offset where `lift` (a light sample's shadow ray, not a path segment).
+    fn shadow_ray_from(
+        &self,
+        si: &SurfaceInteraction,
+        target: Vec3,
+        at_infinity: bool,
+        lift: bool,
+    ) -> Option<(Vec3, Vec3, f32)> {
+        let dir = if at_infinity { target } else { target - si.p };
+        let mut o = si.spawn_origin(dir);
+        if lift {
+            o += self.terminator_lift(si, dir.normalize_or_zero());
         }
-        let o = si.spawn_origin(target - si.p);
+        if at_infinity {
+            return Some((o, target, f32::INFINITY));
+        }
         let to = target - o;
         let len = to.length();
         if !(len > 0.0) {
@@ -340,10 +363,28 @@ impl Scene {
         Some((o, to / len, len * (1.0 - 1e-4) - ray_epsilon(target)))
     }
 
+    /// The shadow-terminator lift (terminator.rs) of a light sample's shadow ray towards `l`
+    /// from `si`: zero unless its triangle is smooth-shaded and lit at a grazing angle.
+    fn terminator_lift(&self, si: &SurfaceInteraction, l: Vec3) -> Vec3 {
+        let t = si.prim as usize;
+        let Some(n) = &self.normals[t] else { return Vec3::ZERO };
+        let cutoff = self.tri_terminator.get(t).copied().unwrap_or(terminator::DEFAULT_GEOMETRY_OFFSET);
+        let (amount, ng) = terminator::lift_amount(si.frame.n, si.ng, l, cutoff);
+        if amount <= 0.0 {
+            return Vec3::ZERO;
+        }
+        let b = [1.0 - si.bary.x - si.bary.y, si.bary.x, si.bary.y];
+        terminator::smooth_surface_lift(&self.positions[t], n, b, ng) * amount
+    }
+
     /// Nothing blocks the shadow segment from a surface point to `target` (a point, or at
     /// infinity a direction); transparent surfaces block it too.
     pub fn segment_clear(&self, si: &SurfaceInteraction, target: Vec3, at_infinity: bool) -> bool {
-        match self.shadow_ray(si, target, at_infinity) {
+        self.segment_clear_from(si, target, at_infinity, false)
+    }
+
+    fn segment_clear_from(&self, si: &SurfaceInteraction, target: Vec3, at_infinity: bool, lift: bool) -> bool {
+        match self.shadow_ray_from(si, target, at_infinity, lift) {
             Some((o, d, tmax)) => tmax <= 0.0 || !self.occluded(o, d, 0.0, tmax),
             None => false,
         }
@@ -353,11 +394,13 @@ impl Scene {
     /// that casts shadows: objects whose shadow visibility is off let it pass.
     pub fn shadow_clear(&self, si: &SurfaceInteraction, target: Vec3, at_infinity: bool) -> bool {
         if !self.has_shadow_invisible {
-            return self.segment_clear(si, target, at_infinity);
+            return self.segment_clear_from(si, target, at_infinity, true);
         }
         let mut from = *si;
-        for _ in 0..MAX_INVISIBLE_CROSSINGS {
-            let Some((o, d, tmax)) = self.shadow_ray(&from, target, at_infinity) else { return false };
+        for crossing in 0..MAX_INVISIBLE_CROSSINGS {
+            let Some((o, d, tmax)) = self.shadow_ray_from(&from, target, at_infinity, crossing == 0) else {
+                return false;
+            };
             if tmax <= 0.0 {
                 return true;
             }
@@ -390,7 +433,8 @@ impl Scene {
         let mut from = *si;
         let (mut crossed, mut invisible) = (0, 0);
         while crossed <= crate::path::MAX_TRANSPARENT_BOUNCES && invisible < MAX_INVISIBLE_CROSSINGS {
-            let Some((o, d, tmax)) = self.shadow_ray(&from, target, at_infinity) else {
+            let first = crossed == 0 && invisible == 0;
+            let Some((o, d, tmax)) = self.shadow_ray_from(&from, target, at_infinity, first) else {
                 return Some((t, crossed > 0));
             };
             if tmax <= 0.0 {
@@ -461,6 +505,7 @@ impl Scene {
             unmapped,
             wo: frame.to_local(-d),
             camera: false,
+            bary: Vec2::new(b1, b2),
         }
     }
 
