@@ -1140,15 +1140,17 @@ def _mesh_local_arrays(ob, colour_layer=None, spaces=()):
         me.loop_triangles.foreach_get("loops", tl)
         mi = np.empty(nt, np.int32)
         me.loop_triangles.foreach_get("material_index", mi)
-        cn = np.empty(len(me.loops) * 3, np.float32)
-        me.corner_normals.foreach_get("vector", cn)
-        normals = cn.reshape(-1, 3)[tl]  # smooth, flat and custom split normals per corner
-        smooth = np.empty(nt, bool)
-        me.loop_triangles.foreach_get("use_smooth", smooth)
-        # a flat face's corners hold its polygon's normal, but Cycles shades each of its
-        # triangles with that triangle's own normal (they differ on a non-planar quad, by 13°
-        # on a rough ground): zero normals tell the core a triangle is flat-shaded
-        normals.reshape(nt, 3, 3)[~smooth] = 0.0
+        # As Cycles takes a mesh's normals (Mesh::pack_shaders and the mesh sync): a mesh
+        # whose faces are all flat (normals domain FACE) is shaded by each triangle's own
+        # normal — on a non-planar quad not its polygon's (13° apart on a rough ground, +1.8%);
+        # otherwise every triangle interpolates its corner normals, a flat face's corners
+        # holding its polygon's normal (domain CORNER: Cycles then counts every triangle as
+        # smooth, for its shadow terminator offset too)
+        normals = None
+        if getattr(me, "normals_domain", "CORNER") != "FACE":
+            cn = np.empty(len(me.loops) * 3, np.float32)
+            me.corner_normals.foreach_get("vector", cn)
+            normals = cn.reshape(-1, 3)[tl]  # smooth, flat and custom split normals per corner
         uvs = None
         uv_layer = next((l for l in me.uv_layers if l.active_render), None) or me.uv_layers.active
         if uv_layer is not None:
@@ -1597,18 +1599,19 @@ def export_scene(depsgraph, test_break=lambda: False, need_camera=True):
         pos = (co.astype(np.float64) @ m[:3, :3].T + m[:3, 3]).astype(np.float32)
         det = np.linalg.det(m[:3, :3])
         nmat = np.linalg.inv(m[:3, :3]).T if abs(det) > 1e-30 else m[:3, :3]
-        nrm = (normals.astype(np.float64) @ nmat.T).astype(np.float32)
+        nrm = None if normals is None else (normals.astype(np.float64) @ nmat.T).astype(np.float32)
         if det < 0:
             # a mirroring transform winds the faces inside out; the core takes the outside
             # (how glass refracts) from the winding, so wind them back, as Cycles negates
             # the geometric normal of negatively scaled objects
-            tris, nrm = tris[:, ::-1], nrm.reshape(-1, 3, 3)[:, ::-1].reshape(-1, 3)
+            tris = tris[:, ::-1]
+            nrm = None if nrm is None else nrm.reshape(-1, 3, 3)[:, ::-1].reshape(-1, 3)
             uvs = None if uvs is None else uvs.reshape(-1, 3, 2)[:, ::-1].reshape(-1, 2)
             colours = None if colours is None else colours.reshape(-1, 3, 3)[:, ::-1].reshape(-1, 3)
             points = {k: p.reshape(-1, 3, 3)[:, ::-1].reshape(-1, 3) for k, p in points.items()}
         name = ob.name if not inst.is_instance else f"{inst.parent.name if inst.parent else ''}/{ob.name}"
         meshes.append(scenedict.mesh(name, np.ascontiguousarray(pos), np.ascontiguousarray(tris, dtype=np.uint32),
-                                     np.ascontiguousarray(nrm), mat_ids, uvs, ob.pass_index,
+                                     None if nrm is None else np.ascontiguousarray(nrm), mat_ids, uvs, ob.pass_index,
                                      None if colours is None else np.ascontiguousarray(colours)))
         for space, p in points.items():
             meshes[-1][space.lower()] = np.ascontiguousarray(p)

@@ -462,12 +462,13 @@ def test_a_mirrored_object_keeps_its_outside(bpy_mod):
 
 
 def test_flat_faces_shade_per_triangle_and_the_terminator_offset_is_exported(bpy_mod):
-    """Issue 45 §1. A flat face's corners hold its polygon's normal, but Cycles shades each of
-    its triangles with the triangle's own normal: on a non-planar quad they differ (a rough
-    ground's quads 13° apart, +1.8% against Cycles). The export marks flat faces' triangles
-    with zero normals, which the core shades flat (failed before: the polygon's normal).
-    And an object's Shadow Terminator › Geometry Offset reaches the core (the default 0.1
-    left out), where 2 would be refused naming the mesh."""
+    """Issue 45 §1. Normals as Cycles takes them: a mesh of flat faces only (normals domain
+    FACE) is shaded by each triangle's own normal — on a non-planar quad not its polygon's,
+    which the corners hold (a rough ground's quads 13° apart, +1.8% against Cycles; failed
+    before) — while in a mesh that mixes flat and smooth faces (domain CORNER) every triangle
+    interpolates its corners, a flat face's holding its polygon's normal (Cycles counts them
+    all smooth). And an object's Shadow Terminator › Geometry Offset reaches the core (the
+    default 0.1 left out), where 2 would be refused naming the mesh."""
     from gdmlt_blender import export
 
     bpy = bpy_mod
@@ -481,11 +482,18 @@ def test_flat_faces_shade_per_triangle_and_the_terminator_offset_is_exported(bpy
     flat = convergence._mesh(bpy, scene, "Flat", bent, [(0, 1, 2, 3)], grey, False)
     smooth = convergence._mesh(bpy, scene, "Smooth", [(x + 2, y, z) for x, y, z in bent], [(0, 1, 2, 3)], grey, True)
     smooth.shadow_terminator_geometry_offset = 0.0
+    mixed = convergence._mesh(bpy, scene, "Mixed", [(x + 4, y, z) for x, y, z in bent] + [(6, 0, 0), (6, 1, 0)],
+                              [(0, 1, 2, 3), (1, 4, 5, 2)], grey, True)
+    mixed.data.polygons[0].use_smooth = False
     desc, _ = export.export_scene(bpy.context.evaluated_depsgraph_get(), need_camera=False)
     meshes = {m["name"]: m for m in desc["meshes"]}
-    assert np.all(np.asarray(meshes["Flat"]["normals"]) == 0.0)
+    assert "normals" not in meshes["Flat"]
     n = np.asarray(meshes["Smooth"]["normals"])
     assert np.allclose(np.linalg.norm(n, axis=1), 1.0, atol=1e-5)
+    # the mixed mesh's flat quad: its two triangles' six corners all hold the polygon's normal
+    flat_corners = np.asarray(meshes["Mixed"]["normals"]).reshape(-1, 3, 3)[:2].reshape(-1, 3)
+    assert np.allclose(flat_corners, flat_corners[0], atol=1e-6)
+    assert np.allclose(flat_corners[0], mixed.data.polygons[0].normal, atol=1e-5)
     assert "shadow_terminator_offset" not in meshes["Flat"] and meshes["Smooth"]["shadow_terminator_offset"] == 0.0
     assert flat.shadow_terminator_geometry_offset == pytest.approx(0.1)
     import gdmlt
