@@ -184,6 +184,11 @@ impl Film {
         self.rows.iter().map(|r| r.invalid).sum()
     }
 
+    /// Samples taken over all pixels.
+    pub fn total_samples(&self) -> u64 {
+        self.rows.iter().flat_map(|r| r.count.iter()).map(|&c| u64::from(c)).sum()
+    }
+
     pub fn sample_count_range(&self) -> (u32, u32) {
         let mut lo = u32::MAX;
         let mut hi = 0;

@@ -279,6 +279,9 @@ pub struct PathContribution {
     /// reached the world — 1 for a miss, less through tinted transparent surfaces, 0 when it
     /// stopped at a surface. Its mean is 1 − alpha, as Cycles' "transparent" sum.
     pub transparent: f32,
+    /// The path's segments (closest-hit rays, the camera ray's included; shadow rays not):
+    /// its length, which Russian roulette and the bounce limits set.
+    pub segments: u32,
 }
 
 /// A path's camera ray and what it hits first: the start of `trace_path_from` (a caller may
@@ -350,6 +353,7 @@ pub fn trace_path_guided<S: Sampler>(
     let mut learn = guiding.filter(|g| g.record).map(|_| PathRecords::default());
     loop {
         // 1. the segment
+        out.segments += 1;
         let hit = match pending_hit.take() {
             Some(h) => h,
             // (what the camera sees through transparent surfaces, before any scattering)

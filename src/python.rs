@@ -1033,6 +1033,7 @@ fn render<'py>(
     stats.set_item("direct_relative_variance", st.direct_relative_variance)?;
     stats.set_item("guide_iterations", st.guide_iterations)?;
     stats.set_item("guide_regions", st.guide_regions)?;
+    stats.set_item("mean_path_segments", st.mean_path_segments)?;
     stats.set_item("alpha_rec", st.alpha_rec)?;
     dict.set_item("stats", stats)?;
     Ok(dict)

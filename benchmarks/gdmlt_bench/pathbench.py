@@ -43,7 +43,8 @@ def cornell_with_sphere(size: int, triangles: int) -> dict:
 
 def rate_gdmlt(sc, w, h, nee, bounces, threads, seconds, method="pt"):
     """Samples/s of one render of `method` long enough to measure (over seconds/4, after a
-    warm-up): (rate, image, samples per pixel of that render)."""
+    warm-up): (rate, image, samples per pixel of that render, mean segments per path — `pt`'s
+    `mean_path_segments`, 0 for the other methods)."""
     import gdmlt
 
     gdmlt.render(sc, method=method, spp=1, nee=nee, seed=7, threads=threads, max_bounces=bounces)
@@ -55,7 +56,7 @@ def rate_gdmlt(sc, w, h, nee, bounces, threads, seconds, method="pt"):
         if dt > seconds / 4 or spp >= 1 << 16:
             break
         spp = max(spp * 2, int(spp * seconds / max(dt, 1e-3)))
-    return w * h * spp / dt, res["layers"]["Combined"], spp
+    return w * h * spp / dt, res["layers"]["Combined"], spp, res["stats"].get("mean_path_segments", 0.0)
 
 
 def _rate_mitsuba(mi, scene, w, h, seconds, rate_hint):
@@ -77,8 +78,8 @@ def run(size=128, triangles=1_000_000, bounces=8, seconds=8.0, thread_counts=Non
     out(f"# gdmlt pathbench: camera samples/s, {size}x{size}, max bounces {bounces} "
         f"(Mitsuba max_depth {bounces + 2}, LuxCore pathdepth {bounces + 1}), ~{seconds:g} s per cell, "
         f"{all_threads} hardware threads")
-    out(f"{'scene':16} {'nee':5} {'threads':>7} {'gdmlt Ms/s':>11} {'mitsuba Ms/s':>13} {'luxcore Ms/s':>13} "
-        f"{'gdmlt/mi':>9} {'gdmlt/lux':>9} {'mean mi/g':>9} {'mean lux/g':>10} {'mi default':>10}")
+    out(f"{'scene':16} {'nee':5} {'threads':>7} {'gdmlt Ms/s':>11} {'segments':>8} {'mitsuba Ms/s':>13} "
+        f"{'luxcore Ms/s':>13} {'gdmlt/mi':>9} {'gdmlt/lux':>9} {'mean mi/g':>9} {'mean lux/g':>10} {'mi default':>10}")
     try:
         mi, dr = peers.import_mitsuba()
     except Exception as e:  # noqa: BLE001 — a missing peer is reported, not fatal
@@ -94,7 +95,7 @@ def run(size=128, triangles=1_000_000, bounces=8, seconds=8.0, thread_counts=Non
                 msc = peers.mitsuba_scene(mi, simple, bounces, nee, rr_depth=gdmlt.RR_START_DEPTH)
                 msc_default = peers.mitsuba_scene(mi, simple, bounces, nee)
             for th in thread_counts:
-                rg, img, _ = rate_gdmlt(sc, size, size, nee, bounces, th, seconds)
+                rg, img, _, segments = rate_gdmlt(sc, size, size, nee, bounces, th, seconds)
                 ref_mean = float(img.mean())
                 rm = mm = rmd = float("nan")
                 if msc is not None:
@@ -110,9 +111,11 @@ def run(size=128, triangles=1_000_000, bounces=8, seconds=8.0, thread_counts=Non
                     out(f"# luxcore failed: {e}")
                     rl = ml = float("nan")
                 rows.append((label, nee, th, rg, rm, rl))
-                out(f"{label:16} {str(nee):5} {th:>7} {rg / 1e6:11.3f} {rm / 1e6:13.3f} {rl / 1e6:13.3f} "
+                out(f"{label:16} {str(nee):5} {th:>7} {rg / 1e6:11.3f} {segments:8.3f} {rm / 1e6:13.3f} {rl / 1e6:13.3f} "
                     f"{rg / rm:9.2f} {rg / rl:9.2f} {mm:9.3f} {ml:10.3f} {rmd / 1e6:10.3f}")
-    out("# Ms/s = million camera samples (paths) per second; mean x/g = that renderer's image mean / GDMLT's;")
+    out("# Ms/s = million camera samples (paths) per second; segments = GDMLT's mean closest-hit rays per "
+        "path (camera ray included), the path length its samples/s are paid for; mean x/g = that renderer's "
+        "image mean / GDMLT's;")
     out(f"# mitsuba with GDMLT's Russian roulette (from bounce {gdmlt.RR_START_DEPTH}); "
         "mi default = Mitsuba's own (path: from depth 5; prb_basic: none), Ms/s")
     return rows

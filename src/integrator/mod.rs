@@ -300,6 +300,9 @@ pub struct RenderStats {
     /// `pt` with path guiding: training iterations completed and the guide's spatial regions.
     pub guide_iterations: u32,
     pub guide_regions: usize,
+    /// `pt`: the mean number of segments (closest-hit rays) per path, camera ray included —
+    /// what samples per second compare at (benchmarks print it beside them); 0 elsewhere.
+    pub mean_path_segments: f64,
 }
 
 /// Named images: "Combined" first, then passes.

@@ -27,7 +27,7 @@ const PACKET: usize = 8;
 /// Renders `n` more samples of every pixel of one row that is still sampling (all of them
 /// unless adaptive sampling stopped some), in the order (pixel, sample): a pixel's samples
 /// continue its own sequence (indices count..count + n). The camera rays of each run of
-/// `PACKET` such samples are traced as one packet.
+/// `PACKET` such samples are traced as one packet. Returns the paths' segments.
 fn render_row(
     scene: &Scene,
     settings: &RenderSettings,
@@ -36,7 +36,7 @@ fn render_row(
     y: usize,
     row: &mut FilmRow,
     n: u32,
-) {
+) -> u64 {
     let w = row.count.len();
     // each sampling pixel's first sample index in this pass
     let first: Vec<Option<u32>> =
@@ -49,7 +49,7 @@ fn render_row(
     let mut rays = [CameraRay::default(); PACKET];
     let mut batch: [(usize, Vec2, SobolSampler); PACKET] =
         std::array::from_fn(|_| (0, Vec2::ZERO, SobolSampler::new(0, 0, 0)));
-    let mut traced = 0u64;
+    let (mut traced, mut segments) = (0u64, 0u64);
     loop {
         let mut k_n = 0;
         for ((slot, ray), (x, s)) in batch.iter_mut().zip(rays.iter_mut()).zip(work.by_ref()) {
@@ -68,11 +68,13 @@ fn render_row(
             let primary = Primary { lens: *lens, ray: rays[k], hit: hits[k] };
             // PT needs no recorded vertices or events: nothing is recorded on its hot path.
             let c = trace_path_guided(scene, &settings.path, primary, sampler, None, guiding);
+            segments += u64::from(c.segments);
             row.add(*x, &c);
         }
         traced += k_n as u64;
     }
     control.work_done.fetch_add(traced, Ordering::Relaxed);
+    segments
 }
 
 pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl) -> RenderOutput {
@@ -95,6 +97,7 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl)
     let mut field = settings.guiding.then(|| GuideField::new(scene));
     let mut done = 0u32;
     let mut batch = 1u32;
+    let mut segments = 0u64;
     while done < settings.spp && !control.should_stop() {
         let mut to = (done + batch).min(settings.spp);
         let iteration_end = field.as_ref().map(|f| GuideField::iteration_end(f.iterations));
@@ -107,11 +110,17 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl)
         let guiding =
             field.as_ref().map(|f| Guiding { field: f, record: iteration_end.is_some_and(|e| e <= settings.spp) });
         let t0 = std::time::Instant::now();
-        film.rows.par_iter_mut().enumerate().for_each(|(y, row)| {
-            if !control.should_stop() {
-                render_row(scene, settings, control, guiding, y, row, to - done);
-            }
-        });
+        segments += film
+            .rows
+            .par_iter_mut()
+            .enumerate()
+            .map(|(y, row)| {
+                if control.should_stop() {
+                    return 0;
+                }
+                render_row(scene, settings, control, guiding, y, row, to - done)
+            })
+            .sum::<u64>();
         done = to;
         if let (Some(f), Some(end)) = (field.as_mut(), iteration_end) {
             if done == end && !control.should_stop() {
@@ -150,6 +159,7 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl)
             invalid_samples: film.invalid_samples(),
             guide_iterations: field.as_ref().map_or(0, |f| f.iterations),
             guide_regions: field.as_ref().map_or(0, |f| f.leaves()),
+            mean_path_segments: segments as f64 / film.total_samples().max(1) as f64,
             ..Default::default()
         },
     }

@@ -340,3 +340,24 @@ def test_path_guiding_from_the_api_and_the_cli(tmp_path):
              "--guiding")
     assert r.returncode == 0, r.stderr
     assert np.isfinite(read_exr(out)).all()
+
+
+def test_pt_reports_its_mean_path_length():
+    """Issue 51: samples per second only compare at matched path lengths, so `pt` reports
+    its mean segments (closest-hit rays) per path. Each path traces its camera ray and at most
+    one segment per bounce plus the last light-finding one (≤ max bounces + 2); more bounces
+    allowed never shorten paths; Russian roulette keeps them finite (64 allowed bounces add
+    little over 8 in the Cornell box); next-event estimation changes none of it (shadow rays
+    are not segments), and the other methods report 0."""
+    sc = gdmlt.Scene(gdmlt.builtin_scene("cornell", 24, 24))
+    means = {}
+    for b in (0, 1, 2, 8, 64):
+        for nee in (True, False):
+            means[b, nee] = gdmlt.render(sc, method="pt", spp=32, max_bounces=b, nee=nee, seed=3)["stats"][
+                "mean_path_segments"]
+        assert means[b, True] == means[b, False]
+        assert 1.0 <= means[b, True] <= b + 2, (b, means[b, True])
+    ordered = [means[b, True] for b in (0, 1, 2, 8, 64)]
+    assert ordered == sorted(ordered) and ordered[0] < ordered[2]
+    assert means[64, True] < 1.1 * means[8, True]
+    assert gdmlt.render(sc, method="gdpt", spp=2)["stats"]["mean_path_segments"] == 0.0
