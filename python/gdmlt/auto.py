@@ -44,7 +44,8 @@ samples per pixel (mutations per pixel for the Metropolis methods), whose time a
 estimate (each of its six renders at least `MIN_PILOT_RENDER`); a render too short for that
 to stay under `MAX_PILOT_SHARE` of it (about 0.6 s) gets `pt` without a pilot. The chosen
 method then renders the samples asked for, within what is left of the time limit: the frame
-holds the samples the user set, and the pilot costs a small share of the render it plans.
+holds the samples the user set, and the pilot costs a small share of the render it plans. (A
+time limit without samples, as the Python API may pass it, renders to the time limit.)
 
 Parameters (defaults once, here): `DENOISE_CROP = 96`, `DENOISED_MARGIN = 2.0`, `PILOT_FRACTION = 0.05`,
 `MAX_PILOT_SHARE = 0.1`, `PROBE_SECONDS = 0.02`, `MIN_PILOT_RENDER = 0.01` s (measured 2026-12-03, 128² cornell, veil and lights, 3 seeds: the pilot
@@ -65,6 +66,7 @@ CANDIDATES = ("pt", "gdpt", "gdpssmlt")
 PILOT_FRACTION = 0.05
 MIN_PILOT_RENDER = 0.01
 MAX_PILOT_SHARE = 0.1
+UNLIMITED_SPP = 10 ** 7
 PROBE_SECONDS = 0.02
 BOOTSTRAP_MARGIN = 1.5
 DENOISE_CROP = 96
@@ -156,7 +158,9 @@ def _choose_in(scene, desc, settings, cancelled, denoise, candidates, sizes):
     limit = float(settings.get("time_limit") or 0.0)
     from .settings import CORE
 
-    spp = settings.get("spp", CORE["spp"])
+    # (a time limit without samples — the Python API's `{"time_limit": 10}` — renders to the
+    # time limit; neither: the core's default samples)
+    spp = settings.get("spp", None if limit else CORE["spp"])
     common = {k: settings[k] for k in ("max_bounces", "nee", "threads", "reconstruction", "alpha_rec",
                                        "large_step_probability", "alpha_target", "diffuse_bounces", "glossy_bounces",
                                        "transmission_bounces", "transparent_bounces", "clamp_direct",
@@ -289,10 +293,12 @@ def plan(desc: dict, settings: dict, cancelled=lambda: False, denoise=False, sce
     settings = dict(settings)
     settings.pop("method", None)
     pick = choose(desc, settings, cancelled, denoise, scene)
-    # the frame holds the samples asked for, within what is left of the time limit
+    # the frame holds the samples asked for, within what is left of the time limit (a time
+    # limit alone: as many samples as fit)
     opts = dict(settings, method=pick["method"])
     if settings.get("time_limit"):
         opts["time_limit"] = max(float(settings["time_limit"]) - pick["pilot_seconds"], MIN_PILOT_RENDER)
+        opts.setdefault("spp", UNLIMITED_SPP)
     return opts, pick
 
 

@@ -68,6 +68,11 @@ def test_the_pilot_costs_a_share_of_the_render_the_samples_make_and_the_frame_ho
         assert opts.get("time_limit", 0) == pytest.approx(max(settings.get("time_limit", 0) - pick["pilot_seconds"], 0))
         res = gdmlt.render(gdmlt.Scene(cornell), **opts)
         assert res["stats"]["spp_max"] == settings["spp"], res["stats"]
+    # a time limit alone (the Python API's {"time_limit": 1}): the pilot takes its share of
+    # it and the render goes on to the limit
+    opts, pick = auto.plan(cornell, {"method": "auto", "time_limit": 1.0, "max_bounces": 4})
+    assert pick["efficiency"] and opts["spp"] == auto.UNLIMITED_SPP and pick["pilot_seconds"] < 0.3
+    assert opts["time_limit"] == pytest.approx(1.0 - pick["pilot_seconds"])
     # samples that take longer: the pilot runs, at a small share of what pt takes for them
     opts, pick = auto.plan(cornell, {"method": "auto", "spp": 4000, "max_bounces": 4, "seed": 1})
     t = time.perf_counter()
