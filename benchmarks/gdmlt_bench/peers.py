@@ -189,18 +189,91 @@ def _register_bsdf_sampling_rr(mi, dr):
     _register_bsdf_sampling_rr.done = {_BSDF_RR}
 
 
+_PATH_RR = "gdmlt_path_rr"
+
+
+def _register_path_rr(mi, dr):
+    """Registers a Mitsuba integrator that is Mitsuba's own unidirectional path tracer with
+    emitter sampling and MIS (the primal part of its `prb`, itself `path`'s estimator) but with
+    GDMLT's Russian roulette, as `_register_bsdf_sampling_rr` does for BSDF sampling: `path`
+    survives with min(max β·η², 0.95), GDMLT with min((max β)^RR_EXPONENT, 1), so at the same
+    rr_depth `path` ends paths sooner and its samples/s are of shorter paths (issue 51)."""
+    if _PATH_RR in getattr(_register_path_rr, "done", set()):
+        return
+
+    class PathRR(mi.SamplingIntegrator):
+        def __init__(self, props):
+            super().__init__(props)
+            self.max_depth = props.get("max_depth", 10)
+            self.rr_depth = props.get("rr_depth", 3)
+
+        @dr.syntax
+        def sample(self, scene, sampler, ray, medium=None, active=True):
+            import drjit as dr
+            import gdmlt
+            import mitsuba as mi
+
+            from mitsuba.ad.integrators.common import mis_weight
+
+            exponent = gdmlt.RR_EXPONENT
+            ctx = mi.BSDFContext()
+            ray = mi.Ray3f(ray)
+            radiance = mi.Spectrum(0.0)
+            beta = mi.Spectrum(1.0)
+            depth = mi.UInt32(0)
+            active = mi.Bool(active)
+            si_prev = dr.zeros(mi.SurfaceInteraction3f)
+            pdf_prev = mi.Float(1.0)
+            delta_prev = mi.Bool(True)
+            while active:
+                si = scene.ray_intersect(ray, active)
+                bsdf = si.bsdf(ray)
+                # light found by the previous bounce's BSDF sample, MIS-weighted
+                ds = mi.DirectionSample3f(scene, si=si, ref=si_prev)
+                mis = mis_weight(pdf_prev, scene.pdf_emitter_direction(si_prev, ds, ~delta_prev))
+                radiance += beta * mis * ds.emitter.eval(si, active)
+                active &= si.is_valid() & (depth + 1 < self.max_depth)
+                # a light sample, MIS-weighted
+                active_em = active & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth)
+                ds, em_weight = scene.sample_emitter_direction(si, sampler.next_2d(), True, active_em)
+                active_em &= ds.pdf != 0.0
+                value, pdf = bsdf.eval_pdf(ctx, si, si.to_local(ds.d), active_em)
+                mis_em = dr.select(ds.delta, 1.0, mis_weight(ds.pdf, pdf))
+                radiance[active_em] += beta * mis_em * value * em_weight
+                # the continuation, then GDMLT's roulette
+                bs, weight = bsdf.sample(ctx, si, sampler.next_1d(), sampler.next_2d(), active)
+                beta *= weight
+                ray = si.spawn_ray(si.to_world(bs.wo))
+                si_prev = dr.detach(si, True)
+                pdf_prev = bs.pdf
+                delta_prev = mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta)
+                depth += 1
+                beta_max = dr.max(mi.unpolarized_spectrum(beta))
+                q = dr.minimum(dr.power(beta_max, exponent), 1.0)
+                roulette = depth >= self.rr_depth
+                survive = sampler.next_1d() < q
+                beta[roulette] *= dr.rcp(q)
+                active &= (~roulette | survive) & (beta_max > 0)
+            return radiance, mi.Bool(True), []
+
+    mi.register_integrator(_PATH_RR, lambda props: PathRR(props))
+    _register_path_rr.done = {_PATH_RR}
+
+
 def mitsuba_integrator(mi, max_bounces: int, nee: bool, rr_depth: int | None = None) -> dict:
-    """Mitsuba's `path` (emitter sampling + MIS) or BSDF sampling only. rr_depth None: Mitsuba's
-    own defaults (`path`: roulette from depth 5, q capped at 0.95; `prb_basic`: no roulette).
-    rr_depth k: roulette from bounce k as GDMLT's (`path` keeps its 0.95 cap, which ends a
-    path only where its throughput is still above 0.95 after k bounces)."""
+    """Emitter sampling + MIS or BSDF sampling only. rr_depth None: Mitsuba's own integrators
+    and defaults (`path`: roulette from depth 5, q = min(max β·η², 0.95); `prb_basic`: no
+    roulette). rr_depth k: Mitsuba's estimators with GDMLT's roulette from bounce k (our
+    `_PATH_RR` and `_BSDF_RR` integrators), so that both renderers trace paths of the same
+    length."""
     depth = max_bounces + 2
-    if nee:
-        return {"type": "path", "max_depth": depth, **({} if rr_depth is None else {"rr_depth": rr_depth})}
     if rr_depth is None:
-        return {"type": "prb_basic", "max_depth": depth}
+        return {"type": "path" if nee else "prb_basic", "max_depth": depth}
     import drjit as dr
 
+    if nee:
+        _register_path_rr(mi, dr)
+        return {"type": _PATH_RR, "max_depth": depth, "rr_depth": rr_depth}
     _register_bsdf_sampling_rr(mi, dr)
     return {"type": _BSDF_RR, "max_depth": depth, "rr_depth": rr_depth}
 

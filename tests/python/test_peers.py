@@ -48,8 +48,9 @@ def test_the_scene_rebuilt_in_cycles_renders_what_gdmlt_renders():
 
 @pytest.mark.parametrize("nee", [True, False])
 def test_mitsuba_with_gdmlt_roulette_renders_what_gdmlt_renders(nee):
-    """pathbench's Mitsuba settings (GDMLT's Russian roulette; without NEE a BSDF-sampling
-    integrator of our own) render the same image as GDMLT: equal means (2%: 64k paths each,
+    """pathbench's Mitsuba settings (GDMLT's Russian roulette in integrators of our own:
+    Mitsuba's emitter sampling + MIS with NEE, BSDF sampling without) render the same image
+    as GDMLT: equal means (2%: 64k paths each,
     image-mean noise ≈ 0.4%) and equal pixels on average over 8×8 blocks. Benchmark-only
     dependency: skipped where Mitsuba or its LLVM library is missing."""
     pytest.importorskip("mitsuba")
