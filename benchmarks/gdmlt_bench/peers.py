@@ -140,6 +140,22 @@ def import_mitsuba(threads: int = 0):
 _BSDF_RR = "gdmlt_bsdf_sampling_rr"
 
 
+def gdmlt_roulette(sampler, beta, depth, rr_depth):
+    """GDMLT's Russian roulette (`src/path.rs`) on Mitsuba's lanes: from bounce `rr_depth` a
+    path goes on with probability q = min((max β)^gdmlt.RR_EXPONENT, 1), its throughput divided
+    by q. Returns (β, the lanes that go on). Used inside the integrators' `dr.syntax` loops."""
+    import drjit as dr
+    import gdmlt
+    import mitsuba as mi
+
+    beta_max = dr.max(mi.unpolarized_spectrum(beta))
+    q = dr.minimum(dr.power(beta_max, gdmlt.RR_EXPONENT), 1.0)
+    roulette = depth >= rr_depth
+    survive = sampler.next_1d() < q
+    beta = dr.select(roulette, beta * dr.rcp(q), beta)
+    return beta, (~roulette | survive) & (beta_max > 0)
+
+
 def _register_bsdf_sampling_rr(mi, dr):
     """Registers a Mitsuba integrator that finds light by BSDF sampling only (as `prb_basic`)
     but with GDMLT's Russian roulette: after `rr_depth` bounces a path goes on with probability
@@ -158,11 +174,10 @@ def _register_bsdf_sampling_rr(mi, dr):
         @dr.syntax
         def sample(self, scene, sampler, ray, medium=None, active=True):
             # (dr.syntax recompiles this body without its closure: the modules come by import)
-            import drjit as dr
-            import gdmlt
             import mitsuba as mi
 
-            exponent = gdmlt.RR_EXPONENT
+            from gdmlt_bench.peers import gdmlt_roulette
+
             ctx = mi.BSDFContext()
             ray = mi.Ray3f(ray)
             radiance = mi.Spectrum(0.0)
@@ -177,12 +192,8 @@ def _register_bsdf_sampling_rr(mi, dr):
                 beta *= weight
                 ray = si.spawn_ray(si.to_world(bs.wo))
                 depth += 1
-                beta_max = dr.max(mi.unpolarized_spectrum(beta))
-                q = dr.minimum(dr.power(beta_max, exponent), 1.0)
-                roulette = depth >= self.rr_depth
-                survive = sampler.next_1d() < q
-                beta[roulette] *= dr.rcp(q)
-                active &= (~roulette | survive) & (beta_max > 0)
+                beta, going_on = gdmlt_roulette(sampler, beta, depth, self.rr_depth)
+                active &= going_on
             return radiance, mi.Bool(True), []
 
     mi.register_integrator(_BSDF_RR, lambda props: BsdfSamplingRR(props))
@@ -210,12 +221,11 @@ def _register_path_rr(mi, dr):
         @dr.syntax
         def sample(self, scene, sampler, ray, medium=None, active=True):
             import drjit as dr
-            import gdmlt
             import mitsuba as mi
 
+            from gdmlt_bench.peers import gdmlt_roulette
             from mitsuba.ad.integrators.common import mis_weight
 
-            exponent = gdmlt.RR_EXPONENT
             ctx = mi.BSDFContext()
             ray = mi.Ray3f(ray)
             radiance = mi.Spectrum(0.0)
@@ -248,12 +258,8 @@ def _register_path_rr(mi, dr):
                 pdf_prev = bs.pdf
                 delta_prev = mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta)
                 depth += 1
-                beta_max = dr.max(mi.unpolarized_spectrum(beta))
-                q = dr.minimum(dr.power(beta_max, exponent), 1.0)
-                roulette = depth >= self.rr_depth
-                survive = sampler.next_1d() < q
-                beta[roulette] *= dr.rcp(q)
-                active &= (~roulette | survive) & (beta_max > 0)
+                beta, going_on = gdmlt_roulette(sampler, beta, depth, self.rr_depth)
+                active &= going_on
             return radiance, mi.Bool(True), []
 
     mi.register_integrator(_PATH_RR, lambda props: PathRR(props))
