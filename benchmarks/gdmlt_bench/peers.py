@@ -156,21 +156,26 @@ def gdmlt_roulette(sampler, beta, depth, rr_depth):
     return beta, (~roulette | survive) & (beta_max > 0)
 
 
-def _register_bsdf_sampling_rr(mi, dr):
-    """Registers a Mitsuba integrator that finds light by BSDF sampling only (as `prb_basic`)
-    but with GDMLT's Russian roulette: after `rr_depth` bounces a path goes on with probability
-    q = min((max throughput)^gdmlt.RR_EXPONENT, 1) and its throughput is divided by q
-    (`src/path.rs`). Mitsuba's
-    `prb_basic` has no roulette at all, so its paths run to `max_depth` and cost more each."""
-    if _BSDF_RR in getattr(_register_bsdf_sampling_rr, "done", set()):
+_PATH_RR = "gdmlt_path_rr"
+
+
+def _register_rr_integrators(mi, dr):
+    """Registers two Mitsuba integrators with GDMLT's Russian roulette (`gdmlt_roulette`):
+    `_BSDF_RR` finds light by BSDF sampling only (as `prb_basic`, which has no roulette, so
+    its paths run to `max_depth`); `_PATH_RR` is Mitsuba's own path tracer with emitter
+    sampling and MIS (the primal part of its `prb`, `path`'s estimator), where `path` survives
+    with min(max β·η², 0.95) and so ends paths sooner than GDMLT at the same rr_depth, its
+    samples/s being of shorter paths (issue 51)."""
+    if getattr(_register_rr_integrators, "done", False):
         return
 
-    class BsdfSamplingRR(mi.SamplingIntegrator):
+    class RR(mi.SamplingIntegrator):
         def __init__(self, props):
             super().__init__(props)
             self.max_depth = props.get("max_depth", 10)
             self.rr_depth = props.get("rr_depth", 3)
 
+    class BsdfSamplingRR(RR):
         @dr.syntax
         def sample(self, scene, sampler, ray, medium=None, active=True):
             # (dr.syntax recompiles this body without its closure: the modules come by import)
@@ -196,28 +201,8 @@ def _register_bsdf_sampling_rr(mi, dr):
                 active &= going_on
             return radiance, mi.Bool(True), []
 
-    mi.register_integrator(_BSDF_RR, lambda props: BsdfSamplingRR(props))
-    _register_bsdf_sampling_rr.done = {_BSDF_RR}
 
-
-_PATH_RR = "gdmlt_path_rr"
-
-
-def _register_path_rr(mi, dr):
-    """Registers a Mitsuba integrator that is Mitsuba's own unidirectional path tracer with
-    emitter sampling and MIS (the primal part of its `prb`, itself `path`'s estimator) but with
-    GDMLT's Russian roulette, as `_register_bsdf_sampling_rr` does for BSDF sampling: `path`
-    survives with min(max β·η², 0.95), GDMLT with min((max β)^RR_EXPONENT, 1), so at the same
-    rr_depth `path` ends paths sooner and its samples/s are of shorter paths (issue 51)."""
-    if _PATH_RR in getattr(_register_path_rr, "done", set()):
-        return
-
-    class PathRR(mi.SamplingIntegrator):
-        def __init__(self, props):
-            super().__init__(props)
-            self.max_depth = props.get("max_depth", 10)
-            self.rr_depth = props.get("rr_depth", 3)
-
+    class PathRR(RR):
         @dr.syntax
         def sample(self, scene, sampler, ray, medium=None, active=True):
             import drjit as dr
@@ -262,8 +247,10 @@ def _register_path_rr(mi, dr):
                 active &= going_on
             return radiance, mi.Bool(True), []
 
+
+    mi.register_integrator(_BSDF_RR, lambda props: BsdfSamplingRR(props))
     mi.register_integrator(_PATH_RR, lambda props: PathRR(props))
-    _register_path_rr.done = {_PATH_RR}
+    _register_rr_integrators.done = True
 
 
 def mitsuba_integrator(mi, max_bounces: int, nee: bool, rr_depth: int | None = None) -> dict:
@@ -277,11 +264,8 @@ def mitsuba_integrator(mi, max_bounces: int, nee: bool, rr_depth: int | None = N
         return {"type": "path" if nee else "prb_basic", "max_depth": depth}
     import drjit as dr
 
-    if nee:
-        _register_path_rr(mi, dr)
-        return {"type": _PATH_RR, "max_depth": depth, "rr_depth": rr_depth}
-    _register_bsdf_sampling_rr(mi, dr)
-    return {"type": _BSDF_RR, "max_depth": depth, "rr_depth": rr_depth}
+    _register_rr_integrators(mi, dr)
+    return {"type": _PATH_RR if nee else _BSDF_RR, "max_depth": depth, "rr_depth": rr_depth}
 
 
 def mitsuba_scene(mi, simple: dict, max_bounces: int, nee: bool, seed_spp: int = 1, rr_depth: int | None = None):
