@@ -136,15 +136,16 @@ def choose(desc: dict, settings: dict, cancelled=lambda: False, denoise=False, s
     # 2. the pilot's window, its scene and settings
     pilot_desc = copy.copy(desc)
     pilot_desc["camera"] = dict(desc["camera"])
-    x, y, ww, wh = _window(*(base[2:] if base else (w, h)))
+    region = tuple(base[2:]) if base else (w, h)  # what the render renders
+    x, y, ww, wh = _window(*region)
     if base:
         x, y = x + base[0], y + base[1]
     pilot_desc["camera"]["window"] = [x, y, ww, wh]
     if scene is None:
-        return _choose_in(gdmlt.Scene(pilot_desc), desc, settings, cancelled, denoise, candidates, (w, h, ww, wh))
+        return _choose_in(gdmlt.Scene(pilot_desc), desc, settings, cancelled, denoise, candidates, (*region, ww, wh))
     scene.set_camera(pilot_desc["camera"])
     try:
-        return _choose_in(scene, desc, settings, cancelled, denoise, candidates, (w, h, ww, wh))
+        return _choose_in(scene, desc, settings, cancelled, denoise, candidates, (*region, ww, wh))
     finally:
         scene.set_camera(desc["camera"])
 
@@ -154,13 +155,14 @@ def _choose_in(scene, desc, settings, cancelled, denoise, candidates, sizes):
     import gdmlt
     from . import oidn
 
-    w, h, ww, wh = sizes
+    w, h, ww, wh = sizes  # (w, h: the frame, or its render region)
+    frame_pixels = w * h
     limit = float(settings.get("time_limit") or 0.0)
     from .settings import CORE
 
     # (a time limit without samples — the Python API's `{"time_limit": 10}` — renders to the
     # time limit; neither: the core's default samples)
-    spp = settings.get("spp", None if limit else CORE["spp"])
+    spp = settings.get("spp") or (None if limit else CORE["spp"])
     common = {k: settings[k] for k in ("max_bounces", "nee", "threads", "reconstruction", "alpha_rec",
                                        "large_step_probability", "alpha_target", "diffuse_bounces", "glossy_bounces",
                                        "transmission_bounces", "transparent_bounces", "clamp_direct",
@@ -174,8 +176,9 @@ def _choose_in(scene, desc, settings, cancelled, denoise, candidates, sizes):
     if spp:
         probe = gdmlt.render(scene, method="pt", spp=10 ** 7, time_limit=PROBE_SECONDS, seed=seed, **common)
         st = probe["stats"]
-        rate["pt"] = max(st["elapsed"], 1e-6) / (max(st["spp_min"], 1) * ww * wh)
-        estimate = min(estimate, float(spp) * rate["pt"] * w * h)
+        # (a time-limited render stops between rows: its pixels are a pass apart)
+        rate["pt"] = max(st["elapsed"], 1e-6) / (max(0.5 * (st["spp_min"] + st["spp_max"]), 1.0) * ww * wh)
+        estimate = min(estimate, float(spp) * rate["pt"] * frame_pixels)
     t_each = PILOT_FRACTION * estimate / (2 * len(candidates))
     if t_each < MIN_PILOT_RENDER * PILOT_FRACTION / MAX_PILOT_SHARE:
         # even its shortest renders would cost more than MAX_PILOT_SHARE of the render: pt,
@@ -298,7 +301,8 @@ def plan(desc: dict, settings: dict, cancelled=lambda: False, denoise=False, sce
     opts = dict(settings, method=pick["method"])
     if settings.get("time_limit"):
         opts["time_limit"] = max(float(settings["time_limit"]) - pick["pilot_seconds"], MIN_PILOT_RENDER)
-        opts.setdefault("spp", UNLIMITED_SPP)
+        if not opts.get("spp"):
+            opts["spp"] = UNLIMITED_SPP
     return opts, pick
 
 

@@ -38,7 +38,8 @@ What it does, for every method:
    share of their difference that is not the raw mean's noise (step 3's Wiener weight and
    caution; the noise from the Variance layer where known, else from the squared raw −
    denoised difference, which overstates it), then over the whole image to the raw mean
-   exactly. Multiplicative, so black stays black: a window whose raw image is exactly 0 is 0.
+   exactly. Multiplicative, so black stays black (a raw image of 0 gives 0); where OIDN left
+   no light that the raw image has, the raw mean is added evenly.
 5. **Stay premultiplied** (`keep_premultiplied`, renders with an "Alpha" layer: Film ›
    Transparent): colour 0 where alpha is 0, as in the raw image, and at most alpha × the
    largest unpremultiplied raw colour in its 5×5 window where alpha is partial — OIDN
@@ -227,8 +228,8 @@ def keep_premultiplied(noisy, denoised, alpha, radius=RESTORE_RADIUS):
     the raw image has it), and where alpha is partial at most alpha × the largest
     unpremultiplied raw colour in the pixel's (2r+1)² window (per channel)."""
     d = np.asarray(denoised, np.float32)[..., :3].copy()
-    a = np.asarray(alpha, np.float32).reshape(d.shape[:2])
-    x = np.asarray(noisy, np.float32)[..., :3]
+    a = np.nan_to_num(np.asarray(alpha, np.float32).reshape(d.shape[:2]), nan=0.0, posinf=1.0, neginf=0.0)
+    x = np.nan_to_num(np.asarray(noisy, np.float32)[..., :3], nan=0.0, posinf=0.0, neginf=0.0)
     seen = a > 0.0
     colour = np.where(seen[..., None], x / np.where(seen, a, 1.0)[..., None], -np.inf).astype(np.float32)
     bound = a[..., None] * np.maximum(_shifted_max(colour, radius), 0.0)
@@ -247,8 +248,9 @@ def keep_mean(noisy, denoised, variance=None, radius=MEAN_RADIUS, caution=MEAN_C
     their difference that is not the raw mean's own noise (the restore step's Wiener weight,
     with the same caution). The raw pixels' noise: pt's Variance layer where known, else
     their squared difference from the denoised image (larger: it also holds what OIDN
-    removed, so it corrects less). A channel whose raw window is exactly 0 is 0: a black
-    frame stays black."""
+    removed, so it corrects less). Multiplicative where the denoised window has light, so a
+    black frame stays black; where OIDN left a window or the image with none that the raw
+    image has, the raw mean is added evenly."""
     x = np.asarray(noisy, np.float64)[..., :3]
     d = np.asarray(denoised, np.float64)[..., :3]
     if not (np.all(np.isfinite(x)) and np.all(np.isfinite(d))):
@@ -267,10 +269,14 @@ def keep_mean(noisy, denoised, variance=None, radius=MEAN_RADIUS, caution=MEAN_C
             mx, md, var = box(x), box(d), _box(noise, radius) / n_local
             delta2 = (mx - md).mean(-1) ** 2
             k = np.clip(1.0 - caution * var / np.maximum(delta2, 1e-300), 0.0, 1.0)
-            k = np.where(delta2 > 0.0, k, 0.0)[..., None]
-        ratio = np.where(md > 0.0, mx / np.where(md > 0.0, md, 1.0), 1.0)
-        ratio = np.where(mx <= 0.0, 0.0, ratio)  # raw exactly 0 there: no light reached it
-        d = d * np.where(mx <= 0.0, 0.0, 1.0 + k * (ratio - 1.0))
+            # a window the raw image has no light in at all says little at few samples (the
+            # light may just not have been found yet): left as OIDN has it
+            k = np.where((delta2 > 0.0) & (mx.max(-1) > 0.0), k, 0.0)[..., None]
+        # towards the raw mean by the share k: scaled where the denoised mean is positive
+        # (black stays black), the missing mean added evenly where OIDN left nothing
+        lost = md <= 0.0
+        ratio = np.where(lost, 1.0, mx / np.where(lost, 1.0, md))
+        d = d * (1.0 + k * (ratio - 1.0)) + np.where(lost, k * np.maximum(mx, 0.0), 0.0)
     return np.maximum(d, 0.0).astype(np.float32)
 
 

@@ -268,7 +268,7 @@ impl Triangles {
                 if ns.iter().all(|n| n.is_finite() && n.length_squared() > 1e-12) {
                     Some(ns.map(|n| n.normalize()))
                 } else {
-                    None // zero (a flat face, as the exporter marks it) or broken: flat shading
+                    None // zero or broken: flat shading
                 }
             };
             self.positions.push(v);

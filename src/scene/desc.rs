@@ -11,8 +11,7 @@ pub struct MeshDesc {
     /// Triangle vertex indices.
     pub indices: Vec<[u32; 3]>,
     /// Optional per-corner shading normals (3 per triangle, in triangle order); empty = flat.
-    /// A triangle whose three are zero is flat-shaded (the exporter's mark for Blender's
-    /// flat faces: shaded by each triangle's own normal, as Cycles does).
+    /// A triangle whose three are zero (or broken) is flat-shaded.
     pub corner_normals: Vec<[f32; 3]>,
     /// Per-triangle index into the scene material table (empty = all 0).
     pub material_ids: Vec<u32>,

@@ -369,7 +369,8 @@ impl Scene {
         let t = si.prim as usize;
         let Some(n) = &self.normals[t] else { return Vec3::ZERO };
         let cutoff = self.tri_terminator.get(t).copied().unwrap_or(terminator::DEFAULT_GEOMETRY_OFFSET);
-        let (amount, ng) = terminator::lift_amount(si.frame.n, si.ng, l, cutoff);
+        // (Cycles' sd->N: the interpolated normal before normal and bump maps)
+        let (amount, ng) = terminator::lift_amount(si.frame.to_world(si.unmapped), si.ng, l, cutoff);
         if amount <= 0.0 {
             return Vec3::ZERO;
         }

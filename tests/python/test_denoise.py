@@ -276,6 +276,17 @@ def test_a_black_frame_stays_black_and_a_sparse_one_keeps_its_mean():
     out = dn.denoise({"Combined": sparse, **_guides(16, 16)})["Combined"]
     assert np.isfinite(out).all() and out.min() >= 0
     np.testing.assert_allclose(out.mean((0, 1)), sparse.mean((0, 1)), rtol=0.01)
+    # a denoiser that erased the pixel altogether: its light comes back, not a black frame
+    erased = dn.keep_mean(sparse, np.zeros_like(sparse))
+    np.testing.assert_allclose(erased.mean((0, 1)), sparse.mean((0, 1)), rtol=1e-5)
+    # a window the raw image found no light in is left as denoised (at few samples the light
+    # may not have been found yet), only the whole image's level is kept
+    half = np.zeros((32, 32, 3), np.float32)
+    half[:, :16] = np.random.default_rng(2).uniform(0.0, 0.4, (32, 16, 3))
+    smooth = np.full_like(half, 0.1)
+    kept = dn.keep_mean(half, smooth)
+    assert kept[:, 28:].min() > 0.05, kept[:, 28:].min()
+    np.testing.assert_allclose(kept.mean((0, 1)), half.mean((0, 1)), rtol=1e-5)
 
 
 @pytest.mark.parametrize("scene", ["gap", "bulb"])
