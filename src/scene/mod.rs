@@ -350,7 +350,7 @@ impl Scene {
         let dir = if at_infinity { target } else { target - si.p };
         let mut o = si.spawn_origin(dir);
         if lift {
-            o += self.terminator_lift(si, dir.normalize_or_zero());
+            o += self.terminator_lift(si, dir);
         }
         if at_infinity {
             return Some((o, target, f32::INFINITY));
@@ -363,11 +363,13 @@ impl Scene {
         Some((o, to / len, len * (1.0 - 1e-4) - ray_epsilon(target)))
     }
 
-    /// The shadow-terminator lift (terminator.rs) of a light sample's shadow ray towards `l`
-    /// from `si`: zero unless its triangle is smooth-shaded and lit at a grazing angle.
-    fn terminator_lift(&self, si: &SurfaceInteraction, l: Vec3) -> Vec3 {
+    /// The shadow-terminator lift (terminator.rs) of a light sample's shadow ray towards
+    /// `dir` (any length) from `si`: zero unless its triangle is smooth-shaded and lit at a
+    /// grazing angle. (Flat triangles return before any arithmetic: most shadow rays.)
+    fn terminator_lift(&self, si: &SurfaceInteraction, dir: Vec3) -> Vec3 {
         let t = si.prim as usize;
         let Some(n) = &self.normals[t] else { return Vec3::ZERO };
+        let l = dir.normalize_or_zero();
         let cutoff = self.tri_terminator.get(t).copied().unwrap_or(terminator::DEFAULT_GEOMETRY_OFFSET);
         // (Cycles' sd->N: the interpolated normal before normal and bump maps)
         let (amount, ng) = terminator::lift_amount(si.frame.to_world(si.unmapped), si.ng, l, cutoff);
