@@ -75,6 +75,31 @@ impl PixelFilter {
         }
     }
 
+    /// The density (per pixel) of `offset`'s samples at offset x from the pixel centre: what
+    /// a light-tracing sample landing at x adds to that pixel, per axis (the filter is
+    /// separable). Exactly the density `offset` draws from: the box's 1 over the pixel, the
+    /// tabulated window's piecewise-constant density.
+    #[inline]
+    pub fn density(&self, x: f32) -> f32 {
+        match self {
+            PixelFilter::Box => {
+                if (-0.5..0.5).contains(&x) {
+                    1.0
+                } else {
+                    0.0
+                }
+            }
+            PixelFilter::BlackmanHarris { width, cdf, .. } => {
+                let t = (x / (2.0 * width) + 0.5) * TABLE as f32;
+                if !(t >= 0.0 && t < TABLE as f32) {
+                    return 0.0;
+                }
+                let i = t as usize;
+                (cdf[i + 1] - cdf[i]) * TABLE as f32 / (2.0 * width)
+            }
+        }
+    }
+
     /// Half the filter's support, in pixels.
     pub fn radius(&self) -> f32 {
         match self {

@@ -21,6 +21,8 @@ pub fn bytes_per_pixel(method: Method) -> u64 {
         Method::Gdpt => 170,
         Method::Pssmlt => 90,
         Method::Gdpssmlt => 190,
+        // pt's film without the variance moments, plus light tracing's splat sums (12 B)
+        Method::Bdpt => 150,
     }
 }
 

@@ -3,6 +3,7 @@
 //! halting, progress and cancellation, and the output.
 
 pub mod adaptive;
+pub mod bdpt;
 pub mod gdpt;
 pub mod memory;
 pub mod mlt;
@@ -24,6 +25,7 @@ pub enum Method {
     Gdpt,
     Pssmlt,
     Gdpssmlt,
+    Bdpt,
 }
 
 impl Method {
@@ -33,9 +35,10 @@ impl Method {
             "gdpt" => Ok(Method::Gdpt),
             "pssmlt" => Ok(Method::Pssmlt),
             "gdpssmlt" => Ok(Method::Gdpssmlt),
-            other => {
-                Err(RenderError::Settings(format!("unknown method '{other}' (expected pt, gdpt, pssmlt or gdpssmlt)")))
-            }
+            "bdpt" => Ok(Method::Bdpt),
+            other => Err(RenderError::Settings(format!(
+                "unknown method '{other}' (expected pt, bdpt, gdpt, pssmlt or gdpssmlt)"
+            ))),
         }
     }
     pub fn name(&self) -> &'static str {
@@ -44,6 +47,7 @@ impl Method {
             Method::Gdpt => "gdpt",
             Method::Pssmlt => "pssmlt",
             Method::Gdpssmlt => "gdpssmlt",
+            Method::Bdpt => "bdpt",
         }
     }
 }
@@ -358,6 +362,7 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl)
         Method::Gdpt => Ok(gdpt::render(scene, settings, control)),
         Method::Pssmlt => Ok(mlt::render(scene, settings, control, false)),
         Method::Gdpssmlt => Ok(mlt::render(scene, settings, control, true)),
+        Method::Bdpt => Ok(bdpt::render(scene, settings, control)),
     })?;
     if settings.data_passes {
         out.layers.extend(pool.install(|| passes::data_passes(scene, settings.seed)));

@@ -450,6 +450,72 @@ impl Camera {
     pub fn position(&self) -> Vec3 {
         self.to_world.w_axis.truncate()
     }
+
+    /// Light tracing can reach the image through this camera: a perspective one (pinhole or
+    /// thin lens). An orthographic camera sees along one direction only (a delta no light
+    /// path meets); panoramas are not connected yet (their paths come from the camera).
+    #[inline]
+    pub fn connectible(&self) -> bool {
+        self.projection == Projection::Perspective
+    }
+
+    /// The camera's importance towards world point `p` seen from the lens point `lens` (the
+    /// camera's position for a pinhole): the raster position where `p` lands (the region's
+    /// pixels, y from the top) and W = 1/(A·cos³θ), the density per solid angle of the
+    /// directions of one pixel's camera rays at the lens (A: a pixel's area on the image plane
+    /// at distance 1, θ: the angle to the view axis) — the same with depth of field, since
+    /// the lens point's own density cancels (docs/bidirectional.md). None behind the lens,
+    /// outside the clipping range or for a camera light tracing cannot connect to.
+    pub fn importance(&self, lens: Vec3, p: Vec3) -> Option<(Vec2, f32)> {
+        if !self.connectible() {
+            return None;
+        }
+        let inv = self.to_world.inverse();
+        let (pc, oc) = (inv.transform_point3(p), inv.transform_point3(lens));
+        let depth = -pc.z;
+        if !(depth > self.clip_start && depth < self.clip_end) {
+            return None;
+        }
+        let d = pc - oc;
+        if d.z >= 0.0 {
+            return None;
+        }
+        let q = if self.aperture_radius > 0.0 {
+            // where the ray from the lens point crosses the plane in focus, seen from the centre
+            let f = oc + d * (self.focus_distance / -d.z);
+            Vec2::new(f.x, f.y) / self.focus_distance
+        } else {
+            Vec2::new(pc.x, pc.y) / depth
+        };
+        let u = (q.x - self.center.x) / self.ext.x + 0.5;
+        let v = (q.y - self.center.y) / self.ext.y + 0.5;
+        let raster = Vec2::new(u * self.full.x, (1.0 - v) * self.full.y) - self.offset;
+        let cos = -d.z / d.length();
+        let pixel_area = self.ext.x * self.ext.y / (self.full.x * self.full.y);
+        Some((raster, 1.0 / (pixel_area * cos * cos * cos)))
+    }
+
+    /// `importance`'s W for a camera ray of unit direction `dir` (world), clipping aside.
+    pub fn ray_density(&self, dir: Vec3) -> f32 {
+        let forward = -self.to_world.z_axis.truncate().normalize_or_zero();
+        let cos = dir.dot(forward);
+        if !(cos > 0.0) {
+            return 0.0;
+        }
+        let pixel_area = self.ext.x * self.ext.y / (self.full.x * self.full.y);
+        1.0 / (pixel_area * cos * cos * cos)
+    }
+
+    /// A point of the lens for a light-tracing connection from sample `u` (world; the
+    /// camera's position for a pinhole), as `generate_ray` picks its origin.
+    pub fn lens_point(&self, u: Vec2) -> Vec3 {
+        if self.aperture_radius > 0.0 && self.projection == Projection::Perspective {
+            let l = self.aperture_point(u) * self.aperture_radius;
+            self.to_world.transform_point3(Vec3::new(l.x, l.y, 0.0))
+        } else {
+            self.position()
+        }
+    }
 }
 
 #[cfg(test)]

@@ -5,6 +5,7 @@ mod build;
 pub mod builtin;
 pub mod camera;
 pub mod desc;
+pub mod emit;
 pub mod environment;
 pub mod light;
 pub mod light_select;

@@ -1,0 +1,1205 @@
+//! Bidirectional path tracing, `bdpt` (Veach 1997 ch. 10; Lafortune & Willems 1993; laid
+//! out as pbrt-v3's bdpt.cpp): per pixel sample, a camera subpath and a light subpath, and
+//! every way of joining them, weighted by multiple importance sampling over all strategies
+//! of the full path (power heuristic).
+//!
+//! A full path of n vertices z₀ (on a light) … z_{n−1} (the camera) is made by strategy
+//! (s, t), s + t = n: s vertices from the light subpath, t from the camera subpath:
+//! * s = 0: the camera subpath hits the light (an emissive surface, an area or sphere light
+//!   it crosses, the world);
+//! * s = 1: next-event estimation at the camera subpath's last vertex (`Scene::sample_light`,
+//!   the light tree: the same light samples `pt` takes);
+//! * s ≥ 2, t ≥ 2: a shadow ray joins the two subpaths' last vertices;
+//! * t = 1: light tracing — the light subpath's vertex is joined to a point of the lens and
+//!   its light lands in whichever pixels the pixel filter gives it (`Camera::importance`).
+//!   (s, t) = (1, 1), a light seen directly through a lens sample, is left to s = 0.
+//!
+//! What the full path is worth is the function `pt` integrates (docs/bidirectional.md):
+//! Le · Π f(ωo, ωi)·|n_s·ωi| · Π |n_g·ω|/d² over segments, the geometric cosine taken at each
+//! segment's light-side end — so that every strategy estimates what `pt` and Cycles
+//! estimate, shading normals included. The light subpath carries it with the adjoint update
+//! (Veach §5.3): f(ω_next, ω_prev)·|n_s·ω_prev|·|n_g·ω_next| / (|n_g·ω_prev|·pdf).
+//!
+//! MIS weights come from each vertex's two densities (area measure; solid angle at a light
+//! at infinity): of being made by the light-side walk and by the camera-side walk, as pbrt
+//! keeps them (`pdf_fwd`, `pdf_rev`), with the joined vertices' densities computed at the
+//! join. The light point's density differs by strategy: s = 1 chooses it as next-event
+//! estimation does (light tree), s ≥ 2 as light subpaths do (by power): both are used.
+//! Light tracing is weighed pixel by pixel with the pixel filter's density, and its N light
+//! paths (one per camera sample) against each pixel's own samples.
+//!
+//! Parameters (RenderSettings): `spp` (one camera and one light subpath per sample), `seed`,
+//! the bounce limits of `path` (Cycles' meaning, as `pt`; the kind of the two joined
+//! vertices' scattering is drawn from the BSDF's lobes, `Bsdf::diffuse_share`), `nee` (off:
+//! no strategy with s = 1, so no delta light is found by it — light tracing still finds
+//! them). Not applied: clamping, path guiding, adaptive sampling.
+
+use super::{RenderControl, RenderOutput, RenderSettings, RenderStats};
+use crate::accel::TriHit;
+use crate::bsdf::{Bsdf, Guide, LobeKind, Scatter};
+use crate::film::{Film, Image};
+use crate::math::Frame;
+use crate::math::{is_finite_spectrum, Spectrum};
+use crate::path::{survival_probability, PathContribution, PathSettings, NO_KIND_LIMIT, RR_START_DEPTH};
+use crate::sampler::{Sampler, SobolSampler};
+use crate::scene::emit::EmitterSelection;
+use crate::scene::{LightSample, Scene, SurfaceInteraction};
+use glam::{Vec2, Vec3};
+use rayon::prelude::*;
+use std::sync::atomic::{AtomicU32, Ordering};
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Kind {
+    Camera,
+    Light,
+    Surface,
+}
+
+/// No scattering label (endpoints, and vertices whose walk ended there).
+const NO_LABEL: u8 = 3;
+
+/// One vertex of a subpath, camera or light side alike.
+#[derive(Clone, Copy, Debug)]
+struct Vertex {
+    kind: Kind,
+    /// Position (the lens point for the camera; unused for a light at infinity).
+    p: Vec3,
+    /// Geometric normal; zero where there is no surface (the camera, a point light, a light
+    /// at infinity): no cosine is taken there.
+    ng: Vec3,
+    /// A light at infinity (the sun, the world); `dir` is the unit direction towards it.
+    infinite: bool,
+    dir: Vec3,
+    si: Option<SurfaceInteraction>,
+    /// The BSDF as seen from the side the walk arrived on (`facing` turns it round).
+    bsdf: Option<Bsdf>,
+    hit: Option<TriHit>,
+    /// Throughput arriving here (for light subpaths: without the pending 1/|n_g·ω_prev|,
+    /// which the join or the next scattering supplies).
+    beta: Spectrum,
+    /// Density of this vertex made by its own walk, and by the walk from the other side.
+    pdf_fwd: f32,
+    pdf_rev: f32,
+    /// The walk left a surface vertex by a delta lobe; a light vertex: no ray can hit it.
+    delta: bool,
+    /// A join may end here (a surface with a non-delta lobe, a light, a perspective camera).
+    connectible: bool,
+    /// The kind of the scattering the walk made here (0 diffuse, 1 glossy, 2 transmission).
+    label: u8,
+    /// Light index of a light vertex.
+    light: u32,
+    /// The camera vertex's pixel centre (raster).
+    pixel: Vec2,
+    /// The walk went straight through here (a transparent surface's pass-through lobe): the
+    /// vertex ends joins only, the walk goes on from the vertex before (module comment).
+    branch: bool,
+    /// Next-event estimation's density of the light origin seen from here (light-subpath
+    /// vertices that follow the origin directly).
+    origin_nee: f32,
+}
+
+impl Vertex {
+    fn endpoint(kind: Kind, p: Vec3) -> Vertex {
+        Vertex {
+            kind,
+            p,
+            ng: Vec3::ZERO,
+            infinite: false,
+            dir: Vec3::ZERO,
+            si: None,
+            bsdf: None,
+            hit: None,
+            beta: Spectrum::ONE,
+            pdf_fwd: 0.0,
+            pdf_rev: 0.0,
+            delta: false,
+            connectible: true,
+            label: NO_LABEL,
+            light: u32::MAX,
+            pixel: Vec2::ZERO,
+            branch: false,
+            origin_nee: 0.0,
+        }
+    }
+
+    #[inline]
+    fn is_surface(&self) -> bool {
+        self.kind == Kind::Surface
+    }
+}
+
+/// Unit direction from a to b and the squared distance (1 towards or from infinity).
+#[inline]
+fn direction(a: &Vertex, b: &Vertex) -> (Vec3, f32) {
+    if b.infinite {
+        (b.dir, 1.0)
+    } else if a.infinite {
+        (-a.dir, 1.0)
+    } else {
+        let d = b.p - a.p;
+        let l2 = d.length_squared();
+        (d / l2.sqrt(), l2)
+    }
+}
+
+/// A density per solid angle at `a` towards `b` as a density of `b` (area; solid angle
+/// when b is at infinity; from a light at infinity, the disc's density projected on b).
+#[inline]
+fn convert(pdf: f32, a: &Vertex, b: &Vertex) -> f32 {
+    if b.infinite {
+        return pdf;
+    }
+    let (w, d2) = direction(a, b);
+    let cos = if b.ng == Vec3::ZERO { 1.0 } else { b.ng.dot(w).abs() };
+    if a.infinite {
+        pdf * cos
+    } else {
+        pdf * cos / d2
+    }
+}
+
+/// Surface vertex `v`'s BSDF and shading frame as seen from the side of `wo` (world): the
+/// BSDFs are built for the side a ray arrives on (their ωo above the frame), so a pair with
+/// ωo on the other side — light subpaths seen through a surface, reverse densities across
+/// one — is evaluated with the surface built for a ray from there.
+fn facing(scene: &Scene, v: &Vertex, wo: Vec3) -> Option<(Bsdf, Frame)> {
+    let (si, bsdf) = (v.si.as_ref()?, v.bsdf?);
+    if wo.dot(si.ng) >= 0.0 {
+        return Some((bsdf, si.frame));
+    }
+    let hit = v.hit?;
+    let other = SurfaceInteraction { camera: si.camera, ..scene.interaction(&hit, -wo) };
+    Some((scene.bsdf_at(&other), other.frame))
+}
+
+/// What every subpath and join of one render shares.
+struct Context<'a> {
+    scene: &'a Scene,
+    cfg: &'a PathSettings,
+    emitters: EmitterSelection,
+    /// Pixels of the image (light tracing's N light paths per camera sample of a pixel).
+    pixels: f32,
+    /// Some per-kind bounce limit binds before the total.
+    kind_limits: bool,
+    /// A diagnostic (`GDMLT_BDPT_ONLY=k`): each full path of n vertices from strategy
+    /// min(k, n − 1) alone, unweighted (n = 2 from the camera): every strategy must render
+    /// the same image.
+    only: Option<usize>,
+}
+
+impl Context<'_> {
+    /// The density with which vertex `a` (reached from `prev`) makes `b`: its BSDF's, the
+    /// camera's (through the pixel of `a`), or the light's emission.
+    fn pdf(&self, a: &Vertex, prev: Option<&Vertex>, b: &Vertex) -> f32 {
+        match a.kind {
+            Kind::Surface => {
+                let Some(prev) = prev else { return 0.0 };
+                let (wn, _) = direction(a, b);
+                let (wp, _) = direction(a, prev);
+                let Some((bsdf, frame)) = facing(self.scene, a, wp) else { return 0.0 };
+                convert(bsdf.pdf(frame.to_local(wp), frame.to_local(wn)), a, b)
+            }
+            Kind::Camera => self.camera_pdf(a, b),
+            Kind::Light => {
+                let (w, _) = direction(a, b);
+                let n = if a.infinite { Vec3::ZERO } else { a.ng };
+                convert(self.scene.light_emit_pdf(a.light, n, w), a, b)
+            }
+        }
+    }
+
+    /// The density of b made by the camera's ray through the pixel of camera vertex `cam`,
+    /// relative to light tracing's N light paths (÷ pixels): filter × W / pixels.
+    fn camera_pdf(&self, cam: &Vertex, b: &Vertex) -> f32 {
+        if b.infinite {
+            return 0.0;
+        }
+        let Some((raster, we)) = self.scene.camera.importance(cam.p, b.p) else { return 0.0 };
+        let f = &self.scene.camera.filter;
+        let fw = f.density(raster.x - cam.pixel.x) * f.density(raster.y - cam.pixel.y);
+        convert(fw * we / self.pixels, cam, b)
+    }
+
+    /// The light-origin density of light vertex `v` (light subpaths' choice by power).
+    fn origin_pdf(&self, v: &Vertex) -> f32 {
+        self.scene.light_origin_pdf(&self.emitters, v.light, if v.infinite { v.dir } else { v.p })
+    }
+
+    /// Next-event estimation's density (solid angle at `from`, selection included) of light
+    /// vertex `v`, as a density of the light point (the measure of `origin_pdf`).
+    fn nee_pdf_of(&self, v: &Vertex, pdf_sa: f32, from: Vec3) -> f32 {
+        if v.infinite || self.scene.is_delta_light(v.light) {
+            return pdf_sa;
+        }
+        let to = from - v.p;
+        let d2 = to.length_squared();
+        let cos = if v.ng == Vec3::ZERO { 1.0 } else { v.ng.dot(to).abs() / d2.sqrt() };
+        pdf_sa * cos / d2
+    }
+}
+
+/// Light found by the camera subpath (strategy s = 0).
+#[derive(Clone, Copy, Debug)]
+struct Emission {
+    /// Camera vertices before it (C₀ … C_{t−1}).
+    t: usize,
+    light: Vertex,
+    /// Throughput × radiance.
+    value: Spectrum,
+    /// Next-event estimation's density of the light point from C_{t−1} (light's measure).
+    pdf_nee: f32,
+    /// Only the camera path can find it (a backdrop, a surface that glows for the camera
+    /// only): weight 1.
+    alone: bool,
+}
+
+/// The scratch of one sample (reused: no allocation once warm).
+#[derive(Default)]
+struct Scratch {
+    camera: Vec<Vertex>,
+    light: Vec<Vertex>,
+    events: Vec<Emission>,
+    fwd_l: Vec<f64>,
+    fwd_c: Vec<f64>,
+    /// The indices of the vertices each subpath scattered at (not branches).
+    camera_reals: Vec<u32>,
+    light_reals: Vec<u32>,
+}
+
+/// What a camera sample gives its own pixel.
+#[derive(Default)]
+struct CameraResult {
+    out: PathContribution,
+}
+
+/// The walk of one subpath from its endpoint (`path[0]`), whose first segment (o, d) was
+/// sampled with solid-angle density `pdf_dir` (the disc's density from a light at infinity).
+/// Camera walks (`radiance`) record the light they find in `events`; light walks (with
+/// `origin_light`) take their throughput at the first surface from the light's radiance
+/// there.
+#[allow(clippy::too_many_arguments)]
+fn random_walk<S: Sampler>(
+    ctx: &Context,
+    sampler: &mut S,
+    path: &mut Vec<Vertex>,
+    mut o: Vec3,
+    mut d: Vec3,
+    mut tmin: f32,
+    mut tmax: f32,
+    mut beta: Spectrum,
+    mut pdf_dir: f32,
+    radiance: bool,
+    mut events: Option<&mut Vec<Emission>>,
+    out: &mut PathContribution,
+) {
+    let scene = ctx.scene;
+    let cfg = ctx.cfg;
+    let max_surface = cfg.max_bounces as usize + 1;
+    let mut transparent = 0u32;
+    let mut scattered = false; // (camera walks: past the first scattering)
+    let mut surfaces = 0usize;
+    let mut guide = Some(Spectrum::ONE);
+    let mut first_light_hit = !radiance;
+    // Russian roulette on the throughput relative to the first vertex's (a light subpath
+    // carries the light's power)
+    let mut beta_ref = Spectrum::ONE;
+    let mut last = 0usize; // the last vertex the walk scattered at (not a branch)
+    loop {
+        let prev = path[last];
+        let camera_ray = radiance && !scattered;
+        let hit = if camera_ray { scene.intersect_camera(o, d, tmin, tmax) } else { scene.intersect(o, d, tmin, tmax) };
+        let t_surface = hit.map_or(tmax, |h| h.t);
+        if let Some(ev) = events.as_deref_mut() {
+            // lights crossed (strategy s = 0)
+            let t = path.len();
+            let _ = t;
+            scene.for_each_light_crossed(prev.p, o, d, t_surface, camera_ray, |li, tl, le, pdf_l| {
+                let inf = !tl.is_finite();
+                let z = if inf { d } else { o + d * tl };
+                let mut lv = Vertex::endpoint(Kind::Light, z);
+                lv.light = li;
+                lv.infinite = inf;
+                lv.dir = d;
+                lv.ng = scene.light_normal(li, z);
+                lv.pdf_fwd = ctx.origin_pdf(&lv);
+                let pdf_nee = ctx.nee_pdf_of(&lv, pdf_l, prev.p);
+                ev.push(Emission { t, light: lv, value: beta * le, pdf_nee, alone: false });
+            });
+        }
+        let Some(hit) = hit else {
+            if let Some(ev) = events.as_deref_mut() {
+                if camera_ray && scene.camera.film_transparent {
+                    out.transparent += (beta.x + beta.y + beta.z) / 3.0;
+                } else if let Some(backdrop) = scene.backdrop.as_ref().filter(|_| camera_ray) {
+                    let le = backdrop.eval(&scene.textures, d);
+                    let lv = Vertex::endpoint(Kind::Light, Vec3::ZERO);
+                    ev.push(Emission { t: path.len(), light: lv, value: beta * le, pdf_nee: 0.0, alone: true });
+                } else {
+                    let (le, pdf_l) = scene.world_eval(prev.p, d);
+                    if le.max_element() > 0.0 {
+                        let mut lv = Vertex::endpoint(Kind::Light, Vec3::ZERO);
+                        lv.light = scene.env_light();
+                        lv.infinite = true;
+                        lv.dir = d;
+                        lv.pdf_fwd = ctx.origin_pdf(&lv);
+                        ev.push(Emission { t: path.len(), light: lv, value: beta * le, pdf_nee: pdf_l, alone: false });
+                    }
+                }
+            }
+            break;
+        };
+        let si = SurfaceInteraction { camera: camera_ray, ..scene.interaction(&hit, d) };
+        if first_light_hit {
+            // the light's radiance as this surface receives it (module comment of scene/emit.rs)
+            first_light_hit = false;
+            let l0 = &path[0];
+            let z = if l0.infinite { l0.dir } else { l0.p };
+            let Some((le, pdf_nee)) = scene.light_eval(l0.light, si.p, z) else { break };
+            let factor = if l0.infinite {
+                1.0
+            } else if l0.ng == Vec3::ZERO {
+                (si.p - l0.p).length_squared() // a point light: light_eval divided by d²
+            } else {
+                l0.ng.dot(d).abs()
+            };
+            beta *= le * factor;
+            beta_ref = beta.max(Spectrum::splat(1e-30));
+            let _ = pdf_nee;
+        }
+        if let Some(ev) = events.as_deref_mut() {
+            if let Some((le, pdf_l)) = scene.surface_emission(&si, prev.p, d) {
+                let li = scene.triangle_light(si.prim);
+                let mut lv = Vertex::endpoint(Kind::Light, si.p);
+                lv.ng = si.ng;
+                lv.light = li.unwrap_or(u32::MAX);
+                if li.is_some() {
+                    lv.pdf_fwd = ctx.origin_pdf(&lv);
+                }
+                let pdf_nee = if li.is_some() { ctx.nee_pdf_of(&lv, pdf_l, prev.p) } else { 0.0 };
+                ev.push(Emission { t: path.len(), light: lv, value: beta * le, pdf_nee, alone: li.is_none() });
+            }
+        }
+        if surfaces >= max_surface {
+            break; // (the segment after the last vertex found its light; no vertex beyond)
+        }
+        let bsdf = scene.bsdf_at(&si);
+        if let (Some(t), true) = (guide, radiance) {
+            if camera_ray {
+                out.normal = si.frame.n;
+            }
+            match bsdf.guide() {
+                Guide::Surface(albedo) => {
+                    out.albedo = t * albedo;
+                    out.normal = si.frame.n;
+                    guide = None;
+                }
+                Guide::Through(tint) => guide = Some(t * tint),
+            }
+        }
+        let wo = si.frame.to_local(-d);
+        let u_lobe = sampler.next_1d();
+        let u_bsdf = sampler.next_2d();
+        let u_rr = sampler.next_1d();
+        let Some(bs) = bsdf.sample(wo, u_lobe, u_bsdf) else {
+            push_vertex(ctx, path, &si, &hit, bsdf, beta, pdf_dir, &prev);
+            break;
+        };
+        let wi = si.frame.to_world(bs.wi);
+        if bs.is_pass_through(wo) {
+            // straight through a transparent surface: the segment goes on, and a branch
+            // vertex here lets joins reach the surface's other lobes — as often as when they
+            // were sampled (pt takes its light sample there before it continues)
+            if !bsdf.is_delta() {
+                push_vertex(ctx, path, &si, &hit, bsdf, beta, pdf_dir, &prev);
+                path.last_mut().expect("pushed").branch = true;
+            }
+            transparent += 1;
+            beta *= bs.weight;
+            if transparent > cfg.transparent_bounces || !(beta.max_element() > 0.0) {
+                break;
+            }
+            o = si.spawn_origin(d);
+            tmin = 0.0;
+            tmax = if tmax.is_finite() { (tmax - si.t).max(0.0) } else { f32::INFINITY };
+            continue;
+        }
+        push_vertex(ctx, path, &si, &hit, bsdf, beta, pdf_dir, &prev);
+        surfaces += 1;
+        scattered = true;
+        let before = last;
+        last = path.len() - 1;
+        if wi.dot(si.ng) * bs.wi.z <= 0.0 {
+            break; // the shading normal sent the ray through the geometric surface
+        }
+        let delta = bs.lobe == LobeKind::Specular;
+        // the reverse density of the vertex before, and this vertex's scattering
+        let turned = if wi.dot(si.ng) >= 0.0 { None } else { facing(scene, &path[last], wi) };
+        let (bsdf_wi, frame_wi) = turned.unwrap_or((bsdf, si.frame));
+        let rev = if delta {
+            0.0
+        } else {
+            let pdf = bsdf_wi.pdf(frame_wi.to_local(wi), frame_wi.to_local(-d));
+            convert(pdf, &path[last], &path[before])
+        };
+        path[before].pdf_rev = rev;
+        {
+            let v = &mut path[last];
+            v.delta = delta;
+            v.label = match bs.scatter {
+                Scatter::Diffuse => 0,
+                Scatter::Glossy => 1,
+                _ => 2,
+            };
+        }
+        if radiance {
+            beta *= bs.weight;
+        } else {
+            // the adjoint: f(ω_next, ω_prev)·|n_s·ω_prev|·|n_g·ω_next| / (|n_g·ω_prev|·pdf)
+            let cos_prev = si.ng.dot(-d).abs();
+            let cos_next = si.ng.dot(wi).abs();
+            if !(cos_prev > 0.0) {
+                break;
+            }
+            if delta {
+                beta *= bs.weight * (cos_next / cos_prev);
+            } else {
+                beta *= bsdf_wi.eval(frame_wi.to_local(wi), frame_wi.to_local(-d)) * (cos_next / (cos_prev * bs.pdf));
+            }
+        }
+        if surfaces as u32 >= RR_START_DEPTH {
+            let q = survival_probability(beta / beta_ref);
+            if !(q > 0.0) || u_rr >= q {
+                break;
+            }
+            beta /= q;
+        }
+        if !is_finite_spectrum(beta) || !(beta.max_element() > 0.0) {
+            break;
+        }
+        pdf_dir = if delta { 0.0 } else { bs.pdf };
+        o = si.spawn_origin(wi);
+        d = wi;
+        tmin = 0.0;
+        tmax = f32::INFINITY;
+    }
+}
+
+/// Appends the surface vertex at `si`, reached from `prev` with throughput `beta` by a
+/// direction of density `pdf_dir` (0: a delta lobe).
+fn push_vertex(
+    ctx: &Context,
+    path: &mut Vec<Vertex>,
+    si: &SurfaceInteraction,
+    hit: &TriHit,
+    bsdf: Bsdf,
+    beta: Spectrum,
+    pdf_dir: f32,
+    prev: &Vertex,
+) {
+    let mut v = Vertex::endpoint(Kind::Surface, si.p);
+    if prev.kind == Kind::Light {
+        let z = if prev.infinite { prev.dir } else { prev.p };
+        let pdf = ctx.scene.light_eval(prev.light, si.p, z).map_or(0.0, |x| x.1);
+        v.origin_nee = ctx.nee_pdf_of(prev, pdf, si.p);
+    }
+    v.ng = si.ng;
+    v.si = Some(*si);
+    v.hit = Some(*hit);
+    v.connectible = !bsdf.is_delta();
+    v.bsdf = Some(bsdf);
+    v.beta = beta;
+    v.pdf_fwd = convert(pdf_dir, prev, &v);
+    path.push(v);
+}
+
+/// f·|n_s·ω_light| of surface vertex `v` between its neighbour on the camera side
+/// (`towards_camera`) and on the light side (`towards_light`), directions from `v`.
+#[inline]
+fn eval(scene: &Scene, v: &Vertex, towards_camera: Vec3, towards_light: Vec3) -> Spectrum {
+    match facing(scene, v, towards_camera) {
+        Some((b, frame)) => b.eval(frame.to_local(towards_camera), frame.to_local(towards_light)),
+        None => Spectrum::ZERO,
+    }
+}
+
+/// A full path laid out as s light vertices then t camera vertices (in reverse). Each side
+/// is a chain of a subpath: the vertices it scattered at before its end (`*_reals`, in
+/// order), then the end vertex (`*_end`, which may be a branch). `ls`/`cs` replace the light
+/// endpoint or the camera. The path was made by strategy `k`: k = s (a join of the two
+/// subpaths), or k = 0 with s = 1 (the camera subpath found the light `ls`).
+struct FullPath<'a> {
+    light: &'a [Vertex],
+    light_reals: &'a [u32],
+    light_end: usize,
+    camera: &'a [Vertex],
+    camera_reals: &'a [u32],
+    camera_end: usize,
+    s: usize,
+    t: usize,
+    k: usize,
+    ls: Option<&'a Vertex>,
+    cs: Option<&'a Vertex>,
+}
+
+impl<'a> FullPath<'a> {
+    #[inline]
+    fn n(&self) -> usize {
+        self.s + self.t
+    }
+    #[inline]
+    fn at(&self, i: usize) -> &'a Vertex {
+        if i < self.s {
+            if i == 0 {
+                if let Some(v) = self.ls {
+                    return v;
+                }
+            }
+            let idx = if i + 1 == self.s { self.light_end } else { self.light_reals[i] as usize };
+            &self.light[idx]
+        } else {
+            let j = self.n() - 1 - i;
+            if j == 0 {
+                if let Some(v) = self.cs {
+                    return v;
+                }
+            }
+            let idx = if j + 1 == self.t { self.camera_end } else { self.camera_reals[j] as usize };
+            &self.camera[idx]
+        }
+    }
+}
+
+impl Context<'_> {
+    /// The power-heuristic weight of strategy (s, t) for the full path `fp` whose light
+    /// point next-event estimation reaches with density `pdf_nee` (the light's measure).
+    fn mis_weight(&self, fp: &FullPath, pdf_nee: f32, scratch_l: &mut Vec<f64>, scratch_c: &mut Vec<f64>) -> f32 {
+        let (s, n, own_k) = (fp.s, fp.n(), fp.k);
+        if let Some(k) = self.only {
+            let chosen = if n == 2 { 0 } else { k.min(n - 1) };
+            return if own_k == chosen { 1.0 } else { 0.0 };
+        }
+        if n == 2 {
+            return 1.0;
+        }
+        let v = |i: usize| fp.at(i);
+        // a surface vertex left by a delta lobe: the densities it makes are Dirac (both
+        // directions); the strategies that include one include exactly one of them, so 1.
+        // The joined vertices' own walks left them towards vertices not on this path.
+        let is_conn = |i: usize| own_k > 0 && (i + 1 == own_k || i == own_k);
+        let delta = |i: usize| v(i).is_surface() && v(i).delta && !is_conn(i);
+        scratch_l.clear();
+        scratch_c.clear();
+        scratch_l.resize(n, 0.0);
+        scratch_c.resize(n, 0.0);
+        let (fl, fc) = (scratch_l, scratch_c);
+        // light-side densities
+        for i in 0..n {
+            fl[i] = if i == 0 {
+                v(0).pdf_fwd
+            } else if i < s {
+                v(i).pdf_fwd
+            } else if i == s {
+                self.pdf(v(i - 1), (i >= 2).then(|| v(i - 2)), v(i))
+            } else if i == s + 1 && s >= 1 {
+                self.pdf(v(s), Some(v(s - 1)), v(i))
+            } else {
+                v(i).pdf_rev
+            } as f64;
+            if i >= 1 && delta(i - 1) {
+                fl[i] = 1.0;
+            }
+        }
+        // camera-side densities
+        for i in 0..n {
+            fc[i] = if i == n - 1 {
+                1.0
+            } else if i >= s {
+                v(i).pdf_fwd
+            } else if i + 1 == s {
+                self.pdf(v(s), (s + 1 < n).then(|| v(s + 1)), v(i))
+            } else if i + 2 == s {
+                self.pdf(v(s - 1), Some(v(s)), v(i))
+            } else {
+                v(i).pdf_rev
+            } as f64;
+            if i + 1 < n && delta(i + 1) {
+                fc[i] = 1.0;
+            }
+        }
+        let connectible = |i: usize| v(i).connectible && !delta(i);
+        let light_hittable = !v(0).delta && v(0).light != u32::MAX;
+        let valid = |k: usize| {
+            if k == 0 {
+                light_hittable
+            } else if k == 1 && !self.cfg.nee {
+                false
+            } else {
+                connectible(k - 1) && connectible(k) && !(k == 1 && n - k == 1)
+            }
+        };
+        let p = |k: usize| -> f64 {
+            let mut x = 1.0f64;
+            for (i, f) in fl.iter().enumerate().take(k) {
+                x *= if i == 0 && k == 1 { pdf_nee as f64 } else { *f };
+            }
+            for f in &fc[k..n - 1] {
+                x *= *f;
+            }
+            x
+        };
+        let own = p(own_k);
+        if !(own > 0.0) || !own.is_finite() {
+            return 0.0;
+        }
+        let mut sum = 0.0f64;
+        for k in 0..n {
+            if k == own_k || valid(k) {
+                let r = p(k) / own;
+                if r.is_finite() {
+                    sum += r * r;
+                }
+            }
+        }
+        (1.0 / sum) as f32
+    }
+
+    /// The per-kind bounce limits hold for the full path (labels of z₂ … z_{n−2}; the
+    /// joined vertices' labels `label_l`, `label_c` drawn at the join).
+    fn kinds_allowed(&self, fp: &FullPath, label_l: u8, label_c: u8) -> bool {
+        let (k, n) = (fp.k, fp.n());
+        let mut count = [0u32; 3];
+        for i in 2..n.saturating_sub(1) {
+            let l = if k >= 1 && i == k - 1 {
+                label_l
+            } else if k >= 1 && i == k {
+                label_c
+            } else {
+                fp.at(i).label
+            };
+            if (l as usize) < 3 {
+                count[l as usize] += 1;
+            }
+        }
+        count[0] <= self.cfg.diffuse_bounces
+            && count[1] <= self.cfg.glossy_bounces
+            && count[2] <= self.cfg.transmission_bounces
+    }
+}
+
+/// The scattering label of a joined vertex `v` between `wo` (camera side) and `wi` (light
+/// side): transmission across the surface, else diffuse with the probability BSDF sampling
+/// gives the pair that label (`Bsdf::diffuse_share`).
+fn join_label(scene: &Scene, v: &Vertex, wo: Vec3, wi: Vec3, u: f32) -> u8 {
+    let Some((b, frame)) = facing(scene, v, wo) else { return NO_LABEL };
+    let (lo, li) = (frame.to_local(wo), frame.to_local(wi));
+    if lo.z * li.z < 0.0 {
+        return 2;
+    }
+    let share = b.diffuse_share(lo, li, b.pdf(lo, li));
+    if u < share {
+        0
+    } else {
+        1
+    }
+}
+
+/// A splat target of light tracing: the film's running sums, added to from every thread.
+struct Splats {
+    data: Vec<AtomicU32>,
+    width: usize,
+    height: usize,
+}
+
+impl Splats {
+    fn new(width: usize, height: usize) -> Splats {
+        Splats { data: (0..width * height * 3).map(|_| AtomicU32::new(0)).collect(), width, height }
+    }
+
+    fn add(&self, x: usize, y: usize, c: Spectrum) {
+        let i = 3 * (y * self.width + x);
+        for (k, v) in [c.x, c.y, c.z].into_iter().enumerate() {
+            let a = &self.data[i + k];
+            let mut cur = a.load(Ordering::Relaxed);
+            loop {
+                let next = (f32::from_bits(cur) + v).to_bits();
+                match a.compare_exchange_weak(cur, next, Ordering::Relaxed, Ordering::Relaxed) {
+                    Ok(_) => break,
+                    Err(x) => cur = x,
+                }
+            }
+        }
+    }
+}
+
+/// One sample of pixel (x, y): both subpaths, every strategy; returns what the pixel gets
+/// and splats light tracing's share.
+#[allow(clippy::too_many_arguments)]
+fn sample_pixel(
+    ctx: &Context,
+    settings: &RenderSettings,
+    splats: &Splats,
+    scratch: &mut Scratch,
+    x: usize,
+    y: usize,
+    index: u32,
+) -> CameraResult {
+    let scene = ctx.scene;
+    let cfg = ctx.cfg;
+    let w = scene.camera.width as usize;
+    let pixel = y * w + x;
+    let mut cs = SobolSampler::new(settings.seed, pixel as u64, index);
+    let mut ls = SobolSampler::new(settings.seed ^ 0x9e37_79b9_7f4a_7c15, pixel as u64, index);
+    let mut res = CameraResult::default();
+
+    // 1. the camera subpath
+    let raster = scene.camera.pixel_raster(x as f32, y as f32, cs.next_2d());
+    let lens = cs.next_2d();
+    let ray = scene.camera.generate_ray(raster, lens);
+    scratch.camera.clear();
+    scratch.events.clear();
+    if ray.is_dead() {
+        return res;
+    }
+    let mut c0 = Vertex::endpoint(Kind::Camera, ray.origin);
+    c0.pixel = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
+    c0.connectible = scene.camera.connectible();
+    scratch.camera.push(c0);
+    // the camera's density of its ray (relative to light tracing's), or 1 where no light path
+    // reaches the camera (a common factor of every strategy then)
+    let mut pdf_cam = if c0.connectible {
+        let f = &scene.camera.filter;
+        let fw = f.density(raster.x - c0.pixel.x) * f.density(raster.y - c0.pixel.y);
+        fw * scene.camera.ray_density(ray.dir) / ctx.pixels
+    } else {
+        0.0
+    };
+    if !(pdf_cam > 0.0) {
+        // no light path reaches the camera here (another projection, or a ray it cannot
+        // place back): the camera's density is then a common factor of every strategy
+        pdf_cam = 1.0;
+        scratch.camera[0].connectible = false;
+    }
+    {
+        let Scratch { camera, events, .. } = scratch;
+        random_walk(
+            ctx,
+            &mut cs,
+            camera,
+            ray.origin,
+            ray.dir,
+            ray.tmin,
+            ray.tmax,
+            Spectrum::ONE,
+            pdf_cam,
+            true,
+            Some(events),
+            &mut res.out,
+        );
+    }
+    // 2. the light subpath
+    scratch.light.clear();
+    let u_sel = ls.next_1d();
+    let (u_pos, u_dir) = (ls.next_2d(), ls.next_2d());
+    if let Some(o) = scene.sample_light_origin(&ctx.emitters, u_sel, u_pos, u_dir) {
+        let mut l0 = Vertex::endpoint(Kind::Light, o.p);
+        l0.light = o.light;
+        l0.ng = o.n;
+        l0.infinite = o.infinite;
+        l0.dir = if o.infinite { -o.dir } else { Vec3::ZERO };
+        l0.delta = o.delta;
+        l0.pdf_fwd = o.pdf_origin;
+        scratch.light.push(l0);
+        let start =
+            if o.n != Vec3::ZERO { o.p + o.n * (crate::math::ray_epsilon(o.p) * o.n.dot(o.dir).signum()) } else { o.p };
+        let beta = Spectrum::splat(1.0 / (o.pdf_origin * o.pdf_emit));
+        let mut unused = PathContribution::default();
+        random_walk(
+            ctx,
+            &mut ls,
+            &mut scratch.light,
+            start,
+            o.dir,
+            0.0,
+            f32::INFINITY,
+            beta,
+            o.pdf_emit,
+            false,
+            None,
+            &mut unused,
+        );
+    }
+
+    // 3. every strategy, over the chains that end at each vertex
+    let Scratch { camera, light, events, fwd_l, fwd_c, camera_reals, light_reals, .. } = scratch;
+    let (camera, light) = (&camera[..], &light[..]);
+    camera_reals.clear();
+    camera_reals.extend((0..camera.len() as u32).filter(|&i| !camera[i as usize].branch));
+    light_reals.clear();
+    light_reals.extend((0..light.len() as u32).filter(|&i| !light[i as usize].branch));
+    // the chain ending at vertex `end`: the real vertices before it, then it
+    let chain = |reals: &[u32], end: usize| reals.partition_point(|&r| (r as usize) < end) + 1;
+    let max_n = cfg.max_bounces as usize + 3;
+    let (cr, lr) = (&camera_reals[..], &light_reals[..]);
+
+    // s = 0: light the camera subpath found (after the real vertices before `t`)
+    for e in events.iter() {
+        let t = cr.partition_point(|&r| (r as usize) < e.t);
+        if e.alone || (t == 1 && ctx.only.is_none()) {
+            res.out.radiance += e.value;
+            if t == 1 {
+                res.out.very_direct += e.value;
+            }
+            continue;
+        }
+        let fp = FullPath {
+            light: &[],
+            light_reals: &[],
+            light_end: 0,
+            camera,
+            camera_reals: cr,
+            camera_end: cr[t - 1] as usize,
+            s: 1,
+            t,
+            k: 0,
+            ls: Some(&e.light),
+            cs: None,
+        };
+        if ctx.kind_limits && !ctx.kinds_allowed(&fp, NO_LABEL, NO_LABEL) {
+            continue;
+        }
+        let wgt = ctx.mis_weight(&fp, e.pdf_nee, fwd_l, fwd_c);
+        res.out.radiance += e.value * wgt;
+    }
+
+    // s = 1: next-event estimation at each camera vertex
+    if cfg.nee && scene.has_lights() {
+        for jc in 1..camera.len() {
+            let b = &camera[jc];
+            let t = chain(cr, jc);
+            if t + 1 > max_n || !b.connectible {
+                continue;
+            }
+            let (u_sel, u_l) = (cs.next_1d(), cs.next_2d());
+            let u_label = cs.next_1d();
+            let (Some(si), Some(bsdf)) = (b.si.as_ref(), b.bsdf.as_ref()) else { continue };
+            let Some((li, lsmp)) = scene.sample_light(b.p, u_sel, u_l) else { continue };
+            let wo = direction(b, &camera[cr[t - 2] as usize]).0;
+            let f = bsdf.eval(si.frame.to_local(wo), si.frame.to_local(lsmp.wi));
+            if !(f.max_element() > 0.0) {
+                continue;
+            }
+            let tr = if scene.casts_shadow(li) {
+                match scene.transmittance(si, &lsmp) {
+                    Some((tr, _)) => tr,
+                    None => continue,
+                }
+            } else {
+                Spectrum::ONE
+            };
+            let inf = !lsmp.dist.is_finite();
+            let mut lv = Vertex::endpoint(Kind::Light, if inf { Vec3::ZERO } else { lsmp.p });
+            lv.light = li;
+            lv.infinite = inf;
+            lv.dir = lsmp.wi;
+            lv.ng = if inf { Vec3::ZERO } else { scene.light_normal(li, lsmp.p) };
+            lv.delta = lsmp.is_delta;
+            lv.pdf_fwd = ctx.origin_pdf(&lv);
+            let fp = FullPath {
+                light: &[],
+                light_reals: &[],
+                light_end: 0,
+                camera,
+                camera_reals: cr,
+                camera_end: jc,
+                s: 1,
+                t,
+                k: 1,
+                ls: Some(&lv),
+                cs: None,
+            };
+            let label = if ctx.kind_limits { join_label(scene, b, wo, lsmp.wi, u_label) } else { NO_LABEL };
+            if ctx.kind_limits && !ctx.kinds_allowed(&fp, NO_LABEL, label) {
+                continue;
+            }
+            let pdf_nee = ctx.nee_pdf_of(&lv, lsmp.pdf, b.p);
+            let wgt = ctx.mis_weight(&fp, pdf_nee, fwd_l, fwd_c);
+            res.out.radiance += b.beta * f * lsmp.radiance * tr * (wgt / lsmp.pdf);
+        }
+    }
+
+    // s ≥ 2: each light vertex, joined to the lens (t = 1) and to each camera vertex
+    for jl in 1..light.len() {
+        let a = &light[jl];
+        let s = chain(lr, jl);
+        if !a.connectible || s < 2 {
+            continue;
+        }
+        let a_prev = &light[lr[s - 2] as usize];
+        let w_prev = direction(a, a_prev).0;
+        let Some(asi) = a.si.as_ref() else { continue };
+        let cos_prev = a.ng.dot(w_prev).abs();
+        if !(cos_prev > 0.0) {
+            continue;
+        }
+        // (z₁ of this chain: a itself, or the first vertex the walk scattered at)
+        let origin_nee = if s == 2 { a.origin_nee } else { light[lr[1] as usize].origin_nee };
+
+        // t = 1, light tracing: join a to a lens point, splat where it lands
+        let u_lens = ls.next_2d();
+        let u_label = ls.next_1d();
+        if s + 1 <= max_n && !scene.camera_invisible(asi.prim) {
+            let lens_p = scene.camera.lens_point(u_lens);
+            if let Some((raster, we)) = scene.camera.importance(lens_p, a.p) {
+                let mut cam = Vertex::endpoint(Kind::Camera, lens_p);
+                let (wc, d2) = direction(a, &cam);
+                let fa = eval(scene, a, wc, w_prev) * (a.ng.dot(wc).abs() / cos_prev);
+                let target = LightSample {
+                    p: lens_p,
+                    n: Vec3::ZERO,
+                    wi: wc,
+                    dist: d2.sqrt(),
+                    radiance: Spectrum::ZERO,
+                    pdf: 1.0,
+                    is_delta: true,
+                };
+                let tr = if fa.max_element() > 0.0 { scene.transmittance(asi, &target).map(|x| x.0) } else { None };
+                if let Some(tr) = tr {
+                    let value = a.beta * fa * tr * (we / d2);
+                    let label = if ctx.kind_limits { join_label(scene, a, wc, w_prev, u_label) } else { NO_LABEL };
+                    let filter = &scene.camera.filter;
+                    let r = filter.radius();
+                    let (x0, x1) = ((raster.x - r).floor().max(0.0) as i64, (raster.x + r).floor() as i64);
+                    let (y0, y1) = ((raster.y - r).floor().max(0.0) as i64, (raster.y + r).floor() as i64);
+                    for py in y0..=y1.min(splats.height as i64 - 1) {
+                        for px in x0..=x1.min(splats.width as i64 - 1) {
+                            cam.pixel = Vec2::new(px as f32 + 0.5, py as f32 + 0.5);
+                            let fw = filter.density(raster.x - cam.pixel.x) * filter.density(raster.y - cam.pixel.y);
+                            if !(fw > 0.0) || !is_finite_spectrum(value) {
+                                continue;
+                            }
+                            let fp = FullPath {
+                                light,
+                                light_reals: lr,
+                                light_end: jl,
+                                camera: &[],
+                                camera_reals: &[],
+                                camera_end: 0,
+                                s,
+                                t: 1,
+                                k: s,
+                                ls: None,
+                                cs: Some(&cam),
+                            };
+                            if ctx.kind_limits && !ctx.kinds_allowed(&fp, label, NO_LABEL) {
+                                continue;
+                            }
+                            let wgt = ctx.mis_weight(&fp, origin_nee, fwd_l, fwd_c);
+                            splats.add(px as usize, py as usize, value * (fw * wgt));
+                        }
+                    }
+                }
+            }
+        }
+
+        // t ≥ 2: a shadow ray joins a and b
+        for jc in 1..camera.len() {
+            let b = &camera[jc];
+            let t = chain(cr, jc);
+            let u_label = cs.next_1d();
+            if s + t > max_n || !b.connectible {
+                continue;
+            }
+            let Some(bsi) = b.si.as_ref() else { continue };
+            let (w, d2) = direction(a, b);
+            let fa = eval(scene, a, w, w_prev) * (a.ng.dot(w).abs() / cos_prev);
+            if !(fa.max_element() > 0.0) {
+                continue;
+            }
+            let wo_b = direction(b, &camera[cr[t - 2] as usize]).0;
+            let fb = eval(scene, b, wo_b, -w);
+            if !(fb.max_element() > 0.0) {
+                continue;
+            }
+            let target = LightSample {
+                p: a.p,
+                n: a.ng,
+                wi: -w,
+                dist: d2.sqrt(),
+                radiance: Spectrum::ZERO,
+                pdf: 1.0,
+                is_delta: false,
+            };
+            let Some((tr, _)) = scene.transmittance(bsi, &target) else { continue };
+            let fp = FullPath {
+                light,
+                light_reals: lr,
+                light_end: jl,
+                camera,
+                camera_reals: cr,
+                camera_end: jc,
+                s,
+                t,
+                k: s,
+                ls: None,
+                cs: None,
+            };
+            if ctx.kind_limits {
+                let (ll, lc) = (join_label(scene, a, w, w_prev, u_label), join_label(scene, b, wo_b, -w, u_label));
+                if !ctx.kinds_allowed(&fp, ll, lc) {
+                    continue;
+                }
+            }
+            let wgt = ctx.mis_weight(&fp, origin_nee, fwd_l, fwd_c);
+            res.out.radiance += a.beta * fa * fb * b.beta * tr * (wgt / d2);
+        }
+    }
+    res
+}
+
+pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl) -> RenderOutput {
+    let (w, h) = (scene.camera.width as usize, scene.camera.height as usize);
+    let cfg = &settings.path;
+    let ctx = Context {
+        scene,
+        cfg,
+        emitters: scene.emitter_selection(),
+        pixels: (w * h) as f32,
+        kind_limits: [cfg.diffuse_bounces, cfg.glossy_bounces, cfg.transmission_bounces]
+            .iter()
+            .any(|&k| k < cfg.max_bounces && k < NO_KIND_LIMIT),
+        only: std::env::var("GDMLT_BDPT_ONLY").ok().and_then(|v| v.parse().ok()),
+    };
+    let mut film = Film::new(w, h);
+    let splats = Splats::new(w, h);
+    control.work_total.store(w as u64 * h as u64 * settings.spp as u64, Ordering::Relaxed);
+    let mut done = 0u32;
+    let mut batch = 1u32;
+    while done < settings.spp && !control.should_stop() {
+        let to = (done + batch).min(settings.spp);
+        let t0 = std::time::Instant::now();
+        film.rows.par_iter_mut().enumerate().for_each_init(Scratch::default, |scratch, (y, row)| {
+            if control.should_stop() {
+                return;
+            }
+            for x in 0..w {
+                for index in done..to {
+                    let r = sample_pixel(&ctx, settings, &splats, scratch, x, y, index);
+                    row.add(x, &r.out);
+                }
+            }
+            control.work_done.fetch_add(w as u64 * (to - done) as u64, Ordering::Relaxed);
+        });
+        if control.should_stop() && done > 0 {
+            // (a pass cut short: its rows are uneven; the light paths of the whole passes stay)
+        }
+        done = to;
+        control.offer_preview(|| combined(&film, &splats, done));
+        if t0.elapsed().as_secs_f64() < 0.1 {
+            batch = (batch * 2).min(64);
+        }
+    }
+    let (spp_min, spp_max) = film.sample_count_range();
+    let mut layers = vec![
+        ("Combined".into(), combined(&film, &splats, spp_max.max(1))),
+        ("Denoising Albedo".into(), film.albedo()),
+        ("Denoising Normal".into(), film.normal()),
+    ];
+    if scene.camera.film_transparent {
+        layers.push(("Alpha".into(), film.alpha()));
+    }
+    RenderOutput {
+        layers,
+        stats: RenderStats {
+            method: "bdpt",
+            elapsed: control.elapsed(),
+            spp_min,
+            spp_max,
+            invalid_samples: film.invalid_samples(),
+            ..Default::default()
+        },
+    }
+}
+
+/// The image: each pixel's camera samples averaged, plus light tracing's splats over the
+/// light paths traced (one per camera sample of every pixel).
+fn combined(film: &Film, splats: &Splats, spp: u32) -> Image {
+    let mut img = film.color();
+    let n = (splats.width * splats.height) as f64 * spp.max(1) as f64;
+    for (c, s) in img.data.iter_mut().zip(&splats.data) {
+        *c += (f32::from_bits(s.load(Ordering::Relaxed)) as f64 / n) as f32;
+    }
+    img
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::integrator::Method;
+    use crate::scene::builtin;
+
+    /// Per-channel means of the four quadrants over `seeds` renders: mean and standard error.
+    fn quadrants(scene: &Scene, settings: &RenderSettings, seeds: u64) -> (Vec<f64>, Vec<f64>) {
+        let mut all: Vec<Vec<f64>> = Vec::new();
+        for seed in 0..seeds {
+            let out = crate::integrator::render(
+                scene,
+                &RenderSettings { seed: seed + 1, ..settings.clone() },
+                &RenderControl::new(0.0),
+            )
+            .unwrap();
+            let img = out.layer("Combined").unwrap();
+            let (w, h) = (img.width, img.height);
+            let mut m = vec![0.0f64; 12];
+            for y in 0..h {
+                for x in 0..w {
+                    let q = (x * 2 / w) + 2 * (y * 2 / h);
+                    for c in 0..3 {
+                        m[3 * q + c] += img.data[3 * (y * w + x) + c] as f64 * 4.0 / (w * h) as f64;
+                    }
+                }
+            }
+            all.push(m);
+        }
+        let n = seeds as f64;
+        let mean: Vec<f64> = (0..12).map(|i| all.iter().map(|m| m[i]).sum::<f64>() / n).collect();
+        let se = (0..12)
+            .map(|i| (all.iter().map(|m| (m[i] - mean[i]).powi(2)).sum::<f64>() / (n - 1.0) / n).sqrt())
+            .collect();
+        (mean, se)
+    }
+
+    fn compare(name: &str, desc: crate::scene::SceneDesc, path: PathSettings, spp_pt: u32, spp_bd: u32, seeds: u64) {
+        let scene = Scene::build(&desc).unwrap();
+        let base = RenderSettings { path, threads: 2, ..Default::default() };
+        let (mp, sp) = quadrants(&scene, &RenderSettings { method: Method::Pt, spp: spp_pt, ..base.clone() }, seeds);
+        let (mb, sb) = quadrants(&scene, &RenderSettings { method: Method::Bdpt, spp: spp_bd, ..base }, seeds);
+        for i in 0..12 {
+            let z = (mb[i] - mp[i]) / (sp[i].powi(2) + sb[i].powi(2)).sqrt().max(1e-9);
+            eprintln!(
+                "{name} q{} c{}: pt {:.5} ± {:.5}  bdpt {:.5} ± {:.5}  z {z:.2}",
+                i / 3,
+                i % 3,
+                mp[i],
+                sp[i],
+                mb[i],
+                sb[i]
+            );
+        }
+    }
+
+    #[test]
+    #[ignore]
+    fn explore() {
+        if let Ok(only) = std::env::var("SCENE") {
+            let d = builtin::builtin(&only, 24, 24).unwrap();
+            let strict = std::env::var("STRICT").is_ok();
+            compare(&only, d, PathSettings { strict_glass_nee: strict, ..Default::default() }, 64, 32, 6);
+            return;
+        }
+        compare("box", builtin::cornell_box(24, 24), PathSettings::default(), 64, 32, 6);
+        compare("mixed", builtin::cornell_mixed_lights(24, 24), PathSettings::default(), 64, 32, 6);
+        compare("spheres", builtin::cornell_spheres(24, 24), PathSettings::default(), 64, 32, 6);
+        compare("bulb", builtin::cornell_bulb(24, 24), PathSettings::default(), 64, 32, 6);
+        compare("veil", builtin::cornell_veil(24, 24), PathSettings::default(), 64, 32, 6);
+    }
+}
