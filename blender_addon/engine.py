@@ -32,6 +32,7 @@ PASSES = (
 # Passes each method writes (besides Combined).
 METHOD_PASSES = {
     "PT": {"Denoising Albedo", "Denoising Normal"},
+    "BDPT": {"Denoising Albedo", "Denoising Normal"},
     "GDPT": {"GD Primal", "GD Gradient X", "GD Gradient Y", "Denoising Albedo", "Denoising Normal"},
     "PSSMLT": {"MLT Density", "Denoising Albedo", "Denoising Normal"},
     "GDPSSMLT": {"GD Primal", "GD Gradient X", "GD Gradient Y", "MLT Density", "Denoising Albedo", "Denoising Normal"},

@@ -16,6 +16,9 @@ METHOD_ITEMS = [
     ("PSSMLT", "Metropolis (PSSMLT)", "Primary-sample-space Metropolis light transport (Kelemen et al. 2002)", 2),
     ("GDPSSMLT", "Gradient-Domain Metropolis",
      "Metropolis sampling of image gradients with screened Poisson reconstruction (Lehtinen et al. 2013)", 3),
+    ("BDPT", "Bidirectional Path Tracing",
+     "Paths from the camera and from the lights, joined every way and weighed by multiple importance sampling "
+     "(Veach 1997): caustics, light through glass and small openings", 5),
 ]
 
 RECON_ITEMS = [

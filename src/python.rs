@@ -1318,7 +1318,7 @@ fn init_module(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(cpu_supports_x86_64_v3, m)?)?;
     m.add_function(wrap_pyfunction!(check_memory, m)?)?;
     m.add_function(wrap_pyfunction!(bootstrap_paths, m)?)?;
-    m.add("METHODS", vec!["pt", "gdpt", "pssmlt", "gdpssmlt"])?;
+    m.add("METHODS", vec!["pt", "bdpt", "gdpt", "pssmlt", "gdpssmlt"])?;
     m.add("DEFAULT_SETTINGS", default_settings(m.py())?)?;
     // The path builder's Russian roulette starts after this many bounces (benchmarks set
     // their peers' roulette to it, so that every renderer traces paths of the same length).

@@ -9,7 +9,7 @@ from pathlib import Path
 from .passes import CLI_NAMES as CLI_PASS_NAMES
 
 BUILTIN = ("cornell", "spheres", "gap", "furnace")
-METHODS = ("pt", "gdpt", "pssmlt", "gdpssmlt")
+METHODS = ("pt", "bdpt", "gdpt", "pssmlt", "gdpssmlt")
 RENDER_METHODS = ("auto",) + METHODS  # auto: gdmlt/auto.py picks one of them per scene
 USD_SUFFIXES = (".usd", ".usda", ".usdc", ".usdz")
 
@@ -92,7 +92,8 @@ def build_parser():
     r.add_argument("scene", help="path to a .blend or USD file, or a built-in scene name (" + ", ".join(BUILTIN) + ")")
     r.add_argument("-o", "--output", required=True, help="output EXR path; a PNG is written next to it")
     r.add_argument("--method", choices=RENDER_METHODS, type=str.lower,
-                   help="light transport method: pt (path tracing), gdpt (gradient-domain path tracing), "
+                   help="light transport method: pt (path tracing), bdpt (bidirectional path tracing), "
+                        "gdpt (gradient-domain path tracing), "
                         "pssmlt (primary-sample-space Metropolis), gdpssmlt (gradient-domain Metropolis), "
                         "auto (a short pilot picks the one with the least error per second on this scene); "
                         f"default: the file's, else {D['method']}")

@@ -26,7 +26,7 @@ def cornell():
     return scene, ref
 
 
-@pytest.mark.parametrize("method", ["pt", "gdpt", "pssmlt", "gdpssmlt"])
+@pytest.mark.parametrize("method", ["pt", "bdpt", "gdpt", "pssmlt", "gdpssmlt"])
 def test_denoising_lowers_the_error_of_every_method(cornell, method):
     """At 16 samples (mutations) per pixel each method's denoised image is closer to a 2048-spp
     render than its raw one; the reference's own noise (about 16/2048 of the raw error) is far

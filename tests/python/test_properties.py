@@ -56,7 +56,7 @@ def test_any_scene_input_builds_or_is_a_value_error(mesh, mats, world):
 
 
 @settings(max_examples=60, deadline=None)
-@given(method=st.sampled_from(["pt", "gdpt", "pssmlt", "gdpssmlt"]), spp=st.integers(1, 3),
+@given(method=st.sampled_from(["pt", "bdpt", "gdpt", "pssmlt", "gdpssmlt"]), spp=st.integers(1, 3),
        bounces=st.integers(0, 3), nee=st.booleans(), seed=st.integers(0, 2 ** 63 - 1),
        alpha=st.one_of(st.just(0.0), st.floats(min_value=1e-3, max_value=10)), large=st.floats(0, 1))
 def test_any_valid_settings_render_finite(method, spp, bounces, nee, seed, alpha, large):

@@ -7,7 +7,7 @@ import pytest
 
 import gdmlt
 
-METHODS = ["pt", "gdpt", "pssmlt", "gdpssmlt"]
+METHODS = ["pt", "bdpt", "gdpt", "pssmlt", "gdpssmlt"]
 
 
 def cornell(w=12, h=12):
