@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
-METHODS = [(m, nee) for m in ("pt", "gdpt", "pssmlt", "gdpssmlt") for nee in (True, False)]
+METHODS = [(m, nee) for m in ("pt", "bdpt", "gdpt", "pssmlt", "gdpssmlt") for nee in (True, False)]
 W, H, BLOCK, BOUNCES = 40, 30, 5, 6
 SEEDS = 6  # GDMLT renders per method and mode (Cycles: two)
 
@@ -1024,7 +1024,7 @@ def samples(method, spp):
     """Samples (mutations) per pixel of `method` for a scene whose pt budget is `spp`: about
     equal time for the path tracers, more mutations for the Metropolis methods (cheaper
     each, and their normalisation needs them)."""
-    return spp * {"pt": 8, "gdpt": 4, "pssmlt": 16, "gdpssmlt": 16}[method]
+    return spp * {"pt": 8, "bdpt": 2, "gdpt": 4, "pssmlt": 16, "gdpssmlt": 16}[method]
 
 
 def _cycles(bpy, scene, spp, seed, path, nee=True):
