@@ -1024,7 +1024,7 @@ def samples(method, spp):
     """Samples (mutations) per pixel of `method` for a scene whose pt budget is `spp`: about
     equal time for the path tracers, more mutations for the Metropolis methods (cheaper
     each, and their normalisation needs them)."""
-    return spp * {"pt": 8, "bdpt": 2, "gdpt": 4, "pssmlt": 16, "gdpssmlt": 16}[method]
+    return spp * {"pt": 8, "bdpt": 1, "gdpt": 4, "pssmlt": 16, "gdpssmlt": 16}[method]
 
 
 def _cycles(bpy, scene, spp, seed, path, nee=True):

@@ -288,6 +288,85 @@ def glass_box(bpy):
     return scene
 
 
+def _glass(bpy, name, roughness=0.0, ior=1.5):
+    from make_test_scenes import empty_material
+
+    glass, nt, out = empty_material(bpy, name)
+    g = nt.nodes.new("ShaderNodeBsdfGlass")
+    g.inputs["IOR"].default_value = ior
+    g.inputs["Roughness"].default_value = roughness
+    nt.links.new(g.outputs[0], out.inputs["Surface"])
+    return glass
+
+
+def caustics(bpy):
+    """Hard light, the caustic kind: a glass ball (IOR 1.5) and a polished metal ring on a
+    wooden table in a dim 4 × 4 × 2.6 m room, lit by one small lamp (a point lamp of radius
+    2 cm) 1.2 m above the table: the ball focuses the lamp into a bright spot on the table
+    and the ring throws a cardioid; every caustic path runs lamp → glass or metal → table."""
+    scene = _reset(bpy)
+    plaster = _material(bpy, "Plaster", (0.7, 0.68, 0.65), "DIFFUSE")
+
+    def box(name, loc, size, mat):
+        _box(bpy, scene, name, loc, size, mat)
+
+    box("Floor", (0, 0, -0.05), (4.2, 4.2, 0.1), plaster)
+    box("Ceiling", (0, 0, 2.65), (4.2, 4.2, 0.1), plaster)
+    box("WallBack", (0, 2.05, 1.3), (4.2, 0.1, 2.6), plaster)
+    box("WallFront", (0, -2.05, 1.3), (4.2, 0.1, 2.6), plaster)
+    box("WallL", (-2.05, 0, 1.3), (0.1, 4.2, 2.6), plaster)
+    box("WallR", (2.05, 0, 1.3), (0.1, 4.2, 2.6), plaster)
+    box("Table", (0, 0.2, 0.35), (1.6, 1.0, 0.7), _material(bpy, "Wood", (0.55, 0.38, 0.22), "DIFFUSE"))
+    bpy.ops.mesh.primitive_uv_sphere_add(radius=0.15, location=(-0.25, 0.25, 0.85), segments=48, ring_count=24)
+    bpy.ops.object.shade_smooth()
+    bpy.context.object.name = "GlassBall"
+    _add(bpy, scene, bpy.context.object, _glass(bpy, "Glass"))
+    metal = _material(bpy, "Polished", (0.95, 0.8, 0.5), roughness=0.02)
+    metal.node_tree.nodes["Principled BSDF"].inputs["Metallic"].default_value = 1.0
+    # a ring: an open cylinder (inner face seen by the lamp) 0.25 m across, 6 cm tall
+    bpy.ops.mesh.primitive_cylinder_add(radius=0.125, depth=0.06, location=(0.35, 0.2, 0.73), vertices=64,
+                                        end_fill_type="NOTHING")
+    bpy.ops.object.shade_smooth()
+    bpy.context.object.name = "Ring"
+    _add(bpy, scene, bpy.context.object, metal)
+    _light(bpy, scene, "POINT", "Lamp", (0.05, -0.15, 1.9), energy=60.0, shadow_soft_size=0.02)
+    _camera(bpy, scene, (0.0, -1.75, 1.55), (66, 0, 0), lens=35)
+    _settings(scene, size=128, bounces=12)
+    return scene
+
+
+def window(bpy):
+    """Hard light, the window kind: a 4 × 4 × 2.6 m room whose only opening, a 1.2 × 1 m
+    window, is glazed with a 6 mm pane of clear glass (IOR 1.5, a closed box); a soft sun
+    (4° disc) shines through it onto the floor and a sky-blue world lights the room through
+    the same pane — every path of light from outside crosses two smooth faces."""
+    scene = _reset(bpy)
+    scene.world.node_tree.nodes["Background"].inputs["Color"].default_value = (0.35, 0.5, 0.8, 1)
+    plaster = _material(bpy, "Plaster", (0.75, 0.72, 0.68), "DIFFUSE")
+    floor = _material(bpy, "Floor", (0.5, 0.35, 0.22), roughness=0.4)
+
+    def box(name, loc, size, mat):
+        _box(bpy, scene, name, loc, size, mat)
+
+    box("Floor", (0, 0, -0.05), (4.2, 4.2, 0.1), floor)
+    box("Ceiling", (0, 0, 2.65), (4.2, 4.2, 0.1), plaster)
+    box("WallFront", (0, -2.05, 1.3), (4.2, 0.1, 2.6), plaster)
+    box("WallL", (-2.05, 0, 1.3), (0.1, 4.2, 2.6), plaster)
+    box("WallR", (2.05, 0, 1.3), (0.1, 4.2, 2.6), plaster)
+    # the back wall (y = 2, 10 cm thick) with the window x ∈ [-0.6, 0.6], z ∈ [1.0, 2.0]
+    box("WallBackL", (-1.35, 2.05, 1.3), (1.5, 0.1, 2.6), plaster)
+    box("WallBackR", (1.35, 2.05, 1.3), (1.5, 0.1, 2.6), plaster)
+    box("WallBackLow", (0, 2.05, 0.5), (1.2, 0.1, 1.0), plaster)
+    box("WallBackHigh", (0, 2.05, 2.3), (1.2, 0.1, 0.6), plaster)
+    box("Pane", (0, 2.05, 1.5), (1.2, 0.006, 1.0), _glass(bpy, "WindowGlass"))
+    box("Table", (-0.5, 0.4, 0.375), (1.2, 0.7, 0.75), _material(bpy, "Wood", (0.45, 0.3, 0.18), roughness=0.3))
+    sun = _light(bpy, scene, "SUN", "Sun", (0, 5, 5), (-50, 0, 0), energy=4.0)
+    sun.data.angle = math.radians(4.0)
+    _camera(bpy, scene, (1.4, -1.8, 1.5), (80, 0, 30), lens=20)
+    _settings(scene, size=128, bounces=12)
+    return scene
+
+
 def main(argv):
     out = Path(argv[0] if argv else "out/bench").resolve()
     out.mkdir(parents=True, exist_ok=True)
@@ -307,7 +386,11 @@ def main(argv):
     bpy.ops.wm.save_as_mainfile(filepath=str(out / "door_ajar.blend"))
     glass_box(bpy)
     bpy.ops.wm.save_as_mainfile(filepath=str(out / "glass_box.blend"))
-    print(f"wrote {len(LIGHT_SETS) + 4} scenes to {out}")
+    caustics(bpy)
+    bpy.ops.wm.save_as_mainfile(filepath=str(out / "caustics.blend"))
+    window(bpy)
+    bpy.ops.wm.save_as_mainfile(filepath=str(out / "window.blend"))
+    print(f"wrote {len(LIGHT_SETS) + 6} scenes to {out}")
 
 
 if __name__ == "__main__":

@@ -39,11 +39,11 @@ use crate::accel::TriHit;
 use crate::bsdf::{Bsdf, Guide, LobeKind, Scatter};
 use crate::film::{Film, Image};
 use crate::math::Frame;
-use crate::math::{is_finite_spectrum, Spectrum};
+use crate::math::{is_finite_spectrum, power_heuristic, Spectrum};
 use crate::path::{survival_probability, PathContribution, PathSettings, NO_KIND_LIMIT, RR_START_DEPTH};
 use crate::sampler::{Sampler, SobolSampler};
 use crate::scene::emit::EmitterSelection;
-use crate::scene::{LightSample, Scene, SurfaceInteraction};
+use crate::scene::{Scene, SurfaceInteraction};
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicU32, Ordering};
@@ -941,7 +941,23 @@ fn sample_pixel(
                 continue;
             }
             let pdf_nee = ctx.nee_pdf_of(&lv, lsmp.pdf, b.p);
-            let wgt = if f.max_element() > 0.0 { ctx.mis_weight(&fp, pdf_nee, fwd_l, fwd_c) } else { 0.0 };
+            let wgt = if !(f.max_element() > 0.0) {
+                0.0
+            } else if scene.casts_shadow(li)
+                && scene.has_shadow_invisible()
+                && scene.segment_transmittance(si, lsmp.p, false).is_none()
+            {
+                // the light came through an object that casts no shadow: only a light sample
+                // reaches it (every other ray stops there), weighed as pt and Cycles weigh it
+                // against the BSDF's sample, which cannot
+                if lsmp.is_delta {
+                    1.0
+                } else {
+                    power_heuristic(lsmp.pdf, bsdf.pdf(lo, li_local))
+                }
+            } else {
+                ctx.mis_weight(&fp, pdf_nee, fwd_l, fwd_c)
+            };
             res.out.radiance += b.beta * (f * wgt + extra) * lsmp.radiance * tr / lsmp.pdf;
         }
     }
@@ -972,16 +988,8 @@ fn sample_pixel(
                 let mut cam = Vertex::endpoint(Kind::Camera, lens_p);
                 let (wc, d2) = direction(a, &cam);
                 let fa = eval(scene, a, wc, w_prev) * (a.ng.dot(wc).abs() / cos_prev);
-                let target = LightSample {
-                    p: lens_p,
-                    n: Vec3::ZERO,
-                    wi: wc,
-                    dist: d2.sqrt(),
-                    radiance: Spectrum::ZERO,
-                    pdf: 1.0,
-                    is_delta: true,
-                };
-                let tr = if fa.max_element() > 0.0 { scene.transmittance(asi, &target).map(|x| x.0) } else { None };
+                // (a camera ray: objects hidden from the camera let it pass)
+                let tr = if fa.max_element() > 0.0 { scene.segment_transmittance(asi, lens_p, true) } else { None };
                 if let Some(tr) = tr {
                     let value = a.beta * fa * tr * (we / d2);
                     let label = if ctx.kind_limits { join_label(scene, a, wc, w_prev, u_label) } else { NO_LABEL };
@@ -1039,16 +1047,9 @@ fn sample_pixel(
             if !(fb.max_element() > 0.0) {
                 continue;
             }
-            let target = LightSample {
-                p: a.p,
-                n: a.ng,
-                wi: -w,
-                dist: d2.sqrt(),
-                radiance: Spectrum::ZERO,
-                pdf: 1.0,
-                is_delta: false,
-            };
-            let Some((tr, _)) = scene.transmittance(bsi, &target) else { continue };
+            // (a ray between surfaces: what casts no shadow still blocks it, as in Cycles,
+            // where only shadow rays to lights pass such objects)
+            let Some(tr) = scene.segment_transmittance(bsi, a.p, false) else { continue };
             let fp = FullPath {
                 light,
                 light_reals: lr,

@@ -466,6 +466,55 @@ impl Scene {
         None
     }
 
+    /// Some object casts no shadow (its shadow ray visibility is off).
+    #[inline]
+    pub fn has_shadow_invisible(&self) -> bool {
+        self.has_shadow_invisible
+    }
+
+    /// Transmittance of the segment from a surface point to the point `target` for a ray of
+    /// another kind than a shadow ray (bidirectional joins): as a camera ray (`camera`:
+    /// objects hidden from the camera let it pass) or as a ray scattered between surfaces
+    /// (every object blocks it, also one whose shadow visibility is off); transparent surfaces
+    /// pass it with τ·tint, as for `transmittance`. No shadow-terminator lift (not a light
+    /// sample). None when blocked.
+    pub fn segment_transmittance(&self, si: &SurfaceInteraction, target: Vec3, camera: bool) -> Option<Spectrum> {
+        let skip = if camera { RAY_CAMERA_INVISIBLE } else { 0 };
+        if !self.has_transparency && (skip == 0 || self.ray_mask.is_empty()) {
+            return self.segment_clear(si, target, false).then_some(Spectrum::ONE);
+        }
+        let mut t = Spectrum::ONE;
+        let mut from = *si;
+        let (mut crossed, mut invisible) = (0, 0);
+        while crossed <= crate::path::MAX_TRANSPARENT_BOUNCES && invisible < MAX_INVISIBLE_CROSSINGS {
+            let Some((o, d, tmax)) = self.shadow_ray_from(&from, target, false, false) else {
+                return Some(t);
+            };
+            if tmax <= 0.0 {
+                return Some(t);
+            }
+            let Some(hit) = self.intersect(o, d, 0.0, tmax) else {
+                return Some(t);
+            };
+            from = self.interaction(&hit, d);
+            if skip != 0 && self.masked(hit.prim, skip) {
+                invisible += 1;
+                continue;
+            }
+            crossed += 1;
+            let m = &self.materials[self.tri_material[hit.prim as usize] as usize];
+            if !m.is_transparent() {
+                return None;
+            }
+            let pass = self.pass_through(m, &from);
+            if pass.max_element() <= 0.0 {
+                return None;
+            }
+            t *= pass;
+        }
+        None
+    }
+
     /// Surface data at a hit, with normals facing the incoming ray direction `d`.
     pub fn interaction(&self, hit: &TriHit, d: Vec3) -> SurfaceInteraction {
         let t = hit.prim as usize;
