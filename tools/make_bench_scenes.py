@@ -329,7 +329,7 @@ def caustics(bpy):
     bpy.ops.object.shade_smooth()
     bpy.context.object.name = "Ring"
     _add(bpy, scene, bpy.context.object, metal)
-    _light(bpy, scene, "POINT", "Lamp", (0.05, -0.15, 1.9), energy=60.0, shadow_soft_size=0.02)
+    _light(bpy, scene, "POINT", "Lamp", (0.3, 1.0, 1.6), energy=60.0, shadow_soft_size=0.02)
     _camera(bpy, scene, (0.0, -1.75, 1.55), (66, 0, 0), lens=35)
     _settings(scene, size=128, bounces=12)
     return scene

@@ -59,8 +59,9 @@ def build_parser():
     b.add_argument("--methods", default="pt,gdpt,pssmlt,gdpssmlt", help="comma-separated methods")
     b.add_argument("--modes", default="nee,naive", help="light modes: nee, naive or both (default nee,naive)")
     b.add_argument("--reference-spp", type=_positive_int, default=8192)
-    b.add_argument("--reference", choices=("pt", "cycles"), default="pt",
-                   help="what every render is compared with: GDMLT pt at --reference-spp (default), or Cycles "
+    b.add_argument("--reference", choices=("pt", "bdpt", "cycles"), default="pt",
+                   help="what every render is compared with: GDMLT pt (default) or bdpt (hard light) at "
+                        "--reference-spp, or Cycles "
                         "rendered for --reference-seconds (then GDMLT's error includes any difference from Cycles)")
     b.add_argument("--reference-seconds", type=_pos_float, default=60.0)
     b.add_argument("--max-bounces", type=_nonneg_int, default=8)
@@ -75,7 +76,8 @@ def build_parser():
     b.add_argument("--denoise", action="store_true",
                    help="also report every render after Intel Open Image Denoise (needs pyoidn)")
     b.add_argument("--peers", default="",
-                   help="also render with these at the same budgets: cycles, luxcore (PATHCPU + Sobol), "
+                   help="also render with these at the same budgets: cycles, cycles-guiding (path guiding on), "
+                        "luxcore (PATHCPU + Sobol), "
                         "luxcore-mlt (PATHCPU + Metropolis), mitsuba (comma-separated; needs requirements-bench.txt)")
     return p
 

@@ -65,7 +65,7 @@ def scene_desc(scene: str, size):
     return desc, label
 
 
-PEERS = ("cycles", "luxcore", "luxcore-mlt", "mitsuba")
+PEERS = ("cycles", "cycles-guiding", "luxcore", "luxcore-mlt", "mitsuba")
 
 
 def peer_rows(peer, scene, desc, budgets, nee, max_bounces, threads, size, denoise=False, adaptive=0.0, runs=1):
@@ -81,14 +81,15 @@ def peer_rows(peer, scene, desc, budgets, nee, max_bounces, threads, size, denoi
         simple = peers.simple_scene(desc)
     except peers.Unsupported as e:
         simple, why = None, str(e)
-    if peer == "cycles":
+    if peer in ("cycles", "cycles-guiding"):
         blend = scene if str(scene).lower().endswith(".blend") else None
         if blend is None and simple is None:
             return None, None, f"skipped: {why}"
         imgs, dens, times = [[] for _ in budgets], [[] for _ in budgets], []
         for seed in range(1, runs + 1):
             raw, t, _, *den = peers.cycles_render(budgets, max_bounces, nee, threads, desc=None if blend else desc,
-                                                  blend=blend, size=size, seed=seed, denoise=denoise, adaptive=adaptive)
+                                                  blend=blend, size=size, seed=seed, denoise=denoise, adaptive=adaptive,
+                                                  guiding=peer == "cycles-guiding")
             for i in range(len(budgets)):
                 imgs[i].append(raw[i])
                 if denoise:
@@ -141,7 +142,7 @@ def run(scene="cornell", size=None, budgets=(1.0, 2.0, 4.0), methods=("pt", "gdp
     extra = dict(extra or {})
     cam = desc["camera"]
     what = (f"Cycles for {reference_seconds:g} s (another seed)" if reference == "cycles"
-            else f"pt with NEE at {reference_spp} spp")
+            else f"{reference} with NEE at {reference_spp} spp")
     out(f"# {label} {cam['resolution_x']}x{cam['resolution_y']}, max bounces {max_bounces}, threads={threads or 'all'}, "
         f"reference: {what}, core {gdmlt.BUILD_TARGET}" + (f", settings {extra}" if extra else ""))
     t0 = time.perf_counter()
@@ -156,7 +157,8 @@ def run(scene="cornell", size=None, budgets=(1.0, 2.0, 4.0), methods=("pt", "gdp
                                        desc=None if blend else desc, blend=blend, size=size, seed=s)[0][0]
                   for s in (977, 978)]
     else:
-        halves = [gdmlt.render(sc, method="pt", spp=max(1, reference_spp // 2), nee=True, seed=s, threads=threads,
+        # (bdpt for hard light: caustics and sunlight through glass, which pt barely finds)
+        halves = [gdmlt.render(sc, method=reference, spp=max(1, reference_spp // 2), nee=True, seed=s, threads=threads,
                                max_bounces=max_bounces)["layers"]["Combined"] for s in (12345, 12346)]
     ref, noise = reference_noise(*halves)
     out(f"# reference took {time.perf_counter() - t0:.1f} s; its own noise: relMSE {noise[0]:.3g}, block error "

@@ -462,6 +462,11 @@ def _cycles_child(inp: str, outp: str):
             mat.cycles.emission_sampling = "NONE"
         if scene.world is not None:
             scene.world.cycles.sampling_method = "NONE"
+    if cfg.get("guiding"):
+        # Cycles as an artist renders hard light: path guiding (Intel Open PGL, CPU) on
+        # surfaces, its defaults otherwise (training throughout the render's first 128 samples)
+        scene.cycles.use_guiding = True
+        scene.cycles.use_surface_guiding = True
     if cfg.get("adaptive"):
         # as artists render: Cycles' adaptive sampling (automatic minimum samples)
         scene.cycles.use_adaptive_sampling = True
@@ -516,7 +521,7 @@ def exr_layers(path, rgb_only=True) -> dict:
 
 
 def cycles_render(budgets, max_bounces: int, nee: bool, threads=0, desc=None, blend=None, size=None, seed=1,
-                  denoise=False, adaptive=0.0):
+                  denoise=False, adaptive=0.0, guiding=False):
     """Cycles images after each time limit (one render per budget, Cycles' own time limit),
     of a .blend file or of a scene dict that `simple_scene` accepts (rebuilt in Blender by
     gdmlt.blendscene). Runs in a child process (bpy). Returns (images, times, samples), and
@@ -525,7 +530,7 @@ def cycles_render(budgets, max_bounces: int, nee: bool, threads=0, desc=None, bl
     artists render (0 = off: every pixel sampled alike)."""
     cfg = dict(budgets=list(budgets), max_bounces=max_bounces, nee=nee, threads=threads, seed=seed,
                blend=str(Path(blend).resolve()) if blend else None, size=list(size) if size else None,
-               denoise=bool(denoise), adaptive=float(adaptive))
+               denoise=bool(denoise), adaptive=float(adaptive), guiding=bool(guiding))
     arrays = {}
     if desc is not None:
         simple_scene(desc)  # refuses what the rebuilt scene would not reproduce
