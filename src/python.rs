@@ -875,7 +875,7 @@ fn numpy_to_image(obj: &Bound<'_, PyAny>) -> PyResult<Image> {
 /// the calling thread; if it returns True the render stops and keeps what it has. Every
 /// setting left out (or None) takes `RenderSettings::default()`'s value (`DEFAULT_SETTINGS`).
 #[pyfunction]
-#[pyo3(signature = (scene, method=None, spp=None, time_limit=None, max_bounces=None, nee=None, seed=None, threads=None, reconstruction=None, alpha_rec=None, large_step_probability=None, alpha_target=None, chains=None, progress=None, preview=None, diffuse_bounces=None, glossy_bounces=None, transmission_bounces=None, transparent_bounces=None, clamp_direct=None, clamp_indirect=None, data_passes=None, adaptive_threshold=None, adaptive_min_samples=None, guiding=None))]
+#[pyo3(signature = (scene, method=None, spp=None, time_limit=None, max_bounces=None, nee=None, seed=None, threads=None, reconstruction=None, alpha_rec=None, large_step_probability=None, alpha_target=None, chains=None, progress=None, preview=None, diffuse_bounces=None, glossy_bounces=None, transmission_bounces=None, transparent_bounces=None, clamp_direct=None, clamp_indirect=None, data_passes=None, adaptive_threshold=None, adaptive_min_samples=None, guiding=None, bidirectional=None))]
 #[allow(clippy::too_many_arguments)]
 fn render<'py>(
     py: Python<'py>,
@@ -904,6 +904,7 @@ fn render<'py>(
     adaptive_threshold: Option<f32>,
     adaptive_min_samples: Option<u32>,
     guiding: Option<bool>,
+    bidirectional: Option<bool>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let d = RenderSettings::default();
     let method = match method {
@@ -941,6 +942,7 @@ fn render<'py>(
         adaptive_threshold: adaptive_threshold.unwrap_or(d.adaptive_threshold),
         adaptive_min_samples: adaptive_min_samples.unwrap_or(d.adaptive_min_samples),
         guiding: guiding.unwrap_or(d.guiding),
+        bidirectional: bidirectional.unwrap_or(d.bidirectional),
         ..d
     };
     settings.validate().map_err(|e| verr(e.to_string()))?;
@@ -1076,6 +1078,7 @@ fn default_settings(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
     out.set_item("adaptive_threshold", shortest(d.adaptive_threshold))?;
     out.set_item("adaptive_min_samples", d.adaptive_min_samples)?;
     out.set_item("guiding", d.guiding)?;
+    out.set_item("bidirectional", d.bidirectional)?;
     Ok(out)
 }
 

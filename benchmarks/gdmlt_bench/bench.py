@@ -192,6 +192,8 @@ def run(scene="cornell", size=None, budgets=(1.0, 2.0, 4.0), methods=("pt", "gdp
 
                         res = auto_render(desc, opts)
                         notes.append(f"auto at {b:g} s (seed {seed}) chose {res['stats']['auto']['method']}")
+                    elif m.endswith("-bd"):  # a Metropolis method over bidirectional states
+                        res = gdmlt.render(sc, method=m[:-3], bidirectional=True, **opts)
                     else:
                         res = gdmlt.render(sc, method=m, **opts)
                     layers = res["layers"]

@@ -137,6 +137,12 @@ def build_parser():
                             "at equal time; on directly lit scenes and the built-in gap it costs more than it gains "
                             "(docs/benchmarks.md)")
     guide.add_argument("--no-guiding", dest="guiding", action="store_false", help="pt: no path guiding (default)")
+    bidir = r.add_mutually_exclusive_group()
+    bidir.add_argument("--bidirectional", dest="bidirectional", action="store_true", default=None,
+                       help="pssmlt: each Markov state is a whole bidirectional sample (paths from the camera and "
+                            "the lights, every join; docs/bidirectional.md)")
+    bidir.add_argument("--no-bidirectional", dest="bidirectional", action="store_false",
+                       help="pssmlt: Markov states are camera paths (the paper's setting; default)")
     r.add_argument("--seed", type=_seed, help=f"random seed (default {D['seed']})")
     den = r.add_mutually_exclusive_group()
     den.add_argument("--denoise", dest="denoise", action="store_true", default=None,
@@ -189,7 +195,8 @@ BOUNCE_KINDS = ("diffuse", "glossy", "transmission", "transparent")
 def _settings(args):
     return {k: v for k, v in {
         "method": args.method, "spp": args.spp, "time_limit": args.time_limit, "max_bounces": args.max_bounces,
-        "nee": args.nee, "guiding": args.guiding, "seed": args.seed, "threads": args.threads,
+        "nee": args.nee, "guiding": args.guiding, "bidirectional": args.bidirectional, "seed": args.seed,
+        "threads": args.threads,
         "reconstruction": args.reconstruction, "alpha_rec": args.alpha_rec,
         "alpha_target": args.alpha_target, "large_step_probability": args.large_step_probability,
         "chains": args.chains, "clamp_direct": args.clamp_direct, "clamp_indirect": args.clamp_indirect,
@@ -226,7 +233,8 @@ def _flag(s):
 # parsers (argparse), and so do the settings a USD stage stores (customLayerData "gdmlt"),
 # which no CLI parser saw. The core validates again (gdmlt.render raises ValueError).
 SETTING_PARSERS = {"method": _choice(*RENDER_METHODS), "spp": _positive_int, "time_limit": _nonneg_float,
-                   "max_bounces": _bounces, "nee": _flag, "guiding": _flag, "seed": _seed, "threads": _threads,
+                   "max_bounces": _bounces, "nee": _flag, "guiding": _flag, "bidirectional": _flag, "seed": _seed,
+                   "threads": _threads,
                    **{f"{k}_bounces": _bounces for k in BOUNCE_KINDS},
                    "clamp_direct": _nonneg_float, "clamp_indirect": _nonneg_float,
                    "reconstruction": _choice("l1", "l2"), "alpha_rec": _nonneg_float, "alpha_target": _pos_float,

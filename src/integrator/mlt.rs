@@ -155,10 +155,19 @@ impl Splats {
     }
 }
 
-/// A base path evaluated at one primary-sample vector; `f(d)` and `splats(d)` per direction.
+/// A base path evaluated at one primary-sample vector; `f(d)` and `splats(d)` per direction;
+/// with bidirectional states, light tracing's splats besides (primal, any pixel).
 struct Evaluated {
     splats: [Splats; 4],
     f: [f32; 4],
+    light_tracing: Vec<(usize, Spectrum)>,
+}
+
+/// What a state's evaluation reuses: the recorded camera path, and bdpt's subpaths.
+#[derive(Default)]
+struct Workspace {
+    path: Path,
+    bd: super::bdpt::Scratch,
 }
 
 struct Target<'a> {
@@ -169,11 +178,14 @@ struct Target<'a> {
     direct_apart: bool,
     w: usize,
     h: usize,
+    /// `pssmlt` over bidirectional paths: each state is a whole bdpt sample (every strategy,
+    /// light tracing's splats included; Veach 1997 §11.3, as Mitsuba 0.6 and LuxCore).
+    bidirectional: Option<super::bdpt::Context<'a>>,
 }
 
 impl Target<'_> {
     /// Evaluates the state; for the gradient target only direction `only` (all four if None).
-    fn evaluate<S: Sampler>(&self, sampler: &mut S, path: &mut Path, only: Option<usize>) -> Evaluated {
+    fn evaluate<S: Sampler>(&self, sampler: &mut S, ws: &mut Workspace, only: Option<usize>) -> Evaluated {
         // The primary sample picks the pixel (its integer part) and, as pt's samples do, the
         // offset from the pixel's centre through the scene's pixel filter (its fraction): the
         // splats go to that pixel, which so estimates the image convolved with the filter.
@@ -183,8 +195,33 @@ impl Target<'_> {
         let frac = Vec2::new(fx - px as f32, fy - py as f32);
         let raster = self.scene.camera.pixel_raster(px as f32, py as f32, frac);
         let pixel = py * self.w + px;
+        let mut ev = Evaluated { splats: [Splats::default(); 4], f: [0.0; 4], light_tracing: Vec::new() };
+        if let Some(ctx) = &self.bidirectional {
+            // the image is b/mpp × the splats: light tracing's per light path ÷ the pixels
+            let (w, scale) = (self.w, 1.0 / (self.w * self.h) as f32);
+            let mut lt = Vec::new();
+            let mut streams = super::bdpt::Streams { cam: sampler, light: None };
+            let c = super::bdpt::sample(ctx, &mut ws.bd, &mut streams, px, py, frac, |x, y, v| {
+                if is_finite_spectrum(v) {
+                    lt.push((y * w + x, v * scale))
+                }
+            });
+            if !is_finite_spectrum(c.radiance) {
+                return ev;
+            }
+            // (camera-seen emission is the direct pass's)
+            let l = c.radiance - c.very_direct;
+            let f = abs_luminance(l) + lt.iter().map(|(_, v)| abs_luminance(*v)).sum::<f32>();
+            for k in 0..4 {
+                ev.f[k] = f;
+                ev.splats[k].pixel = pixel;
+                ev.splats[k].push(PRIMAL, pixel, l);
+            }
+            ev.light_tracing = lt;
+            return ev;
+        }
+        let path = &mut ws.path;
         let c = trace_path(self.scene, &self.settings.path, raster, sampler, Some(path));
-        let mut ev = Evaluated { splats: [Splats::default(); 4], f: [0.0; 4] };
         if !is_finite_spectrum(c.radiance) {
             return ev;
         }
@@ -318,6 +355,18 @@ impl Log {
         }
     }
 
+    /// `splat` for the state's direction `d` and its light-tracing splats.
+    fn splat_state(&mut self, ev: &Evaluated, d: usize, weight: f64) {
+        self.splat(&ev.splats[d], weight);
+        if weight <= 0.0 || !weight.is_finite() {
+            return;
+        }
+        for &(pixel, v) in &ev.light_tracing {
+            let v = [(v.x as f64 * weight) as f32, (v.y as f64 * weight) as f32, (v.z as f64 * weight) as f32];
+            self.push(PRIMAL, pixel, v);
+        }
+    }
+
     /// Sorts the round's splats by band (a stable counting sort: each band keeps the order
     /// the splats were made in).
     fn sort_by_band(&mut self) {
@@ -348,7 +397,7 @@ struct Chain {
     cur: Evaluated,
     d: usize,
     remaining: u64,
-    path: Path,
+    ws: Workspace,
 }
 
 /// One Metropolis–Hastings step with expected-value splatting (docs/algorithm.md §2).
@@ -361,11 +410,11 @@ fn mutate(target: &Target, c: &mut Chain, log: &mut Log, gradient: bool) {
     } else {
         c.d
     };
-    let prop = target.evaluate(&mut c.s, &mut c.path, Some(d_new));
+    let prop = target.evaluate(&mut c.s, &mut c.ws, Some(d_new));
     let (fc, fp) = (c.cur.f[c.d], prop.f[d_new]);
     let a = if fc > 0.0 { (fp / fc).min(1.0) } else { 1.0 };
     if fp > 0.0 {
-        log.splat(&prop.splats[d_new], a as f64 / fp as f64);
+        log.splat_state(&prop, d_new, a as f64 / fp as f64);
     }
     if c.s.is_large_step() {
         // an independent uniform state (u, d): one more sample of b = E[F]
@@ -373,7 +422,7 @@ fn mutate(target: &Target, c: &mut Chain, log: &mut Log, gradient: bool) {
         log.large_steps += 1;
     }
     if fc > 0.0 {
-        log.splat(&c.cur.splats[c.d], (1.0 - a) as f64 / fc as f64);
+        log.splat_state(&c.cur, c.d, (1.0 - a) as f64 / fc as f64);
     }
     if c.s.rng().next_1d() < a {
         c.s.accept();
@@ -497,10 +546,21 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl,
     let half = first.sums_apart();
     first.add(scene, settings.seed, DIRECT_SPP.0, control);
     let q = relative_variance(&half, &first.sums_apart(), DIRECT_SPP.0 / 2);
-    let direct_apart = q.is_some_and(|q| q <= DIRECT_APART_MAX_RELATIVE_VARIANCE);
+    // (bidirectional states render all but camera-seen emission: their strategies do not
+    // split by the direct pass's terms)
+    let bidirectional = settings.bidirectional && !gradient;
+    let direct_apart = !bidirectional && q.is_some_and(|q| q <= DIRECT_APART_MAX_RELATIVE_VARIANCE);
     drop(half);
     first.settle(direct_apart);
-    let target = Target { scene, settings, gradient, direct_apart, w, h };
+    let target = Target {
+        scene,
+        settings,
+        gradient,
+        direct_apart,
+        w,
+        h,
+        bidirectional: bidirectional.then(|| super::bdpt::Context::new(scene, &settings.path, None)),
+    };
     let p_large = settings.large_step_probability;
     let boot_seed = mix64(settings.seed ^ 0xB007);
 
@@ -509,14 +569,14 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl,
     let boot: Vec<f32> = (0..n_boot)
         .into_par_iter()
         .map_init(
-            || (Path::default(), PssSampler::new(boot_seed, 0, p_large)),
-            |(path, s), i| {
+            || (Workspace::default(), PssSampler::new(boot_seed, 0, p_large)),
+            |(ws, s), i| {
                 if control.is_cancelled() {
                     return 0.0; // Esc during the bootstrap: finish at once
                 }
                 s.restart(boot_seed, i as u64);
                 s.start_iteration();
-                let ev = target.evaluate(s, path, None);
+                let ev = target.evaluate(s, ws, None);
                 ev.f.iter().sum::<f32>() * 0.25
             },
         )
@@ -546,9 +606,9 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl,
                 ChainStart::Dimmest => dimmest?,
             };
             let mut s = PssSampler::new(boot_seed, start as u64, p_large);
-            let mut path = Path::default();
+            let mut ws = Workspace::default();
             s.start_iteration();
-            let cur = target.evaluate(&mut s, &mut path, None);
+            let cur = target.evaluate(&mut s, &mut ws, None);
             s.accept();
             // its own proposal stream (two chains may start from the same bootstrap state)
             s.reseed(chain_seed ^ 0x5EED, chain as u64);
@@ -558,7 +618,7 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl,
                 acc -= cur.f[d];
                 d += 1;
             }
-            Some(Chain { s, cur, d, remaining: mutations, path })
+            Some(Chain { s, cur, d, remaining: mutations, ws })
         })
         .collect();
     let no_light = starts.total <= 0.0;

@@ -84,6 +84,9 @@ pub struct RenderSettings {
     pub adaptive_min_samples: u32,
     /// `pt`: path guiding (guiding/mod.rs), learned during the render.
     pub guiding: bool,
+    /// `pssmlt`: each Markov state is a whole bidirectional sample (integrator/bdpt.rs, every
+    /// strategy) instead of a camera path.
+    pub bidirectional: bool,
 }
 
 /// Where Metropolis chains start.
@@ -116,6 +119,7 @@ impl Default for RenderSettings {
             adaptive_threshold: 0.0,
             adaptive_min_samples: 0,
             guiding: false,
+            bidirectional: false,
         }
     }
 }
@@ -345,6 +349,12 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl)
     } else {
         settings
     };
+    if settings.bidirectional && settings.method != Method::Pssmlt {
+        warnings.push(format!(
+            "bidirectional Markov states apply to pssmlt only; {} renders without them",
+            settings.method.name()
+        ));
+    }
     if settings.guiding && settings.method != Method::Pt {
         warnings.push(format!("path guiding applies to pt only; {} renders without it", settings.method.name()));
     }
