@@ -11,7 +11,7 @@ export PATH := $(abspath $(VENV))/bin:$(PATH)
 # Keep Blender's user config out of $HOME during demos and tests.
 export BLENDER_USER_RESOURCES := $(abspath out/blender-user)
 
-.PHONY: all setup build demo test lint test-rust test-python examples addon bench bench-monastery bench-peers bench-lights bench-denoise scalebench skipbench raybench clean
+.PHONY: all setup build demo test lint test-rust test-python examples addon bench bench-monastery bench-peers bench-lights bench-hard bench-denoise scalebench skipbench raybench clean
 
 all: demo
 
@@ -108,6 +108,19 @@ bench-lights: build
 	@for s in $(BENCH_SCENES); do \
 		$(BENCH) bench --scene out/bench/$$s.blend --budgets 1,2,4 --methods pt,gdpt,gdpssmlt \
 			--modes nee --max-bounces 4 --reference-spp 4096 --peers cycles --plot out/bench/$$s.png || exit 1; \
+	done
+
+# Hard light (issue 44): a room lit through a glazed window and caustics on a table, every
+# method that starts paths from the lights against pt and Cycles (raw, with path guiding,
+# with OIDN), reference bdpt at 4096 spp with its own noise measured. About 35 minutes.
+HARD_SCENES := window caustics
+bench-hard: build
+	$(PY) -m pip install -q -r requirements-bench.txt
+	$(PY) tools/make_bench_scenes.py out/bench
+	@for s in $(HARD_SCENES); do \
+		$(BENCH) bench --scene out/bench/$$s.blend --budgets 2,10 --methods pt,bdpt,pssmlt-bd,gdpssmlt \
+			--modes nee --max-bounces 12 --reference bdpt --reference-spp 4096 --peers cycles,cycles-guiding \
+			--denoise || exit 1; \
 	done
 
 # As artists render, denoiser on (issue 16): every method, `auto` (the default) and Cycles,

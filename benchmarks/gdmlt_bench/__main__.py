@@ -103,9 +103,10 @@ def main(argv=None):
         except ValueError:
             parser.error(f"--budgets: '{args.budgets}' is not a comma-separated list of seconds")
         methods = tuple(m.strip() for m in args.methods.split(",") if m.strip())
-        bad = [m for m in methods if m not in RENDER_METHODS]
+        # (NAME-bd: a Metropolis method over bidirectional states, `bidirectional=True`)
+        bad = [m for m in methods if m not in RENDER_METHODS and m not in ("pssmlt-bd",)]
         if bad:
-            parser.error(f"--methods: unknown {', '.join(bad)} (choose from {', '.join(RENDER_METHODS)})")
+            parser.error(f"--methods: unknown {', '.join(bad)} (choose from {', '.join(RENDER_METHODS)}, pssmlt-bd)")
         mode_of = {"nee": True, "naive": False}
         modes = tuple(mode_of.get(m.strip()) for m in args.modes.split(","))
         if None in modes:

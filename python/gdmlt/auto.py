@@ -11,7 +11,7 @@ The pilot (`choose`):
    whole image when it is smaller), so that each pilot render gets many samples per pixel
    in a short time on pixels that are typical of the frame — seen through the render's own
    scene (`Scene.set_camera`), not a second build of it.
-2. **Two independent renders per candidate** (`pt`, `gdpt`, `gdpssmlt`; seeds differ) of
+2. **Two independent renders per candidate** (`pt`, `gdpt`, `gdpssmlt`, `bdpt`; seeds differ) of
    `t` seconds each, with the render's own bounce and NEE settings.
 3. **Error per second**: half the mean relative squared difference of the two renders,
    (a − b)² / (((a + b)/2)² + 0.01), estimates one render's relative variance `v` after `t`
@@ -52,8 +52,10 @@ Parameters (defaults once, here): `DENOISE_CROP = 96`, `DENOISED_MARGIN = 2.0`, 
 4.4–5.0% of a 1 s budget, where 0.02 s made it 8.5–8.9%, and the same choice in all 9),
 `BOOTSTRAP_MARGIN = 1.5` (gdpssmlt is not tried when its bootstrap, predicted from `gdpt`'s
 pilot speed, would outlast a pilot render by this factor),
-`CANDIDATES = ("pt", "gdpt", "gdpssmlt")` (`pssmlt` is left out: it measured behind
-`gdpssmlt` on every benchmark scene).
+`CANDIDATES = ("pt", "gdpt", "gdpssmlt", "bdpt")` (`pssmlt` is left out: it measured behind
+`gdpssmlt` on every benchmark scene; `bdpt`, last so that the others keep their pilot seeds,
+wins where light comes through glass: on the window bench room, 2 and 10 s, its raw relMSE
+was 0.5–1% of `pt`'s and after OIDN 18–22% — docs/bidirectional.md).
 """
 
 import copy
@@ -62,7 +64,7 @@ import time
 
 import numpy as np
 
-CANDIDATES = ("pt", "gdpt", "gdpssmlt")
+CANDIDATES = ("pt", "gdpt", "gdpssmlt", "bdpt")
 PILOT_FRACTION = 0.05
 MIN_PILOT_RENDER = 0.01
 MAX_PILOT_SHARE = 0.1

@@ -167,6 +167,11 @@ fn facing(scene: &Scene, v: &Vertex, wo: Vec3) -> Option<(Bsdf, Frame)> {
     if wo.dot(si.ng) >= 0.0 {
         return Some((bsdf, si.frame));
     }
+    if !bsdf.transmits() {
+        // no non-delta lobe crosses the surface: nothing reaches the other side's pairs
+        // (value and density 0), so the surface is not rebuilt to say so
+        return None;
+    }
     let hit = v.hit?;
     let other = SurfaceInteraction { camera: si.camera, ..scene.interaction(&hit, -wo) };
     Some((scene.bsdf_at(&other), other.frame))
@@ -1169,18 +1174,15 @@ fn render_with(scene: &Scene, settings: &RenderSettings, control: &RenderControl
             }
             control.work_done.fetch_add(w as u64 * (to - done) as u64, Ordering::Relaxed);
         });
-        if control.should_stop() && done > 0 {
-            // (a pass cut short: its rows are uneven; the light paths of the whole passes stay)
-        }
         done = to;
-        control.offer_preview(|| combined(&film, &splats, done));
+        control.offer_preview(|| combined(&film, &splats));
         if t0.elapsed().as_secs_f64() < 0.1 {
             batch = (batch * 2).min(64);
         }
     }
     let (spp_min, spp_max) = film.sample_count_range();
     let mut layers = vec![
-        ("Combined".into(), combined(&film, &splats, spp_max.max(1))),
+        ("Combined".into(), combined(&film, &splats)),
         ("Denoising Albedo".into(), film.albedo()),
         ("Denoising Normal".into(), film.normal()),
     ];
@@ -1201,10 +1203,11 @@ fn render_with(scene: &Scene, settings: &RenderSettings, control: &RenderControl
 }
 
 /// The image: each pixel's camera samples averaged, plus light tracing's splats over the
-/// light paths traced (one per camera sample of every pixel).
-fn combined(film: &Film, splats: &Splats, spp: u32) -> Image {
+/// light paths traced (one per camera sample: a pass a time limit cut short counts the
+/// samples it took).
+fn combined(film: &Film, splats: &Splats) -> Image {
     let mut img = film.color();
-    let n = (splats.width * splats.height) as f64 * spp.max(1) as f64;
+    let n = film.total_samples().max(1) as f64;
     for (c, s) in img.data.iter_mut().zip(&splats.data) {
         *c += (f32::from_bits(s.load(Ordering::Relaxed)) as f64 / n) as f32;
     }

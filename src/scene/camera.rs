@@ -29,6 +29,8 @@ impl CameraRay {
 #[derive(Clone, Debug)]
 pub struct Camera {
     to_world: Mat4,
+    /// Its inverse (world → camera), for light tracing's projections.
+    to_camera: Mat4,
     projection: Projection,
     /// The rendered image (the render region when there is one).
     pub width: u32,
@@ -226,6 +228,7 @@ impl Camera {
         };
         Ok(Camera {
             to_world,
+            to_camera: to_world.inverse(),
             projection: d.projection,
             width: size.0,
             height: size.1,
@@ -470,8 +473,7 @@ impl Camera {
         if !self.connectible() {
             return None;
         }
-        let inv = self.to_world.inverse();
-        let (pc, oc) = (inv.transform_point3(p), inv.transform_point3(lens));
+        let (pc, oc) = (self.to_camera.transform_point3(p), self.to_camera.transform_point3(lens));
         let depth = -pc.z;
         if !(depth > self.clip_start && depth < self.clip_end) {
             return None;

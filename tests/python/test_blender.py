@@ -577,7 +577,7 @@ def test_mirror_and_glass_agree_with_cycles(bpy_mod, tmp_out):
     assert_agrees_with_cycles(bpy_mod, build, tmp_out, "specular", block=5)
 
 
-@pytest.mark.parametrize("method", ["PT", "GDPT"])
+@pytest.mark.parametrize("method", ["PT", "GDPT", "BDPT"])
 def test_bounces_per_kind_agree_with_cycles(bpy_mod, tmp_out, method):
     """Issue 17: Light Paths limits per kind (Diffuse 0, Glossy 1, Transmission 2, total 6)
     set alike in Cycles and GDMLT on the mirror/glass/plastic scene: the images agree; and
@@ -753,7 +753,7 @@ def test_spot_sun_world_and_all_lights_together_agree_with_cycles(bpy_mod, tmp_o
     assert_agrees_with_cycles(bpy_mod, build, tmp_out, kind, block=5)
 
 
-@pytest.mark.parametrize("method", ["PT", "GDPSSMLT"])
+@pytest.mark.parametrize("method", ["PT", "GDPSSMLT", "BDPT"])
 def test_transparent_film_agrees_with_cycles(bpy_mod, tmp_out, method):
     """Issue 17: Film > Transparent was ignored (alpha 1, the world in the image). With it, the
     world seen by the camera leaves the colour and becomes alpha, as in Cycles: RGBA block
@@ -825,12 +825,15 @@ def _hdri_scene(bpy, engine, spp, seed):
     return scene
 
 
-@pytest.mark.parametrize("kind", ["ortho", "dof"])
-def test_orthographic_and_depth_of_field_cameras_agree_with_cycles(bpy_mod, tmp_out, kind):
+@pytest.mark.parametrize("kind, method", [("ortho", None), ("dof", None), ("ortho", "BDPT"), ("dof", "BDPT")])
+def test_orthographic_and_depth_of_field_cameras_agree_with_cycles(bpy_mod, tmp_out, kind, method):
     """The lights scene through an orthographic camera, and through a perspective one with a
-    wide aperture (f/0.8) focused on the card: GDMLT against Cycles."""
+    wide aperture (f/0.8) focused on the card: GDMLT against Cycles — also with `bdpt`, whose
+    light tracing goes through the lens (and not through an orthographic camera)."""
     def build(bpy, engine, spp, seed):
         scene = open_scene(bpy, "lights", engine, spp, seed, keep={"Area", "Point"})
+        if engine == "GDMLT" and method:
+            scene.gdmlt.method = method
         cam = scene.camera.data
         if kind == "ortho":
             cam.type, cam.ortho_scale = "ORTHO", 6.0
@@ -840,7 +843,7 @@ def test_orthographic_and_depth_of_field_cameras_agree_with_cycles(bpy_mod, tmp_
             cam.dof.aperture_fstop = 0.8
         return scene
 
-    assert_agrees_with_cycles(bpy_mod, build, tmp_out, kind, block=5)
+    assert_agrees_with_cycles(bpy_mod, build, tmp_out, f"{kind}{method}", block=5)
 
 
 @pytest.mark.parametrize("kind", ["full", "narrow", "equidistant", "equisolid"])
