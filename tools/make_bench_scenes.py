@@ -367,6 +367,38 @@ def window(bpy):
     return scene
 
 
+def lampshade(bpy):
+    """Hard light, the shaded-bulb kind: an evening room (4 × 4 × 2.6 m, no world light) lit
+    only by a bulb (a point lamp of radius 3 cm) inside an opaque cylindrical shade open at
+    top and bottom on a floor lamp: the light leaves through the two openings onto the
+    ceiling and the floor and reaches the rest of the room after bouncing."""
+    scene = _reset(bpy)
+    plaster = _material(bpy, "Plaster", (0.75, 0.72, 0.68), "DIFFUSE")
+    floor = _material(bpy, "Floor", (0.5, 0.35, 0.22), roughness=0.4)
+
+    def box(name, loc, size, mat):
+        _box(bpy, scene, name, loc, size, mat)
+
+    box("Floor", (0, 0, -0.05), (4.2, 4.2, 0.1), floor)
+    box("Ceiling", (0, 0, 2.65), (4.2, 4.2, 0.1), plaster)
+    box("WallBack", (0, 2.05, 1.3), (4.2, 0.1, 2.6), plaster)
+    box("WallFront", (0, -2.05, 1.3), (4.2, 0.1, 2.6), plaster)
+    box("WallL", (-2.05, 0, 1.3), (0.1, 4.2, 2.6), plaster)
+    box("WallR", (2.05, 0, 1.3), (0.1, 4.2, 2.6), plaster)
+    box("Sofa", (-0.6, 1.3, 0.25), (1.8, 0.8, 0.5), _material(bpy, "Fabric", (0.3, 0.35, 0.5), "DIFFUSE"))
+    box("Pole", (1.2, 1.4, 0.7), (0.03, 0.03, 1.4), _material(bpy, "Metal", (0.2, 0.2, 0.2), roughness=0.3))
+    # the shade: an open cylinder (both sides opaque cloth), 40 cm across, 35 cm tall
+    bpy.ops.mesh.primitive_cylinder_add(radius=0.2, depth=0.35, location=(1.2, 1.4, 1.55), vertices=48,
+                                        end_fill_type="NOTHING")
+    bpy.ops.object.shade_smooth()
+    bpy.context.object.name = "Shade"
+    _add(bpy, scene, bpy.context.object, _material(bpy, "Cloth", (0.8, 0.7, 0.55), "DIFFUSE"))
+    _light(bpy, scene, "POINT", "Bulb", (1.2, 1.4, 1.55), energy=40.0, shadow_soft_size=0.03)
+    _camera(bpy, scene, (-1.5, -1.8, 1.4), (85, 0, -35), lens=20)
+    _settings(scene, size=128, bounces=12)
+    return scene
+
+
 def main(argv):
     out = Path(argv[0] if argv else "out/bench").resolve()
     out.mkdir(parents=True, exist_ok=True)
@@ -390,7 +422,9 @@ def main(argv):
     bpy.ops.wm.save_as_mainfile(filepath=str(out / "caustics.blend"))
     window(bpy)
     bpy.ops.wm.save_as_mainfile(filepath=str(out / "window.blend"))
-    print(f"wrote {len(LIGHT_SETS) + 6} scenes to {out}")
+    lampshade(bpy)
+    bpy.ops.wm.save_as_mainfile(filepath=str(out / "lampshade.blend"))
+    print(f"wrote {len(LIGHT_SETS) + 7} scenes to {out}")
 
 
 if __name__ == "__main__":
