@@ -263,7 +263,8 @@ impl Context<'_> {
 /// Light found by the camera subpath (strategy s = 0).
 #[derive(Clone, Copy, Debug)]
 struct Emission {
-    /// Camera vertices before it (C₀ … C_{t−1}).
+    /// The camera subpath's length when it was found: its chain is the vertices the walk
+    /// scattered at before index `t` (branch vertices on the way are not on it).
     t: usize,
     light: Vertex,
     /// Throughput × radiance.
