@@ -299,6 +299,19 @@ def _glass(bpy, name, roughness=0.0, ior=1.5):
     return glass
 
 
+def _room(bpy, scene, walls, floor, back=True):
+    """A closed 4 × 4 × 2.6 m room around the origin (its back wall at y = 2 left to the
+    caller when `back` is False): floor, ceiling and walls of 10 cm boxes."""
+    for name, loc, size, mat in (("Floor", (0, 0, -0.05), (4.2, 4.2, 0.1), floor),
+                                 ("Ceiling", (0, 0, 2.65), (4.2, 4.2, 0.1), walls),
+                                 ("WallFront", (0, -2.05, 1.3), (4.2, 0.1, 2.6), walls),
+                                 ("WallL", (-2.05, 0, 1.3), (0.1, 4.2, 2.6), walls),
+                                 ("WallR", (2.05, 0, 1.3), (0.1, 4.2, 2.6), walls)):
+        _box(bpy, scene, name, loc, size, mat)
+    if back:
+        _box(bpy, scene, "WallBack", (0, 2.05, 1.3), (4.2, 0.1, 2.6), walls)
+
+
 def caustics(bpy):
     """Hard light, the caustic kind: a glass ball (IOR 1.5) and a polished metal ring on a
     wooden table in a dim 4 × 4 × 2.6 m room, lit by one small lamp (a point lamp of radius
@@ -310,12 +323,7 @@ def caustics(bpy):
     def box(name, loc, size, mat):
         _box(bpy, scene, name, loc, size, mat)
 
-    box("Floor", (0, 0, -0.05), (4.2, 4.2, 0.1), plaster)
-    box("Ceiling", (0, 0, 2.65), (4.2, 4.2, 0.1), plaster)
-    box("WallBack", (0, 2.05, 1.3), (4.2, 0.1, 2.6), plaster)
-    box("WallFront", (0, -2.05, 1.3), (4.2, 0.1, 2.6), plaster)
-    box("WallL", (-2.05, 0, 1.3), (0.1, 4.2, 2.6), plaster)
-    box("WallR", (2.05, 0, 1.3), (0.1, 4.2, 2.6), plaster)
+    _room(bpy, scene, plaster, plaster)
     box("Table", (0, 0.2, 0.35), (1.6, 1.0, 0.7), _material(bpy, "Wood", (0.55, 0.38, 0.22), "DIFFUSE"))
     bpy.ops.mesh.primitive_uv_sphere_add(radius=0.15, location=(-0.25, 0.25, 0.85), segments=48, ring_count=24)
     bpy.ops.object.shade_smooth()
@@ -348,11 +356,7 @@ def window(bpy):
     def box(name, loc, size, mat):
         _box(bpy, scene, name, loc, size, mat)
 
-    box("Floor", (0, 0, -0.05), (4.2, 4.2, 0.1), floor)
-    box("Ceiling", (0, 0, 2.65), (4.2, 4.2, 0.1), plaster)
-    box("WallFront", (0, -2.05, 1.3), (4.2, 0.1, 2.6), plaster)
-    box("WallL", (-2.05, 0, 1.3), (0.1, 4.2, 2.6), plaster)
-    box("WallR", (2.05, 0, 1.3), (0.1, 4.2, 2.6), plaster)
+    _room(bpy, scene, plaster, floor, back=False)
     # the back wall (y = 2, 10 cm thick) with the window x ∈ [-0.6, 0.6], z ∈ [1.0, 2.0]
     box("WallBackL", (-1.35, 2.05, 1.3), (1.5, 0.1, 2.6), plaster)
     box("WallBackR", (1.35, 2.05, 1.3), (1.5, 0.1, 2.6), plaster)
@@ -379,12 +383,7 @@ def lampshade(bpy):
     def box(name, loc, size, mat):
         _box(bpy, scene, name, loc, size, mat)
 
-    box("Floor", (0, 0, -0.05), (4.2, 4.2, 0.1), floor)
-    box("Ceiling", (0, 0, 2.65), (4.2, 4.2, 0.1), plaster)
-    box("WallBack", (0, 2.05, 1.3), (4.2, 0.1, 2.6), plaster)
-    box("WallFront", (0, -2.05, 1.3), (4.2, 0.1, 2.6), plaster)
-    box("WallL", (-2.05, 0, 1.3), (0.1, 4.2, 2.6), plaster)
-    box("WallR", (2.05, 0, 1.3), (0.1, 4.2, 2.6), plaster)
+    _room(bpy, scene, plaster, floor)
     box("Sofa", (-0.6, 1.3, 0.25), (1.8, 0.8, 0.5), _material(bpy, "Fabric", (0.3, 0.35, 0.5), "DIFFUSE"))
     box("Pole", (1.2, 1.4, 0.7), (0.03, 0.03, 1.4), _material(bpy, "Metal", (0.2, 0.2, 0.2), roughness=0.3))
     # the shade: an open cylinder (both sides opaque cloth), 40 cm across, 35 cm tall

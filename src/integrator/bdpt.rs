@@ -578,6 +578,48 @@ struct FullPath<'a> {
 }
 
 impl<'a> FullPath<'a> {
+    /// The camera chain ending at `camera[camera_end]` (t vertices), then the light point
+    /// `light`: found by the camera walk (k = 0) or by a light sample (k = 1).
+    fn to_light(
+        camera: &'a [Vertex],
+        reals: &'a [u32],
+        camera_end: usize,
+        t: usize,
+        light: &'a Vertex,
+        k: usize,
+    ) -> Self {
+        FullPath {
+            light: &[],
+            light_reals: &[],
+            light_end: 0,
+            camera,
+            camera_reals: reals,
+            camera_end,
+            s: 1,
+            t,
+            k,
+            ls: Some(light),
+            cs: None,
+        }
+    }
+
+    /// The light chain ending at `light[light_end]` (s vertices) joined to the camera chain
+    /// ending at `camera[camera_end]` (t vertices), or to the lens point `lens` (t = 1).
+    #[allow(clippy::too_many_arguments)]
+    fn joined(
+        light: &'a [Vertex],
+        light_reals: &'a [u32],
+        light_end: usize,
+        s: usize,
+        camera: &'a [Vertex],
+        camera_reals: &'a [u32],
+        camera_end: usize,
+        t: usize,
+        lens: Option<&'a Vertex>,
+    ) -> Self {
+        FullPath { light, light_reals, light_end, camera, camera_reals, camera_end, s, t, k: s, ls: None, cs: lens }
+    }
+
     #[inline]
     fn n(&self) -> usize {
         self.s + self.t
@@ -944,19 +986,7 @@ pub(crate) fn sample(
             }
             continue;
         }
-        let fp = FullPath {
-            light: &[],
-            light_reals: &[],
-            light_end: 0,
-            camera,
-            camera_reals: cr,
-            camera_end: cr[t - 1] as usize,
-            s: 1,
-            t,
-            k: 0,
-            ls: Some(&e.light),
-            cs: None,
-        };
+        let fp = FullPath::to_light(camera, cr, cr[t - 1] as usize, t, &e.light, 0);
         if ctx.kind_limits && !ctx.kinds_allowed(&fp, NO_LABEL, NO_LABEL) {
             continue;
         }
@@ -1007,19 +1037,7 @@ pub(crate) fn sample(
             lv.ng = if inf { Vec3::ZERO } else { scene.light_normal(li, lsmp.p) };
             lv.delta = lsmp.is_delta;
             lv.pdf_fwd = ctx.origin_pdf(&lv);
-            let fp = FullPath {
-                light: &[],
-                light_reals: &[],
-                light_end: 0,
-                camera,
-                camera_reals: cr,
-                camera_end: jc,
-                s: 1,
-                t,
-                k: 1,
-                ls: Some(&lv),
-                cs: None,
-            };
+            let fp = FullPath::to_light(camera, cr, jc, t, &lv, 1);
             let label = if ctx.kind_limits { join_label(scene, b, wo, lsmp.wi, u_label) } else { NO_LABEL };
             if ctx.kind_limits && !ctx.kinds_allowed(&fp, NO_LABEL, label) {
                 continue;
@@ -1088,19 +1106,7 @@ pub(crate) fn sample(
                             if !(fw > 0.0) || !is_finite_spectrum(value) {
                                 continue;
                             }
-                            let fp = FullPath {
-                                light,
-                                light_reals: lr,
-                                light_end: jl,
-                                camera: &[],
-                                camera_reals: &[],
-                                camera_end: 0,
-                                s,
-                                t: 1,
-                                k: s,
-                                ls: None,
-                                cs: Some(&cam),
-                            };
+                            let fp = FullPath::joined(light, lr, jl, s, &[], &[], 0, 1, Some(&cam));
                             if ctx.kind_limits && !ctx.kinds_allowed(&fp, label, NO_LABEL) {
                                 continue;
                             }
@@ -1134,19 +1140,7 @@ pub(crate) fn sample(
             // (a ray between surfaces: what casts no shadow still blocks it, as in Cycles,
             // where only shadow rays to lights pass such objects)
             let Some(tr) = scene.segment_transmittance(bsi, a.p, false) else { continue };
-            let fp = FullPath {
-                light,
-                light_reals: lr,
-                light_end: jl,
-                camera,
-                camera_reals: cr,
-                camera_end: jc,
-                s,
-                t,
-                k: s,
-                ls: None,
-                cs: None,
-            };
+            let fp = FullPath::joined(light, lr, jl, s, camera, cr, jc, t, None);
             if ctx.kind_limits {
                 let (ll, lc) = (join_label(scene, a, w, w_prev, u_label), join_label(scene, b, wo_b, -w, u_label));
                 if !ctx.kinds_allowed(&fp, ll, lc) {

@@ -432,38 +432,7 @@ impl Scene {
             return self.visible(si, ls).then_some((Spectrum::ONE, false));
         }
         let at_infinity = !ls.dist.is_finite();
-        let target = if at_infinity { ls.wi } else { ls.p };
-        let mut t = Spectrum::ONE;
-        let mut from = *si;
-        let (mut crossed, mut invisible) = (0, 0);
-        while crossed <= crate::path::MAX_TRANSPARENT_BOUNCES && invisible < MAX_INVISIBLE_CROSSINGS {
-            let first = crossed == 0 && invisible == 0;
-            let Some((o, d, tmax)) = self.shadow_ray_from(&from, target, at_infinity, first) else {
-                return Some((t, crossed > 0));
-            };
-            if tmax <= 0.0 {
-                return Some((t, crossed > 0));
-            }
-            let Some(hit) = self.intersect(o, d, 0.0, tmax) else {
-                return Some((t, crossed > 0));
-            };
-            from = self.interaction(&hit, d);
-            if self.masked(hit.prim, RAY_SHADOW_INVISIBLE) {
-                invisible += 1; // (casts no shadow: not a crossing of a transparent surface)
-                continue;
-            }
-            crossed += 1;
-            let m = &self.materials[self.tri_material[hit.prim as usize] as usize];
-            if !m.is_transparent() {
-                return None;
-            }
-            let pass = self.pass_through(m, &from);
-            if pass.max_element() <= 0.0 {
-                return None;
-            }
-            t *= pass;
-        }
-        None
+        self.transmittance_along(si, if at_infinity { ls.wi } else { ls.p }, at_infinity, RAY_SHADOW_INVISIBLE, true)
     }
 
     /// Some object casts no shadow (its shadow ray visibility is off).
@@ -483,22 +452,40 @@ impl Scene {
         if !self.has_transparency && (skip == 0 || self.ray_mask.is_empty()) {
             return self.segment_clear(si, target, false).then_some(Spectrum::ONE);
         }
+        self.transmittance_along(si, target, false, skip, false).map(|(t, _)| t)
+    }
+
+    /// The walk of `transmittance` and `segment_transmittance` from `si` to `target` (a point,
+    /// or at infinity a direction): surfaces whose ray mask has a bit of `skip` let the ray
+    /// pass untouched, transparent ones multiply it by τ·tint (at most
+    /// `MAX_TRANSPARENT_BOUNCES`), any other blocks it (None); `lift`: the first segment
+    /// starts lifted off a smooth triangle (a light sample's). Also whether any transparent
+    /// surface was crossed.
+    fn transmittance_along(
+        &self,
+        si: &SurfaceInteraction,
+        target: Vec3,
+        at_infinity: bool,
+        skip: u8,
+        lift: bool,
+    ) -> Option<(Spectrum, bool)> {
         let mut t = Spectrum::ONE;
         let mut from = *si;
         let (mut crossed, mut invisible) = (0, 0);
         while crossed <= crate::path::MAX_TRANSPARENT_BOUNCES && invisible < MAX_INVISIBLE_CROSSINGS {
-            let Some((o, d, tmax)) = self.shadow_ray_from(&from, target, false, false) else {
-                return Some(t);
+            let first = lift && crossed == 0 && invisible == 0;
+            let Some((o, d, tmax)) = self.shadow_ray_from(&from, target, at_infinity, first) else {
+                return Some((t, crossed > 0));
             };
             if tmax <= 0.0 {
-                return Some(t);
+                return Some((t, crossed > 0));
             }
             let Some(hit) = self.intersect(o, d, 0.0, tmax) else {
-                return Some(t);
+                return Some((t, crossed > 0));
             };
             from = self.interaction(&hit, d);
             if skip != 0 && self.masked(hit.prim, skip) {
-                invisible += 1;
+                invisible += 1; // (not a crossing of a transparent surface)
                 continue;
             }
             crossed += 1;
