@@ -875,7 +875,7 @@ fn numpy_to_image(obj: &Bound<'_, PyAny>) -> PyResult<Image> {
 /// the calling thread; if it returns True the render stops and keeps what it has. Every
 /// setting left out (or None) takes `RenderSettings::default()`'s value (`DEFAULT_SETTINGS`).
 #[pyfunction]
-#[pyo3(signature = (scene, method=None, spp=None, time_limit=None, max_bounces=None, nee=None, seed=None, threads=None, reconstruction=None, alpha_rec=None, large_step_probability=None, alpha_target=None, chains=None, progress=None, preview=None, diffuse_bounces=None, glossy_bounces=None, transmission_bounces=None, transparent_bounces=None, clamp_direct=None, clamp_indirect=None, data_passes=None, adaptive_threshold=None, adaptive_min_samples=None, guiding=None, bidirectional=None))]
+#[pyo3(signature = (scene, method=None, spp=None, time_limit=None, max_bounces=None, nee=None, seed=None, threads=None, reconstruction=None, alpha_rec=None, large_step_probability=None, alpha_target=None, chains=None, progress=None, preview=None, diffuse_bounces=None, glossy_bounces=None, transmission_bounces=None, transparent_bounces=None, clamp_direct=None, clamp_indirect=None, data_passes=None, adaptive_threshold=None, adaptive_min_samples=None, guiding=None, bidirectional=None, predict_pt=None))]
 #[allow(clippy::too_many_arguments)]
 fn render<'py>(
     py: Python<'py>,
@@ -905,6 +905,7 @@ fn render<'py>(
     adaptive_min_samples: Option<u32>,
     guiding: Option<bool>,
     bidirectional: Option<bool>,
+    predict_pt: Option<bool>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let d = RenderSettings::default();
     let method = match method {
@@ -943,6 +944,7 @@ fn render<'py>(
         adaptive_min_samples: adaptive_min_samples.unwrap_or(d.adaptive_min_samples),
         guiding: guiding.unwrap_or(d.guiding),
         bidirectional: bidirectional.unwrap_or(d.bidirectional),
+        predict_pt: predict_pt.unwrap_or(d.predict_pt),
         ..d
     };
     settings.validate().map_err(|e| verr(e.to_string()))?;

@@ -18,6 +18,18 @@ The pilot (`choose`):
    seconds; a Monte Carlo error falls as 1/time, so `v·t` is the method's error for one second
    (its fixed costs — the Metropolis bootstrap — counted against it, as the real render pays
    them too). The smallest `v·t` wins.
+4. **What camera paths miss**: a short render of a method that builds its paths from the
+   camera (`CAMERA_PATHS`) shows the light those paths find often and not the light they
+   find rarely — a sun through a glazed window, a lamp behind glass —, and so reports a small,
+   confident variance where the real render gets fireflies or a dark, biased image (the
+   window bench room: `pt` measured 6× ahead of `bdpt` in the pilot, 100× behind in the
+   render). `bdpt`'s pilot renders therefore also estimate, from their own samples, what
+   `pt` would make of each pixel (integrator/bdpt.rs, `predict_pt`: its second moment, and
+   the light it cannot make at all — docs/bidirectional.md, "Predicting pt's noise"). When
+   that predicts `TAILS_MIN` (4×) more error than `pt`'s own renders showed, the camera-path
+   methods' `v·t` are multiplied by the ratio, `tails` (on the window room 5000–6000, caustics
+   50–80, a lamp in a glass ball 300–600; on everyday scenes 0.1–2.9, where the prediction,
+   which leaves out the correlations between one path's contributions, is the lower).
 
 With the denoiser on (Blender's Denoise, the CLI's default), what the user gets is each
 method's image *after* OIDN, and that ranks the methods differently: OIDN removes path
@@ -26,7 +38,13 @@ reconstruction leaves (docs/denoising.md). So when the raw ranking puts another 
 first, `choose(..., denoise=True)` denoises both pilot renders of it and of `pt` (a central
 crop of at most `DENOISE_CROP` pixels a side, one OIDN device for the four) and picks the
 lower relative variance of the denoised pair × seconds — the other method only when it is
-`DENOISED_MARGIN` (2×) ahead of `pt` there. (`pt` ranked first raw stays first: OIDN lowers
+`DENOISED_MARGIN` (2×) ahead of `pt` there. `bdpt` is an exception both ways: its noise is
+white, as `pt`'s, and OIDN takes it out as well, so when it is `BDPT_RAW_LEAD` (2×) ahead of
+`pt` raw it joins the denoised comparison (whatever ranked first raw) and only has to stay
+ahead there — measured at 10 s, 128² (2026-12-07): bulb in a shade raw 25× ahead, denoised
+3.3×; window 90× / 4.6×; caustics 18× / 1.3×; door ajar 2.3× / 1.1×; an HDRI-lit interior
+0.67× / 0.75×, which the rule leaves to `pt`. (A margin of 1.25× on the denoised crops
+alone took `bdpt` on that interior once in two seeds.) (`pt` ranked first raw stays first: OIDN lowers
 its error at least as much as any other method's, on every scene measured.) The margin:
 the denoised comparison rests on two small crops per method and is noisy — on the glass box
 at 8 s its pt ÷ gdpt ratio ranged 1.2–1.5 over seeds while the whole images after OIDN were
@@ -65,6 +83,8 @@ import time
 import numpy as np
 
 CANDIDATES = ("pt", "gdpt", "gdpssmlt", "bdpt")
+CAMERA_PATHS = ("pt", "gdpt", "gdpssmlt")
+TAILS_MIN = 4.0
 PILOT_FRACTION = 0.05
 MIN_PILOT_RENDER = 0.01
 MAX_PILOT_SHARE = 0.1
@@ -73,6 +93,7 @@ PROBE_SECONDS = 0.02
 BOOTSTRAP_MARGIN = 1.5
 DENOISE_CROP = 96
 DENOISED_MARGIN = 2.0
+BDPT_RAW_LEAD = 2.0
 EPS = 1e-2
 
 
@@ -210,7 +231,8 @@ def _choose_in(scene, desc, settings, cancelled, denoise, candidates, sizes):
             if cancelled():
                 break
             res = gdmlt.render(scene, method=m, spp=10 ** 7, time_limit=t_each,
-                               seed=(seed * 7919 + s * 104729 + 31 * CANDIDATES.index(m)) % 2 ** 63, **common)
+                               seed=(seed * 7919 + s * 104729 + 31 * CANDIDATES.index(m)) % 2 ** 63,
+                               **({"predict_pt": True} if m == "bdpt" else {}), **common)
             layers.append(res["layers"])
             elapsed += res["stats"]["elapsed"]
             samples += res["stats"]["spp_min"]
@@ -229,10 +251,22 @@ def _choose_in(scene, desc, settings, cancelled, denoise, candidates, sizes):
     if not eff:
         return {"method": "pt", "budget": estimate, "pilot_seconds": time.perf_counter() - t0, "efficiency": {},
                 "denoised": {}, "why": "cancelled"}
+    # 3c. camera paths' rare bright light, which their short renders do not see: bdpt's
+    # prediction of pt's noise from its own samples
+    tails = 1.0
+    if "bdpt" in pairs and 0 < eff.get("pt", float("inf")) < float("inf"):
+        predicted = _pt_predicted(pairs["bdpt"][0], rate["pt"] * ww * wh, limit or estimate)
+        ratio = predicted / eff["pt"]
+        tails = ratio if ratio > TAILS_MIN else 1.0
+        for m in CAMERA_PATHS:
+            if m in eff:
+                eff[m] *= tails
     best = min(eff, key=eff.get)
     if eff[best] == float("inf"):
         best = "pt"  # nothing measured: the method with the least fixed cost
-    # 4. for an image that will be denoised: the raw winner against pt, after OIDN
+    # 4. for an image that will be denoised: the raw winner against pt after OIDN, and bdpt
+    # too where it is ahead of pt raw (its noise is white, as pt's, and OIDN takes it out;
+    # the gradient-domain methods' low-frequency error it hardly touches)
     denoised, note = {}, ""
     if denoise:
         # with a time limit, OIDN's loading (cold: up to a second) is waited for at most as
@@ -243,16 +277,45 @@ def _choose_in(scene, desc, settings, cancelled, denoise, candidates, sizes):
             if loader.is_alive():
                 best, note = "pt", "; OIDN still loading: pt, first after denoising on every scene measured"
             elif oidn.available():
-                denoised = _after_denoising({m: pairs[m] for m in ("pt", best)}, common.get("threads", 0))
-                if not DENOISED_MARGIN * denoised[best] < denoised["pt"]:
+                # (bdpt's noise is white as pt's: well ahead of pt raw, it only has to stay
+                # ahead after OIDN)
+                lead = eff["pt"] / eff["bdpt"] if "bdpt" in pairs and eff["bdpt"] > 0 else 0.0
+                contenders = {"pt", best} | ({"bdpt"} if lead >= BDPT_RAW_LEAD else set())
+                denoised = _after_denoising({m: pairs[m] for m in contenders}, common.get("threads", 0))
+                for m in denoised:  # (OIDN leaves a firefly's energy in the image)
+                    if m in CAMERA_PATHS:
+                        denoised[m] *= tails
+                best = min((m for m in denoised if m != "pt"), key=denoised.get)
+                margin = 1.0 if best == "bdpt" and lead >= BDPT_RAW_LEAD else DENOISED_MARGIN
+                if not margin * denoised[best] < denoised["pt"]:
                     if denoised[best] < denoised["pt"]:
-                        note = f"; {best}'s lead after denoising is under {DENOISED_MARGIN:g}×: pt"
+                        note = f"; {best}'s lead after denoising is under {margin:g}×: pt"
                     best = "pt"
     # 5. why
     pilot = time.perf_counter() - t0
     why = _explain(best, eff, denoised, f"pilot {pilot:.2f} s on a {ww}×{wh} window") + note + skipped
+    if tails > 1.0:
+        why += f"; camera paths' error × {tails:.3g} for the rare light bdpt's samples show they miss"
     return {"method": best, "budget": estimate, "pilot_seconds": pilot, "efficiency": eff, "denoised": denoised,
-            "why": why}
+            "tails": tails, "why": why}
+
+
+def _pt_predicted(layers_pair, seconds_per_sample: float, budget: float) -> float:
+    """`pt`'s relative error × seconds on the pilot's window as bdpt's two pilot renders
+    predict it ("PT Second Moment", "PT Unsampled": integrator/bdpt.rs): the variance of one
+    sample, M₂ − mean², relative as `relative_variance` takes it, × the seconds a sample of
+    the window takes; plus the light `pt` cannot make at all, a squared relative bias that no
+    render time lowers (× the render's `budget`; the product of the two renders' estimates,
+    which is unbiased for its square)."""
+    a, b = layers_pair
+    if any(k not in a or k not in b for k in ("PT Second Moment", "PT Unsampled")):
+        return 0.0  # (a bdpt without the prediction: nothing known)
+    mean = 0.5 * (a["Combined"] + b["Combined"])
+    m2 = 0.5 * (a["PT Second Moment"] + b["PT Second Moment"])
+    denom = mean ** 2 + EPS
+    var = np.maximum(m2 - mean ** 2, 0.0)
+    bias2 = np.maximum(a["PT Unsampled"] * b["PT Unsampled"], 0.0)
+    return float(np.mean(var / denom)) * seconds_per_sample + float(np.mean(bias2 / denom)) * budget
 
 
 def _after_denoising(pairs: dict, threads: int) -> dict:

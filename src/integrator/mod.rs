@@ -87,6 +87,12 @@ pub struct RenderSettings {
     /// `pssmlt`: each Markov state is a whole bidirectional sample (integrator/bdpt.rs, every
     /// strategy) instead of a camera path.
     pub bidirectional: bool,
+    /// `bdpt`: also estimate, from its own samples, what `pt` would make of each pixel —
+    /// the second moment of its estimator ("PT Second Moment") and the light it cannot
+    /// make at all ("PT Unsampled"): the automatic method's pilot reads `pt`'s heavy tails
+    /// there, which its own short renders of `pt` rarely see (python/gdmlt/auto.py).
+    /// Default false; other methods ignore it.
+    pub predict_pt: bool,
 }
 
 /// Where Metropolis chains start.
@@ -120,6 +126,7 @@ impl Default for RenderSettings {
             adaptive_min_samples: 0,
             guiding: false,
             bidirectional: false,
+            predict_pt: false,
         }
     }
 }

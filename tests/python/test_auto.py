@@ -254,3 +254,24 @@ def test_gdpssmlt_is_not_tried_when_its_bootstrap_would_outlast_the_pilot_render
     monkeypatch.setattr(auto, "BOOTSTRAP_MARGIN", float("inf"))
     _, pick = auto.plan(cornell, settings)
     assert [s for m, s in calls if m == "gdpssmlt"] == [0]
+
+
+def test_the_pilot_sees_light_camera_paths_miss_through_bdpts_prediction():
+    """A lamp inside a glass ball lights the room only through smooth glass: camera paths
+    (pt, gdpt, gdpssmlt) cannot make that light at all (no light sample passes the glass,
+    no scattered ray hits a point) and render the room by the ceiling light alone, with a
+    small, confident variance — the raw pilot picked pt or gdpt, a biased image, on seeds
+    1–3 (failed before). bdpt's pilot renders now estimate what pt would make of each
+    pixel ("PT Second Moment", "PT Unsampled"): the light pt misses counts against the
+    camera-path methods, and bdpt is chosen. On the Cornell box, where pt misses nothing,
+    the prediction changes nothing."""
+    d = gdmlt.builtin_scene("spheres", 48, 48)
+    d["lights"] = [{"type": "point", "name": "Caustic", "position": [0.4, -0.3, -0.6], "power": [60.0, 60.0, 60.0]}]
+    cornell = gdmlt.builtin_scene("cornell", 48, 48)
+    for seed in (1, 2, 3):
+        settings = {"time_limit": 2.0, "spp": 10 ** 7, "max_bounces": 6, "seed": seed}
+        pick = auto.choose(d, settings)
+        assert pick["method"] == "bdpt" and pick["tails"] > 10, pick["why"]
+        assert "rare light" in pick["why"]
+        plain = auto.choose(cornell, settings)
+        assert plain["tails"] == 1.0 and plain["method"] != "bdpt", plain["why"]
