@@ -11,7 +11,7 @@ export PATH := $(abspath $(VENV))/bin:$(PATH)
 # Keep Blender's user config out of $HOME during demos and tests.
 export BLENDER_USER_RESOURCES := $(abspath out/blender-user)
 
-.PHONY: all setup build demo test lint test-rust test-python examples addon bench bench-monastery bench-peers bench-lights bench-hard bench-denoise scalebench skipbench raybench clean
+.PHONY: all setup build demo test lint test-rust test-python test-blender-versions examples addon bench bench-monastery bench-peers bench-lights bench-hard bench-denoise scalebench skipbench raybench clean
 
 all: demo
 
@@ -42,7 +42,7 @@ demo: build
 	@mkdir -p out
 	$(VENV)/bin/gdmlt render examples/cornell.blend -o out/cornell.exr
 
-test: build lint test-rust test-python
+test: build lint test-rust test-python test-blender-versions
 
 # Style and static checks: rustfmt (rustfmt.toml), clippy with warnings as errors (the
 # binding included), and ruff's pyflakes checks (ruff.toml).
@@ -62,6 +62,25 @@ test-rust:
 
 test-python: build
 	$(PY) -m pytest -q tests/python
+
+# Blender versions besides the default (requirements-dev.txt's bpy): the current release and
+# the long-term-support line, each as bpy in its own venv with the Python that bpy is built
+# for (tools/python_for.sh finds it: PATH, then pyenv). On each, the headless tests marked
+# `compat` (tests/python/test_blender.py: F12, export, panels, errors, Cycles agreement) run
+# with the core the default venv built (an abi3 module, on sys.path from python/).
+BLENDER_VERSIONS := 5.3.0:3.13 4.5.15:3.11
+test-blender-versions: build
+	@for spec in $(BLENDER_VERSIONS); do \
+		bpy=$${spec%%:*}; pyv=$${spec##*:}; venv=.venv-bpy-$$bpy; \
+		py=$$(tools/python_for.sh $$pyv) || { echo "Python $$pyv not found: bpy $$bpy needs it (pyenv install $$pyv)"; exit 1; }; \
+		if [ ! -e $$venv/.deps-stamp ]; then \
+			$$py -m venv $$venv && $$venv/bin/python -m pip install -q --upgrade pip && \
+			$$venv/bin/python -m pip install -q bpy==$$bpy pyoidn==2.5.1.0 OpenEXR pytest && touch $$venv/.deps-stamp || exit 1; \
+		fi; \
+		echo "Blender $$bpy (Python $$pyv):"; \
+		PYTHONPATH=$(abspath python) VIRTUAL_ENV=$(abspath .)/$$venv PATH=$(abspath .)/$$venv/bin:$$PATH \
+			$$venv/bin/python -m pytest -q -m compat -p no:cacheprovider tests/python/test_blender.py || exit 1; \
+	done
 
 # The Blender extension: dist/gdmlt-<version>.zip with the core bundled as an abi3 wheel.
 # Install it in Blender with Edit > Preferences > Get Extensions > Install from Disk, or

@@ -1305,12 +1305,22 @@ def _light(ob, matrix, warnings):
     return None
 
 
+def _light_uses_nodes(light):
+    """Light › Use Nodes. Blender 5.3 deprecates the property (a light's node tree, when it
+    has one, is always used there, and the property reads True): read without its warning."""
+    import warnings as _w
+
+    with _w.catch_warnings():
+        _w.simplefilter("ignore", DeprecationWarning)
+        return bool(getattr(light, "use_nodes", False))
+
+
 def _light_emission(light, warnings, what):
     """The factor a light's node tree puts on its colour × power, as Cycles applies it: the
     Emission node's Color × Strength into the Light Output (constant, or colour and value
     nodes without a texture under them: a Blackbody node, say); white without a tree. Anything
     else (a texture, an IES profile, Light Falloff) is left out with a warning: factor 1."""
-    tree = light.node_tree if getattr(light, "use_nodes", False) else None
+    tree = light.node_tree if _light_uses_nodes(light) else None
     out = _output_node(tree, warnings, what) if tree is not None else None
     if out is None:
         return (1.0, 1.0, 1.0)

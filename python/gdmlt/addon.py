@@ -1,5 +1,6 @@
 """Finding and enabling the Blender addon from Python (tests, the CLI, scripts)."""
 
+import atexit
 import importlib.util
 import os
 import sys
@@ -37,4 +38,16 @@ def enable_addon():
         spec.loader.exec_module(mod)
     if not getattr(mod, "_registered", False):
         mod.register()
+        # Blender 4.5's bpy module does not exit while an add-on's classes are still
+        # registered (the process hangs after Python has finished); 5.x does. Unregister
+        # first (Python's exit handlers run before bpy's own teardown).
+        atexit.register(_unregister, mod)
     return mod
+
+
+def _unregister(mod):
+    if getattr(mod, "_registered", False):
+        try:
+            mod.unregister()
+        except Exception:  # noqa: BLE001  (at exit: nothing left to tell)
+            pass

@@ -35,6 +35,7 @@ def render_to_exr(bpy, scene, path, denoise=False, rgba=False):
     return read_exr(path, "RGBA" if rgba else "RGB")
 
 
+@pytest.mark.compat
 def test_demo_blend_matches_builtin_scene(bpy_mod, tmp_out):
     bpy = bpy_mod
     bpy.ops.wm.open_mainfile(filepath=str(ROOT / "examples" / "cornell.blend"))
@@ -57,6 +58,7 @@ def test_demo_blend_matches_builtin_scene(bpy_mod, tmp_out):
     assert abs(b.mean() / r1.mean() - 1) < 0.01
 
 
+@pytest.mark.compat
 def test_nan_vertex_reports_an_error_naming_the_object(bpy_mod, tmp_out):
     bpy = bpy_mod
     bpy.ops.wm.open_mainfile(filepath=str(ROOT / "examples" / "cornell.blend"))
@@ -68,6 +70,7 @@ def test_nan_vertex_reports_an_error_naming_the_object(bpy_mod, tmp_out):
         render_to_exr(bpy, scene, tmp_out / "nan.exr")
 
 
+@pytest.mark.compat
 def test_unsupported_node_warns_and_falls_back(bpy_mod, tmp_out, capfd):
     bpy = bpy_mod
     bpy.ops.wm.open_mainfile(filepath=str(ROOT / "examples" / "cornell.blend"))
@@ -160,6 +163,7 @@ def test_what_gdmlt_leaves_out_is_named_and_kept_in_the_last_render_panel(bpy_mo
     assert any("object 'Hair'" in w for w in engine.last_warnings)
 
 
+@pytest.mark.compat
 def test_every_gdmlt_panel_draws_properties_that_exist(bpy_mod):
     """Each GDMLT panel's draw(), run headless on a recording layout with GDMLT as the engine
     (and after a render, for the Last Render panel): it finishes, and every property it shows
@@ -244,6 +248,7 @@ def _camera_scene(bpy):
     dict(type="PERSP", sensor_fit="AUTO", res=(100, 140), pct=100, aspect=(2.0, 1.0), shift=(-0.3, 0.25)),
     dict(type="ORTHO", sensor_fit="AUTO", res=(160, 90), pct=100, shift=(0.1, 0.1)),
 ])
+@pytest.mark.compat
 def test_camera_projection_matches_blender(bpy_mod, case):
     bpy = bpy_mod
     from gdmlt_blender import export
@@ -381,6 +386,7 @@ def test_render_region_renders_only_that_window(bpy_mod, tmp_out, crop):
     assert a.mean() > 0.01
 
 
+@pytest.mark.compat
 def test_smooth_flat_and_custom_split_normals_are_exported(bpy_mod):
     """Per-corner shading normals as Blender computes them: a flat-shaded sphere gets none (the
     core shades each triangle with its own normal, as Cycles does a mesh of flat faces), a
@@ -525,6 +531,7 @@ def test_a_cycles_portal_sends_no_light(bpy_mod):
     assert warnings == []
 
 
+@pytest.mark.compat
 def test_area_and_point_light_agree_with_cycles(bpy_mod, tmp_out):
     def _lights_scene(bpy, engine, spp, seed):
         return open_scene(bpy, "lights", engine, spp, seed, keep={"Area", "Point"})
@@ -567,6 +574,7 @@ def test_gdpt_through_blender_writes_its_passes(bpy_mod, tmp_out):
     assert abs(combined[..., :3].mean() / ref["Combined"].mean() - 1) < 0.01
 
 
+@pytest.mark.compat
 def test_mirror_and_glass_agree_with_cycles(bpy_mod, tmp_out):
     """Sharp mirror and glass, and Principled's opaque dielectric (a specular layer of IOR
     1.5 / 1.45 with Specular IOR Level 0.7 over the base; roughness 0, 0.35 and 0.5) against
@@ -743,6 +751,7 @@ def test_stats_line_extrapolates_the_remaining_time(bpy_mod):
     assert remaining_time(1.0, 8.0) == ""
 
 
+@pytest.mark.compat
 @pytest.mark.parametrize("kind", ["Spot", "Sun", "World", "all"])
 def test_spot_sun_world_and_all_lights_together_agree_with_cycles(bpy_mod, tmp_out, kind):
     keep = {"Area", "Point", "Spot", "Sun", "World"} if kind == "all" else {kind}
@@ -753,6 +762,7 @@ def test_spot_sun_world_and_all_lights_together_agree_with_cycles(bpy_mod, tmp_o
     assert_agrees_with_cycles(bpy_mod, build, tmp_out, kind, block=5)
 
 
+@pytest.mark.compat
 @pytest.mark.parametrize("method", ["PT", "GDPSSMLT", "BDPT"])
 def test_transparent_film_agrees_with_cycles(bpy_mod, tmp_out, method):
     """Issue 17: Film > Transparent was ignored (alpha 1, the world in the image). With it, the
@@ -798,6 +808,7 @@ def test_light_colour_temperature_agrees_with_cycles_and_survives_usd(bpy_mod, t
     assert np.allclose(ratio, ratio.mean(), rtol=1e-3), (point, addon["Point"])  # the same colour
 
 
+@pytest.mark.compat
 def test_image_textures_agree_with_cycles(bpy_mod, tmp_out):
     """sRGB decoding (after interpolation, as Cycles does for 8-bit images: decoding first
     renders this checker 40% brighter), Non-Color data, bilinear lookup, Repeat and UV maps,
@@ -1275,6 +1286,7 @@ def test_fifty_f12_renders_in_one_blender_do_not_grow_memory(bpy_mod, tmp_out):
     assert grown < 40, f"RSS grew by {grown:.1f} MB over 50 renders"
 
 
+@pytest.mark.compat
 @pytest.mark.parametrize("method", ["PT", "GDPSSMLT"])
 def test_esc_at_any_moment_stops_the_render_cleanly(bpy_mod, tmp_out, monkeypatch, method):
     """Esc in Blender turns RenderEngine.test_break() true; the engine polls it through
@@ -1311,6 +1323,7 @@ def test_esc_at_any_moment_stops_the_render_cleanly(bpy_mod, tmp_out, monkeypatc
         assert np.isfinite(img).all()
 
 
+@pytest.mark.compat
 @pytest.mark.parametrize("name", ["lights", "textures"])
 def test_command_line_render_of_a_checked_in_scene_is_the_f12_render(bpy_mod, tmp_out, name):
     """`gdmlt render tests/scenes/NAME.blend -o x.exr` (a separate process, Blender as a module)
@@ -1323,7 +1336,10 @@ def test_command_line_render_of_a_checked_in_scene_is_the_f12_render(bpy_mod, tm
     f12 = render_to_exr(bpy, bpy.context.scene, tmp_out / f"{name}-f12.exr", denoise=True)
     out = tmp_out / f"{name}-cli.exr"
     gdmlt_cli = Path(sys.executable).parent / "gdmlt"
-    r = subprocess.run([str(gdmlt_cli), "render", str(SCENES / f"{name}.blend"), "-o", str(out)],
+    # (the venv's console script; where gdmlt is on the path but not installed — the other
+    # Blender versions' runs, `make test-blender-versions` — the same entry point as a module)
+    cli = [str(gdmlt_cli)] if gdmlt_cli.exists() else [sys.executable, "-m", "gdmlt.cli"]
+    r = subprocess.run([*cli, "render", str(SCENES / f"{name}.blend"), "-o", str(out)],
                        capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr[-2000:]
     cli = read_exr(out)
@@ -1331,6 +1347,7 @@ def test_command_line_render_of_a_checked_in_scene_is_the_f12_render(bpy_mod, tm
     assert np.allclose(cli, f12, rtol=1e-4, atol=1e-5), np.abs(cli - f12).max()
 
 
+@pytest.mark.compat
 def test_material_world_light_camera_and_object_panels_show_for_gdmlt(bpy_mod):
     """With GDMLT as the engine the panels an artist works in are there: the material slot
     list and Surface panel, the World's Surface panel, the spot shape, depth of field and
@@ -2020,6 +2037,7 @@ def _grouped_quads():
     return [tinted(0.7), shader_group, conversions, unlinked_image, muted, tinted(0.2)]
 
 
+@pytest.mark.compat
 def test_node_groups_agree_with_cycles(bpy_mod, tmp_out):
     """Materials built of node groups (grouped graphs, a grouped shader, nested groups,
     reroutes, conversions at the groups' borders, unlinked group inputs, muted nodes and
