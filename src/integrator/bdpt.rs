@@ -795,7 +795,10 @@ impl Context<'_> {
         }
         let [r0, r1] = r_pt;
         let q = r0 * r0 + r1 * r1;
-        Weight { w: (1.0 / sum) as f32, pt: if q > 0.0 { (r0 * r0 * r0 + r1 * r1 * r1) / (q * q) } else { f64::INFINITY } }
+        Weight {
+            w: (1.0 / sum) as f32,
+            pt: if q > 0.0 { (r0 * r0 * r0 + r1 * r1 * r1) / (q * q) } else { f64::INFINITY },
+        }
     }
 
     /// The per-kind bounce limits hold for the full path (labels of z₂ … z_{n−2}; the
