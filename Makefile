@@ -2,7 +2,9 @@
 # Both set everything up first: the Python venv at .venv (bpy, usd-core, numpy, maturin,
 # pytest) and the Rust core built into it with maturin.
 
-PYTHON ?= python3
+# The Python the default venv is made with follows the bpy it installs (requirements-dev.txt:
+# bpy 5.0.1 is built for Python 3.11): tools/python_for.sh finds it (PATH, then pyenv).
+PYTHON ?= $(shell tools/python_for.sh 3.11 || echo python3)
 VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.deps-stamp
