@@ -4,7 +4,8 @@
 
 # The Python the default venv is made with follows the bpy it installs (requirements-dev.txt:
 # bpy 5.0.1 is built for Python 3.11): tools/python_for.sh finds it (PATH, then pyenv).
-PYTHON ?= $(shell tools/python_for.sh 3.11 || echo python3)
+HERE   := $(dir $(abspath $(lastword $(MAKEFILE_LIST))))
+PYTHON ?= $(shell $(HERE)tools/python_for.sh 3.11 || echo python3)
 VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.deps-stamp
@@ -176,4 +177,4 @@ examples: build
 	$(PY) tools/make_examples.py
 
 clean:
-	rm -rf target out $(VENV) python/gdmlt/*.so
+	rm -rf target out $(VENV) .venv-bpy-* python/gdmlt/*.so

@@ -4,7 +4,8 @@
 set -u
 v="$1"
 if p=$(command -v "python$v" 2>/dev/null) && "$p" -c "import sys; assert sys.version.startswith('$v')" 2>/dev/null; then
-	"$p" -c 'import sys; print(sys.executable)'
+	# (a venv's interpreter — PATH may lead to one — gives the one it was made from)
+	"$p" -c 'import sys; print(getattr(sys, "_base_executable", None) or sys.executable)'
 	exit 0
 fi
 root=$(pyenv root 2>/dev/null || echo "$HOME/.pyenv")

@@ -41,7 +41,7 @@ lower relative variance of the denoised pair × seconds — the other method onl
 `DENOISED_MARGIN` (2×) ahead of `pt` there. `bdpt` is an exception both ways: its noise is
 white, as `pt`'s, and OIDN takes it out as well, so when it is `BDPT_RAW_LEAD` (2×) ahead of
 `pt` raw it joins the denoised comparison (whatever ranked first raw) and only has to stay
-ahead there — measured at 10 s, 128² (2026-12-07): bulb in a shade raw 25× ahead, denoised
+ahead there (and is kept while OIDN is still loading) — measured at 10 s, 128² (2026-12-07): bulb in a shade raw 25× ahead, denoised
 3.3×; window 90× / 4.6×; caustics 18× / 1.3×; door ajar 2.3× / 1.1×; an HDRI-lit interior
 0.67× / 0.75×, which the rule leaves to `pt`. (A margin of 1.25× on the denoised crops
 alone took `bdpt` on that interior once in two seeds.) (`pt` ranked first raw stays first: OIDN lowers
@@ -137,7 +137,8 @@ def _denoised_pair(layers_pair, device):
 def choose(desc: dict, settings: dict, cancelled=lambda: False, denoise=False, scene=None) -> dict:
     """Runs the pilot. Returns {"method", "budget" (seconds for the whole render, pilot
     included), "pilot_seconds", "efficiency": {method: v·t}, "denoised": {method: v·t after
-    OIDN} (empty unless compared), "why"}. `denoise`: the final image will be denoised, so
+    OIDN} (empty unless compared), "tails" (the factor on the camera-path methods' v·t, 1
+    when none), "why"}. `denoise`: the final image will be denoised, so
     the raw winner and pt are compared after OIDN (without OIDN installed: the raw ranking).
     `scene`: the render's own `gdmlt.Scene` of `desc`, if built already: the pilot looks
     through it at its window and gives the camera back (a second build, BVH included, can
@@ -208,7 +209,7 @@ def _choose_in(scene, desc, settings, cancelled, denoise, candidates, sizes):
         # the method with the least fixed cost, without a pilot
         pilot = time.perf_counter() - t0
         return {"method": "pt", "budget": estimate, "pilot_seconds": pilot, "efficiency": {}, "denoised": {},
-                "why": f"the render (≈{estimate:.2g} s) is too short to pay for a pilot: pt"}
+                "tails": 1.0, "why": f"the render (≈{estimate:.2g} s) is too short to pay for a pilot: pt"}
     t_each = max(MIN_PILOT_RENDER, t_each)
     if denoise:  # loading OIDN's library takes ~0.25 s: during the pilot renders, not after them
         loader = threading.Thread(target=oidn.available, daemon=True)
@@ -250,7 +251,7 @@ def _choose_in(scene, desc, settings, cancelled, denoise, candidates, sizes):
         rate[m] = elapsed / max(samples, 1) / (ww * wh)  # seconds per sample per pixel
     if not eff:
         return {"method": "pt", "budget": estimate, "pilot_seconds": time.perf_counter() - t0, "efficiency": {},
-                "denoised": {}, "why": "cancelled"}
+                "denoised": {}, "tails": 1.0, "why": "cancelled"}
     # 3c. camera paths' rare bright light, which their short renders do not see: bdpt's
     # prediction of pt's noise from its own samples
     tails = 1.0
@@ -265,9 +266,12 @@ def _choose_in(scene, desc, settings, cancelled, denoise, candidates, sizes):
     if eff[best] == float("inf"):
         best = "pt"  # nothing measured: the method with the least fixed cost
     # 4. for an image that will be denoised: the raw winner against pt after OIDN, and bdpt
-    # too where it is ahead of pt raw (its noise is white, as pt's, and OIDN takes it out;
-    # the gradient-domain methods' low-frequency error it hardly touches)
+    # too where it is well ahead of pt raw (its noise is white, as pt's, and OIDN takes it
+    # out; the gradient-domain methods' low-frequency error it hardly touches)
     denoised, note = {}, ""
+    finite_bdpt = "bdpt" in pairs and 0 < eff.get("bdpt", 0) < float("inf")
+    lead = eff.get("pt", float("inf")) / eff["bdpt"] if finite_bdpt else 0.0
+    bdpt_clear = lead >= BDPT_RAW_LEAD
     if denoise:
         # with a time limit, OIDN's loading (cold: up to a second) is waited for at most as
         # long as the pilot renders took, so that it cannot eat a short budget
@@ -275,21 +279,31 @@ def _choose_in(scene, desc, settings, cancelled, denoise, candidates, sizes):
         # pt first already stays first: OIDN lowers its error at least as much as any other's
         if best != "pt" and eff.get("pt", float("inf")) < float("inf") and not cancelled():
             if loader.is_alive():
-                best, note = "pt", "; OIDN still loading: pt, first after denoising on every scene measured"
+                if best == "bdpt" and bdpt_clear:
+                    note = "; OIDN still loading: bdpt, well ahead of pt raw"
+                else:
+                    best, note = "pt", "; OIDN still loading: pt, first after denoising on every scene measured"
             elif oidn.available():
-                # (bdpt's noise is white as pt's: well ahead of pt raw, it only has to stay
-                # ahead after OIDN)
-                lead = eff["pt"] / eff["bdpt"] if "bdpt" in pairs and eff["bdpt"] > 0 else 0.0
-                contenders = {"pt", best} | ({"bdpt"} if lead >= BDPT_RAW_LEAD else set())
+                contenders = {"pt", best} | ({"bdpt"} if bdpt_clear else set())
                 denoised = _after_denoising({m: pairs[m] for m in contenders}, common.get("threads", 0))
                 for m in denoised:  # (OIDN leaves a firefly's energy in the image)
                     if m in CAMERA_PATHS:
                         denoised[m] *= tails
-                best = min((m for m in denoised if m != "pt"), key=denoised.get)
-                margin = 1.0 if best == "bdpt" and lead >= BDPT_RAW_LEAD else DENOISED_MARGIN
-                if not margin * denoised[best] < denoised["pt"]:
-                    if denoised[best] < denoised["pt"]:
-                        note = f"; {best}'s lead after denoising is under {margin:g}×: pt"
+                # each other method must lead pt by its margin: bdpt, clear of pt raw, only
+                # has to stay ahead; the others DENOISED_MARGIN
+                def margin(m):
+                    return 1.0 if m == "bdpt" and bdpt_clear else DENOISED_MARGIN
+
+                pt_den = denoised.get("pt", float("inf"))
+                others = [m for m in contenders - {"pt"} if m in denoised]
+                passing = [m for m in others if margin(m) * denoised[m] < pt_den]
+                if passing:
+                    best = min(passing, key=denoised.get)
+                else:
+                    ahead = [m for m in others if denoised[m] < pt_den]
+                    if ahead:
+                        m = min(ahead, key=denoised.get)
+                        note = f"; {m}'s lead after denoising is under {margin(m):g}×: pt"
                     best = "pt"
     # 5. why
     pilot = time.perf_counter() - t0
@@ -312,10 +326,12 @@ def _pt_predicted(layers_pair, seconds_per_sample: float, budget: float) -> floa
         return 0.0  # (a bdpt without the prediction: nothing known)
     mean = 0.5 * (a["Combined"] + b["Combined"])
     m2 = 0.5 * (a["PT Second Moment"] + b["PT Second Moment"])
+    pt_mean = mean - 0.5 * (a["PT Unsampled"] + b["PT Unsampled"])  # (what pt itself makes)
     denom = mean ** 2 + EPS
-    var = np.maximum(m2 - mean ** 2, 0.0)
+    var = np.maximum(m2 - pt_mean ** 2, 0.0)
     bias2 = np.maximum(a["PT Unsampled"] * b["PT Unsampled"], 0.0)
-    return float(np.mean(var / denom)) * seconds_per_sample + float(np.mean(bias2 / denom)) * budget
+    predicted = float(np.mean(var / denom)) * seconds_per_sample + float(np.mean(bias2 / denom)) * budget
+    return predicted if np.isfinite(predicted) else 0.0  # (nothing known)
 
 
 def _after_denoising(pairs: dict, threads: int) -> dict:

@@ -594,14 +594,18 @@ pub(crate) struct PtMoments {
 }
 
 impl PtMoments {
-    /// Notes the contribution `c` made with weight `wt`.
+    /// Notes the contribution `c` made with weight `wt`. A second moment beyond `MAX_SECOND`
+    /// (or a factor that is not finite) is light `pt` all but never makes: unsampled.
     #[inline]
     fn add(&mut self, c: Spectrum, wt: Weight) {
+        const MAX_SECOND: f64 = 1e30;
         if !(wt.w > 0.0) {
             return;
         }
-        if wt.pt.is_finite() {
-            self.second += c * c * ((wt.pt / wt.w as f64) as f32);
+        let factor = wt.pt / wt.w as f64;
+        let cc = c.as_dvec3() * c.as_dvec3() * factor;
+        if factor.is_finite() && cc.max_element() <= MAX_SECOND {
+            self.second += cc.as_vec3();
         } else {
             self.unsampled += c;
         }
@@ -793,12 +797,12 @@ impl Context<'_> {
                 }
             }
         }
-        let [r0, r1] = r_pt;
-        let q = r0 * r0 + r1 * r1;
-        Weight {
-            w: (1.0 / sum) as f32,
-            pt: if q > 0.0 { (r0 * r0 * r0 + r1 * r1 * r1) / (q * q) } else { f64::INFINITY },
-        }
+        // (r₀³ + r₁³)/(r₀² + r₁²)² with both ratios scaled by the larger, so that neither
+        // underflows: (a³ + b³)/((a² + b²)²·m)
+        let m = r_pt[0].max(r_pt[1]);
+        let (a, b) = (r_pt[0] / m, r_pt[1] / m);
+        let pt = if m > 0.0 { (a * a * a + b * b * b) / ((a * a + b * b).powi(2) * m) } else { f64::INFINITY };
+        Weight { w: (1.0 / sum) as f32, pt }
     }
 
     /// The per-kind bounce limits hold for the full path (labels of z₂ … z_{n−2}; the
@@ -1243,7 +1247,8 @@ fn render_with(scene: &Scene, settings: &RenderSettings, control: &RenderControl
     let (w, h) = (scene.camera.width as usize, scene.camera.height as usize);
     let cfg = &settings.path;
     let mut ctx = Context::new(scene, cfg, only);
-    ctx.predict_pt = settings.predict_pt;
+    // (not under the diagnostic `only`, whose weights are not the strategies' own)
+    ctx.predict_pt = settings.predict_pt && only.is_none();
     let mut film = Film::new(w, h);
     let splats = Splats::new(w, h);
     // pt's moments (predict_pt): second moment and unsampled light, from the camera samples

@@ -256,7 +256,7 @@ def test_gdpssmlt_is_not_tried_when_its_bootstrap_would_outlast_the_pilot_render
     assert [s for m, s in calls if m == "gdpssmlt"] == [0]
 
 
-def test_the_pilot_sees_light_camera_paths_miss_through_bdpts_prediction():
+def test_the_pilot_sees_light_camera_paths_miss_through_bdpts_prediction(monkeypatch):
     """A lamp inside a glass ball lights the room only through smooth glass: camera paths
     (pt, gdpt, gdpssmlt) cannot make that light at all (no light sample passes the glass,
     no scattered ray hits a point) and render the room by the ceiling light alone, with a
@@ -275,3 +275,10 @@ def test_the_pilot_sees_light_camera_paths_miss_through_bdpts_prediction():
         assert "rare light" in pick["why"]
         plain = auto.choose(cornell, settings)
         assert plain["tails"] == 1.0 and plain["method"] != "bdpt", plain["why"]
+    # with the denoiser on and OIDN still loading when the pilot is done, bdpt, far ahead of
+    # pt raw, is kept (the loading fallback took pt, the biased image, before)
+    from gdmlt import oidn
+
+    monkeypatch.setattr(oidn, "available", lambda: time.sleep(3.0) or True)
+    pick = auto.choose(d, {"time_limit": 2.0, "spp": 10 ** 7, "max_bounces": 6, "seed": 1}, denoise=True)
+    assert pick["method"] == "bdpt" and "OIDN still loading: bdpt" in pick["why"], pick["why"]
