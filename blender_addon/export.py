@@ -1140,17 +1140,7 @@ def _mesh_local_arrays(ob, colour_layer=None, spaces=()):
         me.loop_triangles.foreach_get("loops", tl)
         mi = np.empty(nt, np.int32)
         me.loop_triangles.foreach_get("material_index", mi)
-        # As Cycles takes a mesh's normals (Mesh::pack_shaders and the mesh sync): a mesh
-        # whose faces are all flat (normals domain FACE) is shaded by each triangle's own
-        # normal — on a non-planar quad not its polygon's (13° apart on a rough ground, +1.8%);
-        # otherwise every triangle interpolates its corner normals, a flat face's corners
-        # holding its polygon's normal (domain CORNER: Cycles then counts every triangle as
-        # smooth, for its shadow terminator offset too)
-        normals = None
-        if getattr(me, "normals_domain", "CORNER") != "FACE":
-            cn = np.empty(len(me.loops) * 3, np.float32)
-            me.corner_normals.foreach_get("vector", cn)
-            normals = cn.reshape(-1, 3)[tl]  # smooth, flat and custom split normals per corner
+        normals = _cycles_normals(me, co.reshape(-1, 3), tv.reshape(-1, 3), tl)
         uvs = None
         uv_layer = next((l for l in me.uv_layers if l.active_render), None) or me.uv_layers.active
         if uv_layer is not None:
@@ -1180,6 +1170,68 @@ def _mesh_local_arrays(ob, colour_layer=None, spaces=()):
         return co.reshape(-1, 3), tv.reshape(-1, 3), normals, mi, uvs, colours, points
     finally:
         ob.to_mesh_clear()
+
+
+def _cycles_normals(me, co, tv, tl):
+    """The shading normals of mesh `me`'s triangles (vertex indices `tv`, corner indices `tl`)
+    per corner as Cycles takes them, or None where every triangle is flat (Cycles' mesh sync,
+    which reads the normals domain as `Mesh::normals_domain(support_sharp_face=true)`):
+    - all faces flat (domain FACE): each triangle its own normal — on a non-planar quad not
+      its polygon's (13° apart on a rough ground, +1.8%): None;
+    - smooth and flat faces mixed, with no sharp edge and no custom normals (Python reports
+      CORNER; Cycles up to Blender 5.0 reads POINT): a smooth triangle interpolates Blender's
+      vertex normals, which average every face around a vertex, the flat ones too — not the
+      corner normals, which leave the flat faces out (a smooth floor beside a flat skirt,
+      pybullet's monastery: corner and vertex normals up to 40° apart, the image −3%) —,
+      and a flat one takes its own normal. Measured against Cycles' Normal pass in 4.5.15
+      and 5.0.1; 5.3.0's Cycles takes the corner normals here (as below), and so does the
+      export from 5.1 on (5.1 and 5.2 not checked);
+    - otherwise (domain CORNER: sharp edges or custom normals, which Cycles splits the mesh
+      along) every triangle interpolates its corner normals, a flat face's corners holding its
+      polygon's normal, and Cycles counts every triangle as smooth (for its shadow
+      terminator offset too)."""
+    domain = getattr(me, "normals_domain", "CORNER")
+    if domain == "FACE":
+        return None
+    attrs = me.attributes
+    sharp_edge = attrs.get("sharp_edge")
+    sharp_face = attrs.get("sharp_face")
+    if (domain == "CORNER" and "custom_normal" not in attrs and sharp_face is not None
+            and _cycles_reads_point_normals() and not _any_true(sharp_edge, len(me.edges))):
+        vn = np.empty(len(me.vertices) * 3, np.float32)
+        me.vertices.foreach_get("normal", vn)
+        normals = vn.reshape(-1, 3)[tv]  # (triangles, 3 corners, 3)
+        flat = np.empty(len(me.polygons), bool)
+        sharp_face.data.foreach_get("value", flat)
+        pi = np.empty(len(tv), np.int32)
+        me.loop_triangles.foreach_get("polygon_index", pi)
+        tri_flat = flat[pi]
+        if tri_flat.any():
+            p = co[tv[tri_flat]].astype(np.float64)
+            n = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+            n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-30)
+            normals[tri_flat] = n[:, None, :].astype(np.float32)
+        return normals.reshape(-1, 3)
+    cn = np.empty(len(me.loops) * 3, np.float32)
+    me.corner_normals.foreach_get("vector", cn)
+    return cn.reshape(-1, 3)[tl]  # smooth, flat and custom split normals per corner
+
+
+def _cycles_reads_point_normals():
+    """Whether this Blender's Cycles shades a mesh of mixed smooth and flat faces (no sharp
+    edges, no custom normals) with vertex normals (up to 5.0) rather than corner normals."""
+    import bpy
+
+    return bpy.app.version < (5, 1, 0)
+
+
+def _any_true(attr, n):
+    """Whether boolean attribute `attr` (of `n` elements, or None) is set anywhere."""
+    if attr is None or n == 0:
+        return False
+    v = np.empty(n, bool)
+    attr.data.foreach_get("value", v)
+    return bool(v.any())
 
 
 def _colour_layer(ob, layers, warnings):

@@ -504,19 +504,28 @@ def _cycles_child(inp: str, outp: str):
 
 def exr_layers(path, rgb_only=True) -> dict:
     """{pass name: H×W×C, top row first} of a multi-layer EXR that Blender wrote (one part
-    per pass, "ViewLayer.Noisy Image" → "Noisy Image"): its colour passes as RGB, or with
-    `rgb_only=False` every pass with all its channels (Depth as H×W×1)."""
+    per pass in Blender 5, one part for all of them in 4.5; "ViewLayer.Noisy Image" → "Noisy
+    Image"): its colour passes as RGB, or with `rgb_only=False` every pass with all its
+    channels (Depth as H×W×1; the X, Y, Z channels of Normal and Position, which OpenEXR
+    leaves apart, stacked in that order)."""
     import OpenEXR
 
-    out = {}
+    passes = {}  # name: [channel arrays]
     with OpenEXR.File(str(path)) as f:
         for part in f.parts:
-            a = np.asarray(next(iter(part.channels.values())).pixels, np.float32)
-            name = part.name().split(".", 1)[1]
-            if not rgb_only:
-                out[name] = a[..., None] if a.ndim == 2 else a
-            elif a.ndim == 3 and a.shape[2] >= 3:
-                out[name] = a[..., :3].copy()
+            for key, ch in part.channels.items():
+                name = key.split(".", 1)[1] if "." in key else key
+                head, _, last = name.rpartition(".")
+                if head and len(last) == 1:  # a lone channel of a pass ("Normal.X")
+                    name = head
+                passes.setdefault(name, []).append(np.asarray(ch.pixels, np.float32))
+    out = {}
+    for name, chans in passes.items():
+        a = np.stack(chans, axis=-1) if len(chans) > 1 and all(c.ndim == 2 for c in chans) else chans[0]
+        if not rgb_only:
+            out[name] = a[..., None] if a.ndim == 2 else a
+        elif a.ndim == 3 and a.shape[2] >= 3:
+            out[name] = a[..., :3].copy()
     return out
 
 

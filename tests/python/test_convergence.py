@@ -39,7 +39,9 @@ def test_every_method_converges_to_cycles(bpy_mod, tmp_out, name):
     and block differences 37% while the coat was left out) and the Translucent BSDF
     (translucent: a grey diffuse fallback before) and Cycles' light samples on smooth
     triangles (veranda: pt NEE −4.8%, block differences 7× the noise, without the shadow
-    terminator's lift and light samples below the geometric surface). The textures and HDRI scenes failed for gdpt without
+    terminator's lift and light samples below the geometric surface; −3.1%, 9× the noise,
+    with its floor's corner normals where Cycles 5.0 takes the vertex normals of a mesh of
+    mixed smooth and flat faces). The textures and HDRI scenes failed for gdpt without
     NEE until the mean's noise was measured from the seeds' image means: the reconstruction
     correlates blocks, and the independent-block σ understated it 3×; at 4× the samples both
     agree (6 seeds, L1 and L2)."""
