@@ -416,7 +416,17 @@ impl Camera {
             let (u, v) = match self.projection {
                 Projection::Equirectangular => {
                     let r = self.equirect;
-                    ((y.atan2(x) - r.y) / r.x, (z.clamp(-1.0, 1.0).acos() - r.w) / r.z)
+                    // (the longitude's turn nearest the image's range: a range across ±π)
+                    let period = (std::f32::consts::TAU / r.x).abs();
+                    let mut u = (y.atan2(x) - r.y) / r.x;
+                    for k in [-1.0, 1.0] {
+                        let other = u + k * period;
+                        let out = |u: f32| (-u).max(u - 1.0).max(0.0);
+                        if out(other) < out(u) {
+                            u = other;
+                        }
+                    }
+                    (u, (z.clamp(-1.0, 1.0).acos() - r.w) / r.z)
                 }
                 _ => {
                     let theta = x.clamp(-1.0, 1.0).acos();
@@ -455,11 +465,82 @@ impl Camera {
     }
 
     /// Light tracing can reach the image through this camera: a perspective one (pinhole or
-    /// thin lens). An orthographic camera sees along one direction only (a delta no light
-    /// path meets); panoramas are not connected yet (their paths come from the camera).
+    /// thin lens) or a panorama (its centre). An orthographic camera sees along one direction
+    /// only (a delta no light path meets).
     #[inline]
     pub fn connectible(&self) -> bool {
-        self.projection == Projection::Perspective
+        self.projection == Projection::Perspective || self.is_panoramic()
+    }
+
+    /// A panorama's W towards the camera-space unit direction `d`: 1 / the solid angle of
+    /// one pixel's directions there, the image's pixel count over dω/(du dv) of its mapping
+    /// (u, v ∈ [0, 1]², `panorama_direction`):
+    /// - equirectangular, φ = a·u + b, θ = c·v + e: dω = sin θ dθ dφ, so |a·c|·sin θ;
+    /// - fisheye equidistant, θ = r·fov/2 over (x, y) = (2u − 1, 2v − 1) = r(cos φ, sin φ):
+    ///   dω = sin θ dθ dφ = sin θ (fov/2)² dx dy / θ, so 4·(fov/2)²·sin θ/θ;
+    /// - fisheye equisolid, r = 2f·sin(θ/2) over the sensor (x, y) = ((u − ½)·w, (v − ½)·h):
+    ///   dr = f·cos(θ/2) dθ, so dω = r dr dφ / f² = dx dy / f² (the mapping keeps areas), w·h/f².
+    ///
+    /// Zero outside the image (a fisheye's circle) or at an equirectangular pole.
+    fn panorama_density(&self, d: Vec3) -> f32 {
+        let (x, z) = (-d.z, d.y); // (Cycles' panorama frame: +X forward, +Z up)
+        let per_uv = match self.projection {
+            Projection::Equirectangular => {
+                let r = self.equirect;
+                (r.x * r.z).abs() * (1.0 - z * z).max(0.0).sqrt()
+            }
+            Projection::FisheyeEquidistant => {
+                let theta = x.clamp(-1.0, 1.0).acos();
+                if theta > self.fisheye_fov * 0.5 {
+                    return 0.0;
+                }
+                let h = self.fisheye_fov * 0.5;
+                4.0 * h * h * if theta > 1e-4 { theta.sin() / theta } else { 1.0 }
+            }
+            _ => {
+                if x.clamp(-1.0, 1.0).acos() > self.fisheye_fov * 0.5 {
+                    return 0.0;
+                }
+                self.ext.x * self.ext.y / (self.fisheye_lens * self.fisheye_lens)
+            }
+        };
+        if !(per_uv > 0.0) {
+            return 0.0;
+        }
+        self.full.x * self.full.y / per_uv
+    }
+
+    /// Every raster position (the region's pixels, y from the top, as `project` gives them)
+    /// within `reach` pixels of the image where the camera looks the way it looks at
+    /// `raster`. One for most cameras; an equirectangular image repeats its directions
+    /// beyond its edges, as its camera rays (a pixel filter reaches past the edge) find
+    /// them: every turn of longitude (u + k·2π/|a| for φ = a·u + b) and, past a pole, the
+    /// mirror image (θ → −θ or 2π − θ, φ → φ + π). Light tracing splats at each, and the
+    /// camera's density of a direction adds the pixel filter over all of them.
+    pub fn raster_images(&self, raster: Vec2, reach: f32) -> ([Vec2; 9], usize) {
+        let mut out = [raster; 9];
+        if self.projection != Projection::Equirectangular {
+            return (out, 1);
+        }
+        let r = self.equirect;
+        let full = raster + self.offset;
+        let (u, v) = (full.x / self.full.x, 1.0 - full.y / self.full.y);
+        let (tau, pi) = (std::f32::consts::TAU, std::f32::consts::PI);
+        let period = tau / r.x.abs();
+        let mirrors = [(v, 0.0), (-v - 2.0 * r.w / r.z, pi / r.x), (-v + (tau - 2.0 * r.w) / r.z, pi / r.x)];
+        let mut n = 0;
+        for (vv, du) in mirrors {
+            for k in [-1.0, 0.0, 1.0] {
+                let p = Vec2::new((u + du + k * period) * self.full.x, (1.0 - vv) * self.full.y) - self.offset;
+                let near =
+                    p.x > -reach && p.x < self.width as f32 + reach && p.y > -reach && p.y < self.height as f32 + reach;
+                if near && n < out.len() {
+                    out[n] = p;
+                    n += 1;
+                }
+            }
+        }
+        (out, n)
     }
 
     /// The camera's importance towards world point `p` seen from the lens point `lens` (the
@@ -472,6 +553,17 @@ impl Camera {
     pub fn importance(&self, lens: Vec3, p: Vec3) -> Option<(Vec2, f32)> {
         if !self.connectible() {
             return None;
+        }
+        if self.is_panoramic() {
+            // (no lens: the centre; clipped along the ray, as its camera rays are)
+            let d = p - self.position();
+            let dist = d.length();
+            if !(dist > self.clip_start && dist < self.clip_end) {
+                return None;
+            }
+            let w = self.panorama_density(self.to_camera.transform_vector3(d / dist));
+            let raster = self.project(p)?;
+            return (w > 0.0 && w.is_finite()).then_some((raster, w));
         }
         let (pc, oc) = (self.to_camera.transform_point3(p), self.to_camera.transform_point3(lens));
         let depth = -pc.z;
@@ -499,6 +591,10 @@ impl Camera {
 
     /// `importance`'s W for a camera ray of unit direction `dir` (world), clipping aside.
     pub fn ray_density(&self, dir: Vec3) -> f32 {
+        if self.is_panoramic() {
+            let w = self.panorama_density(self.to_camera.transform_vector3(dir).normalize_or_zero());
+            return if w.is_finite() { w } else { 0.0 };
+        }
         let forward = -self.to_world.z_axis.truncate().normalize_or_zero();
         let cos = dir.dot(forward);
         if !(cos > 0.0) {
@@ -652,6 +748,66 @@ mod tests {
             d.panorama = bad;
             assert!(Camera::new(&d).err().unwrap().to_string().contains("panorama"), "{bad:?}");
         }
+    }
+
+    /// Light tracing's W (`ray_density`, `importance`) is 1 / the solid angle of one pixel's
+    /// camera rays: against finite differences of `generate_ray`'s directions over the raster
+    /// (|∂d/∂x × ∂d/∂y|, central differences) at pixels across the frame, for every projection
+    /// light tracing joins — pinhole, equirectangular (the whole sphere and a band across
+    /// ±180° of longitude), fisheye equidistant and equisolid — and `importance` lands where
+    /// the camera ray came from.
+    #[test]
+    fn light_tracings_importance_is_one_over_a_pixels_solid_angle() {
+        let turned = [[0.0, 0.0, 1.0, 0.5], [1.0, 0.0, 0.0, -1.0], [0.0, 1.0, 0.0, 2.0], [0.0, 0.0, 0.0, 1.0]];
+        let base = CameraDesc { resolution_x: 64, resolution_y: 40, to_world: turned, ..Default::default() };
+        let cases = [
+            ("pinhole", CameraDesc { lens: 30.0, ..base.clone() }),
+            ("equirectangular", CameraDesc { projection: Projection::Equirectangular, ..base.clone() }),
+            (
+                "equirectangular band across ±180°",
+                CameraDesc { projection: Projection::Equirectangular, panorama: [-0.6, 0.9, 2.0, 4.0], ..base.clone() },
+            ),
+            (
+                "fisheye equidistant",
+                CameraDesc { projection: Projection::FisheyeEquidistant, fisheye_fov: 3.3, ..base.clone() },
+            ),
+            (
+                "fisheye equisolid",
+                CameraDesc {
+                    projection: Projection::FisheyeEquisolid,
+                    fisheye_fov: 3.1,
+                    fisheye_lens: 14.0,
+                    ..base.clone()
+                },
+            ),
+        ];
+        for (name, d) in cases {
+            let cam = Camera::new(&d).unwrap();
+            assert!(cam.connectible(), "{name}");
+            let dir = |x: f32, y: f32| cam.generate_ray(Vec2::new(x, y), Vec2::ZERO).dir.as_dvec3();
+            let mut checked = 0;
+            for (x, y) in [(10.3, 7.7), (32.0, 20.0), (50.5, 12.25), (5.5, 33.5), (60.2, 38.9), (31.1, 2.6)] {
+                let ray = cam.generate_ray(Vec2::new(x, y), Vec2::ZERO);
+                if ray.is_dead() {
+                    continue; // (outside a fisheye's circle)
+                }
+                let h = 1e-3;
+                let dx = (dir(x + h as f32, y) - dir(x - h as f32, y)) / (2.0 * h);
+                let dy = (dir(x, y + h as f32) - dir(x, y - h as f32)) / (2.0 * h);
+                let solid_angle = dx.cross(dy).length();
+                let w = cam.ray_density(ray.dir) as f64;
+                assert!((w * solid_angle - 1.0).abs() < 0.02, "{name} at ({x}, {y}): W {w} × dω {solid_angle}");
+                let p = ray.origin + ray.dir * 3.0;
+                let (raster, wi) = cam.importance(ray.origin, p).unwrap();
+                assert!((raster - Vec2::new(x, y)).length() < 2e-3, "{name}: ({x}, {y}) lands at {raster}");
+                assert!((wi / w as f32 - 1.0).abs() < 1e-4, "{name}: {wi} against {w}");
+                checked += 1;
+            }
+            assert!(checked >= 4, "{name}: {checked} pixels in the image");
+        }
+        // an orthographic camera looks along one direction: no light path meets it
+        let ortho = Camera::new(&CameraDesc { projection: Projection::Orthographic, ..base }).unwrap();
+        assert!(!ortho.connectible() && ortho.importance(Vec3::ZERO, Vec3::new(0.0, 0.0, -3.0)).is_none());
     }
 
     #[test]
