@@ -464,12 +464,25 @@ impl Camera {
         self.to_world.w_axis.truncate()
     }
 
-    /// Light tracing can reach the image through this camera: a perspective one (pinhole or
-    /// thin lens) or a panorama (its centre). An orthographic camera sees along one direction
-    /// only (a delta no light path meets).
+    /// Light tracing can reach the image through this camera: every projection GDMLT renders
+    /// — a perspective camera (pinhole or thin lens) at its lens, a panorama at its centre,
+    /// an orthographic one along its one direction (`parallel`).
     #[inline]
     pub fn connectible(&self) -> bool {
-        self.projection == Projection::Perspective || self.is_panoramic()
+        true
+    }
+
+    /// An orthographic camera: its rays are parallel, from every point of its film, like a
+    /// light at infinity's: a point joins it along the view axis (a delta direction), and
+    /// densities at its vertex are per unit film area (no 1/d², as from a distant light).
+    #[inline]
+    pub fn parallel(&self) -> bool {
+        self.projection == Projection::Orthographic
+    }
+
+    /// The camera's viewing direction (world; a panorama's image centre).
+    pub fn forward(&self) -> Vec3 {
+        -self.to_world.z_axis.truncate().normalize_or_zero()
     }
 
     /// A panorama's W towards the camera-space unit direction `d`: 1 / the solid angle of
@@ -548,11 +561,23 @@ impl Camera {
     /// pixels, y from the top) and W = 1/(A·cos³θ), the density per solid angle of the
     /// directions of one pixel's camera rays at the lens (A: a pixel's area on the image plane
     /// at distance 1, θ: the angle to the view axis) — the same with depth of field, since
-    /// the lens point's own density cancels (docs/bidirectional.md). None behind the lens,
-    /// outside the clipping range or for a camera light tracing cannot connect to.
+    /// the lens point's own density cancels (docs/bidirectional.md). A panorama's W is per
+    /// solid angle too (`panorama_density`); an orthographic camera's per unit film area
+    /// (1/a, `lens` unused: `p` is joined along the view axis). None behind the lens, outside
+    /// the clipping range or for a camera light tracing cannot connect to.
     pub fn importance(&self, lens: Vec3, p: Vec3) -> Option<(Vec2, f32)> {
         if !self.connectible() {
             return None;
+        }
+        if self.parallel() {
+            // W = 1/a: a pixel's rays start uniformly over its footprint on the film, of area a
+            let pc = self.to_camera.transform_point3(p);
+            let depth = -pc.z;
+            if !(depth > self.clip_start && depth < self.clip_end) {
+                return None;
+            }
+            let pixel_area = self.ext.x * self.ext.y / (self.full.x * self.full.y);
+            return Some((self.project(p)?, 1.0 / pixel_area));
         }
         if self.is_panoramic() {
             // (no lens: the centre; clipped along the ray, as its camera rays are)
@@ -591,6 +616,9 @@ impl Camera {
 
     /// `importance`'s W for a camera ray of unit direction `dir` (world), clipping aside.
     pub fn ray_density(&self, dir: Vec3) -> f32 {
+        if self.parallel() {
+            return self.full.x * self.full.y / (self.ext.x * self.ext.y); // (per film area)
+        }
         if self.is_panoramic() {
             let w = self.panorama_density(self.to_camera.transform_vector3(dir).normalize_or_zero());
             return if w.is_finite() { w } else { 0.0 };
@@ -604,9 +632,15 @@ impl Camera {
         1.0 / (pixel_area * cos * cos * cos)
     }
 
-    /// A point of the lens for a light-tracing connection from sample `u` (world; the
-    /// camera's position for a pinhole), as `generate_ray` picks its origin.
-    pub fn lens_point(&self, u: Vec2) -> Vec3 {
+    /// A point of the lens for a light-tracing connection to `p` from sample `u` (world; the
+    /// camera's position for a pinhole), as `generate_ray` picks its origin; for an
+    /// orthographic camera the point of its film whose ray meets `p`, moved to the clip start
+    /// (what lies before it is clipped).
+    pub fn lens_point(&self, u: Vec2, p: Vec3) -> Vec3 {
+        if self.parallel() {
+            let pc = self.to_camera.transform_point3(p);
+            return self.to_world.transform_point3(Vec3::new(pc.x, pc.y, -self.clip_start));
+        }
         if self.aperture_radius > 0.0 && self.projection == Projection::Perspective {
             let l = self.aperture_point(u) * self.aperture_radius;
             self.to_world.transform_point3(Vec3::new(l.x, l.y, 0.0))
@@ -805,9 +839,19 @@ mod tests {
             }
             assert!(checked >= 4, "{name}: {checked} pixels in the image");
         }
-        // an orthographic camera looks along one direction: no light path meets it
-        let ortho = Camera::new(&CameraDesc { projection: Projection::Orthographic, ..base }).unwrap();
-        assert!(!ortho.connectible() && ortho.importance(Vec3::ZERO, Vec3::new(0.0, 0.0, -3.0)).is_none());
+        // an orthographic camera: W per unit film area, 1 / a pixel's footprint there, and a
+        // point lands where the ray along the view axis that meets it starts
+        let ortho =
+            Camera::new(&CameraDesc { projection: Projection::Orthographic, ortho_scale: 4.0, ..base }).unwrap();
+        assert!(ortho.parallel());
+        let ray = ortho.generate_ray(Vec2::new(20.3, 30.6), Vec2::ZERO);
+        let p = ray.origin + ray.dir * 2.5;
+        let (raster, w) = ortho.importance(Vec3::ZERO, p).unwrap();
+        assert!((raster - Vec2::new(20.3, 30.6)).length() < 1e-3, "{raster}");
+        let footprint = (4.0 / 64.0) * (4.0 * 40.0 / 64.0 / 40.0);
+        assert!((w * footprint - 1.0).abs() < 1e-4, "{w}");
+        let lens = ortho.lens_point(Vec2::ZERO, p);
+        assert!((lens - (ray.origin + ray.dir * ortho.clip_start)).length() < 1e-4, "{lens} {ray:?}");
     }
 
     #[test]

@@ -901,7 +901,7 @@ def _hdri_scene(bpy, engine, spp, seed):
 def test_orthographic_and_depth_of_field_cameras_agree_with_cycles(bpy_mod, tmp_out, kind, method):
     """The lights scene through an orthographic camera, and through a perspective one with a
     wide aperture (f/0.8) focused on the card: GDMLT against Cycles — also with `bdpt`, whose
-    light tracing goes through the lens (and not through an orthographic camera)."""
+    light tracing goes through the lens, and along the orthographic camera's one direction."""
     def build(bpy, engine, spp, seed):
         scene = open_scene(bpy, "lights", engine, spp, seed, keep={"Area", "Point"})
         if engine == "GDMLT" and method:
@@ -924,7 +924,9 @@ def test_panoramic_cameras_agree_with_cycles(bpy_mod, tmp_out, kind):
     the scene, against Cycles: Equirectangular (a 360° × 180° view, and one narrowed to
     latitudes −30…60° and longitudes −100…80°), Fisheye Equidistant (a 200° view over a 2:1
     frame: an ellipse, black outside) and Fisheye Equisolid (a 12 mm lens of 180°, vertical
-    sensor fit). Before, these cameras were refused ("PANO cameras are not supported")."""
+    sensor fit). Before, these cameras were refused ("PANO cameras are not supported"). (`bdpt`,
+    whose light tracing joins a panorama's centre: the `panorama` and `fisheye` convergence
+    scenes.)"""
     def build(bpy, engine, spp, seed):
         scene = open_scene(bpy, "lights", engine, spp, seed, keep={"Area", "Point", "Sun", "World"})
         cam = scene.camera
