@@ -252,13 +252,9 @@ impl Context<'_> {
         if b.infinite {
             return 0.0;
         }
-        let camera = &self.scene.camera;
-        let Some((raster, we)) = camera.importance(cam.p, b.p) else { return 0.0 };
-        let f = &camera.filter;
+        let Some((raster, we)) = self.scene.camera.importance(cam.p, b.p) else { return 0.0 };
         // (a panorama sees b at more than one place near its edges: the filter over each)
-        let (images, n) = camera.raster_images(raster, f.radius() + 1.0);
-        let fw: f32 = images[..n].iter().map(|r| f.density(r.x - cam.pixel.x) * f.density(r.y - cam.pixel.y)).sum();
-        convert(fw * we / self.pixels, cam, b)
+        convert(self.scene.camera.filter_weight(raster, cam.pixel) * we / self.pixels, cam, b)
     }
 
     /// The light-origin density of light vertex `v` (light subpaths' choice by power).
@@ -957,7 +953,6 @@ pub(crate) fn sample(
 ) -> PathContribution {
     let scene = ctx.scene;
     let cfg = ctx.cfg;
-    let (width, height) = (scene.camera.width as usize, scene.camera.height as usize);
     let mut res = CameraResult::default();
     // the joins' scattering labels (per-kind bounce limits) draw from a hash of the sample's
     // first numbers: a function of the sample (as a Markov state needs), without a primary
@@ -974,19 +969,11 @@ pub(crate) fn sample(
     scratch.moment_splats.clear();
     let mut c0 = camera_vertex(scene, ray.origin);
     c0.pixel = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
-    c0.connectible = scene.camera.connectible();
     scratch.camera.push(c0);
     // the camera's density of its ray (relative to light tracing's; the pixel filter over
     // every place a panorama sees that way), or 1 where no light path reaches the camera (a
     // common factor of every strategy then)
-    let mut pdf_cam = if c0.connectible {
-        let f = &scene.camera.filter;
-        let (images, n) = scene.camera.raster_images(raster, f.radius() + 1.0);
-        let fw: f32 = images[..n].iter().map(|r| f.density(r.x - c0.pixel.x) * f.density(r.y - c0.pixel.y)).sum();
-        fw * scene.camera.ray_density(ray.dir) / ctx.pixels
-    } else {
-        0.0
-    };
+    let mut pdf_cam = scene.camera.filter_weight(raster, c0.pixel) * scene.camera.ray_density(ray.dir) / ctx.pixels;
     if !(pdf_cam > 0.0) {
         // no light path reaches the camera here (another projection, or a ray it cannot
         // place back): the camera's density is then a common factor of every strategy
@@ -1184,34 +1171,20 @@ pub(crate) fn sample(
                 if let Some(tr) = tr {
                     let value = a.beta * fa * tr * (we / d2);
                     let label = if ctx.kind_limits { join_label(scene, a, wc, w_prev, u_label) } else { NO_LABEL };
-                    let filter = &scene.camera.filter;
-                    let r = filter.radius();
                     // (a panorama sees a at more than one place near its edges: a splat at each)
-                    let (images, n_images) = scene.camera.raster_images(raster, r + 1.0);
-                    for raster in &images[..n_images] {
-                        let (x0, x1) = ((raster.x - r).floor().max(0.0) as i64, (raster.x + r).floor() as i64);
-                        let (y0, y1) = ((raster.y - r).floor().max(0.0) as i64, (raster.y + r).floor() as i64);
-                        for py in y0..=y1.min(height as i64 - 1) {
-                            for px in x0..=x1.min(width as i64 - 1) {
-                                cam.pixel = Vec2::new(px as f32 + 0.5, py as f32 + 0.5);
-                                let fw =
-                                    filter.density(raster.x - cam.pixel.x) * filter.density(raster.y - cam.pixel.y);
-                                if !(fw > 0.0) || !is_finite_spectrum(value) {
-                                    continue;
-                                }
-                                let fp = FullPath::joined(light, lr, jl, s, &[], &[], 0, 1, Some(&cam));
-                                if ctx.kind_limits && !ctx.kinds_allowed(&fp, label, NO_LABEL) {
-                                    continue;
-                                }
-                                let wgt = ctx.mis_weight(&fp, origin_nee, fwd_l, fwd_c);
-                                let c = value * (fw * wgt.w);
-                                splat(px as usize, py as usize, c);
-                                if predict {
-                                    let mut m = PtMoments::default();
-                                    m.add(c, wgt);
-                                    moment_splats.push((px as u32, py as u32, m));
-                                }
-                            }
+                    for (px, py, fw) in scene.camera.footprint(raster).filter(|_| is_finite_spectrum(value)) {
+                        cam.pixel = Vec2::new(px as f32 + 0.5, py as f32 + 0.5);
+                        let fp = FullPath::joined(light, lr, jl, s, &[], &[], 0, 1, Some(&cam));
+                        if ctx.kind_limits && !ctx.kinds_allowed(&fp, label, NO_LABEL) {
+                            continue;
+                        }
+                        let wgt = ctx.mis_weight(&fp, origin_nee, fwd_l, fwd_c);
+                        let c = value * (fw * wgt.w);
+                        splat(px as usize, py as usize, c);
+                        if predict {
+                            let mut m = PtMoments::default();
+                            m.add(c, wgt);
+                            moment_splats.push((px, py, m));
                         }
                     }
                 }

@@ -464,14 +464,6 @@ impl Camera {
         self.to_world.w_axis.truncate()
     }
 
-    /// Light tracing can reach the image through this camera: every projection GDMLT renders
-    /// — a perspective camera (pinhole or thin lens) at its lens, a panorama at its centre,
-    /// an orthographic one along its one direction (`parallel`).
-    #[inline]
-    pub fn connectible(&self) -> bool {
-        true
-    }
-
     /// An orthographic camera: its rays are parallel, from every point of its film, like a
     /// light at infinity's: a point joins it along the view axis (a delta direction), and
     /// densities at its vertex are per unit film area (no 1/d², as from a distant light).
@@ -556,6 +548,38 @@ impl Camera {
         (out, n)
     }
 
+    /// The pixel filter's weight at the pixel centred on `pixel` of a sample that lands at
+    /// `raster`: its density over every place the camera sees that way (`raster_images`).
+    #[inline]
+    pub fn filter_weight(&self, raster: Vec2, pixel: Vec2) -> f32 {
+        let f = &self.filter;
+        if self.projection != Projection::Equirectangular {
+            return f.density(raster.x - pixel.x) * f.density(raster.y - pixel.y);
+            // (one place)
+        }
+        let (images, n) = self.raster_images(raster, f.radius() + 1.0);
+        images[..n].iter().map(|r| f.density(r.x - pixel.x) * f.density(r.y - pixel.y)).sum()
+    }
+
+    /// The pixels (x, y) of the region a sample landing at `raster` reaches through the pixel
+    /// filter, each with the filter's weight there (one place's: a pixel that two places of
+    /// a panorama reach comes twice).
+    pub fn footprint(&self, raster: Vec2) -> impl Iterator<Item = (u32, u32, f32)> + '_ {
+        let f = &self.filter;
+        let r = f.radius();
+        let (images, n) = self.raster_images(raster, r + 1.0);
+        let (w, h) = (self.width as i64, self.height as i64);
+        (0..n).flat_map(move |i| {
+            let p = images[i];
+            let (x0, x1) = (((p.x - r).floor() as i64).max(0), ((p.x + r).floor() as i64).min(w - 1));
+            let (y0, y1) = (((p.y - r).floor() as i64).max(0), ((p.y + r).floor() as i64).min(h - 1));
+            (y0..=y1).flat_map(move |y| (x0..=x1).map(move |x| (x, y))).filter_map(move |(x, y)| {
+                let fw = f.density(p.x - (x as f32 + 0.5)) * f.density(p.y - (y as f32 + 0.5));
+                (fw > 0.0).then_some((x as u32, y as u32, fw))
+            })
+        })
+    }
+
     /// The camera's importance towards world point `p` seen from the lens point `lens` (the
     /// camera's position for a pinhole): the raster position where `p` lands (the region's
     /// pixels, y from the top) and W = 1/(A·cos³θ), the density per solid angle of the
@@ -564,11 +588,8 @@ impl Camera {
     /// the lens point's own density cancels (docs/bidirectional.md). A panorama's W is per
     /// solid angle too (`panorama_density`); an orthographic camera's per unit film area
     /// (1/a, `lens` unused: `p` is joined along the view axis). None behind the lens, outside
-    /// the clipping range or for a camera light tracing cannot connect to.
+    /// the clipping range, or outside a fisheye's circle.
     pub fn importance(&self, lens: Vec3, p: Vec3) -> Option<(Vec2, f32)> {
-        if !self.connectible() {
-            return None;
-        }
         if self.parallel() {
             // W = 1/a: a pixel's rays start uniformly over its footprint on the film, of area a
             let pc = self.to_camera.transform_point3(p);
@@ -817,7 +838,6 @@ mod tests {
         ];
         for (name, d) in cases {
             let cam = Camera::new(&d).unwrap();
-            assert!(cam.connectible(), "{name}");
             let dir = |x: f32, y: f32| cam.generate_ray(Vec2::new(x, y), Vec2::ZERO).dir.as_dvec3();
             let mut checked = 0;
             for (x, y) in [(10.3, 7.7), (32.0, 20.0), (50.5, 12.25), (5.5, 33.5), (60.2, 38.9), (31.1, 2.6)] {
