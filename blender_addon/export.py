@@ -1225,6 +1225,15 @@ def _cycles_reads_point_normals():
     return bpy.app.version < (5, 1, 0)
 
 
+def _cycles_oren_nayar_rho_cubed():
+    """Whether this Blender's Cycles renders rough diffuse with its multiple scattering cubed
+    in the colour (4.5 to 5.2, read in their kernels' bsdf_oren_nayar.h) rather than squared
+    as OpenPBR's EON (5.3; src/bsdf/oren_nayar.rs)."""
+    import bpy
+
+    return bpy.app.version < (5, 3, 0)
+
+
 def _any_true(attr, n):
     """Whether boolean attribute `attr` (of `n` elements, or None) is set anywhere."""
     if attr is None or n == 0:
@@ -1693,6 +1702,8 @@ def export_scene(depsgraph, test_break=lambda: False, need_camera=True):
             "world": world, "world_texture": world_texture}
     if world_rotation is not None:
         desc["world_rotation"] = world_rotation
+    if _cycles_oren_nayar_rho_cubed():
+        desc["oren_nayar_rho_cubed"] = True
     if need_camera:
         desc["camera"] = camera_dict(scene, scene.camera.evaluated_get(depsgraph), warnings)
         if backdrop is not None:

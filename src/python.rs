@@ -705,6 +705,7 @@ fn parse_scene(d: &Bound<'_, PyDict>) -> PyResult<SceneDesc> {
         world: get_or(d, "world", [0.0; 3], "scene")?,
         world_texture: get_or(d, "world_texture", None, "scene")?,
         general_paths: get_or(d, "general_paths", false, "scene")?,
+        oren_nayar_rho_cubed: get_or(d, "oren_nayar_rho_cubed", false, "scene")?,
         world_rotation: rotation3(d, "world_rotation", "scene")?,
     })
 }

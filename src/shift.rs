@@ -222,7 +222,12 @@ struct Offset<'a> {
 }
 
 /// `Offset::bsdf` while the state is not `Free`.
-const NO_BSDF: Bsdf = Bsdf::Lambert(crate::bsdf::Lambert { albedo: Spectrum::ZERO, roughness: 0.0, unmapped: Vec3::Z });
+const NO_BSDF: Bsdf = Bsdf::Lambert(crate::bsdf::Lambert {
+    albedo: Spectrum::ZERO,
+    roughness: 0.0,
+    power: crate::bsdf::ColourPower::Squared,
+    unmapped: Vec3::Z,
+});
 
 impl<'a> Offset<'a> {
     fn new(scene: &'a Scene, base: &'a Path, offset_raster: Option<Vec2>) -> Offset<'a> {

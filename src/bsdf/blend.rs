@@ -66,6 +66,7 @@ impl Bsdf {
             base: Lambert {
                 albedo: mean(da.base.albedo, d1, db.base.albedo, d2),
                 roughness: mean(da.base.roughness, d1, db.base.roughness, d2),
+                power: da.base.power,
                 unmapped: da.base.unmapped,
             },
             eta: mean(da.eta, s1, db.eta, s2),

@@ -11,7 +11,7 @@
 //! Under a normal or bump map the lobe is shadowed as Cycles shadows it (`bump_shadowing.rs`).
 
 use super::bump_shadowing::diffuse_bump_shadowing;
-use super::oren_nayar::OrenNayar;
+use super::oren_nayar::{ColourPower, OrenNayar};
 use super::{BsdfSample, LobeKind, Scatter};
 use crate::math::{cosine_hemisphere_pdf, square_to_cosine_hemisphere, Spectrum};
 use glam::{Vec2, Vec3};
@@ -22,6 +22,8 @@ pub struct Lambert {
     pub albedo: Spectrum,
     /// Blender's diffuse roughness σ ∈ [0, 1]: 0 = Lambertian, above it Oren–Nayar.
     pub roughness: f32,
+    /// How Oren–Nayar's multiple scattering takes the colour (Cycles 5.3's, or 4.5–5.2's).
+    pub power: ColourPower,
     /// The surface's normal before normal/bump mapping, in the shading frame (whose Z is the
     /// mapped normal): +Z where nothing maps it, and then no bump shadowing.
     pub unmapped: Vec3,
@@ -31,13 +33,13 @@ impl Lambert {
     /// A Lambertian of this albedo.
     #[inline]
     pub fn new(albedo: Spectrum) -> Lambert {
-        Lambert { albedo, roughness: 0.0, unmapped: Vec3::Z }
+        Lambert { albedo, roughness: 0.0, power: ColourPower::Squared, unmapped: Vec3::Z }
     }
 
     /// A Lambertian (or Oren–Nayar, σ = `roughness`) of this albedo, not bumped.
     #[inline]
     pub fn rough(albedo: Spectrum, roughness: f32) -> Lambert {
-        Lambert { albedo, roughness, unmapped: Vec3::Z }
+        Lambert { albedo, roughness, power: ColourPower::Squared, unmapped: Vec3::Z }
     }
 
     /// The bump shadowing factor towards `wi` (`bump_shadowing.rs`), 1 without a mapped normal.
@@ -58,7 +60,7 @@ impl Lambert {
         if self.roughness < Self::ROUGH {
             return self.albedo * (FRAC_1_PI * wi.z * shadowing);
         }
-        self.albedo * (OrenNayar::new(self.roughness, self.albedo).eval(wo.z, wi.z, wo.dot(wi)) * shadowing)
+        self.albedo * (OrenNayar::new(self.roughness, self.albedo, self.power).eval(wo.z, wi.z, wo.dot(wi)) * shadowing)
     }
 
     #[inline]
@@ -137,7 +139,7 @@ mod tests {
             let (by_sampling, by_quadrature) = white_furnace(&orange, wo, 200_000, 14);
             assert!((by_sampling - by_quadrature).abs() < 0.01 * by_quadrature, "{by_sampling} {by_quadrature}");
             // darker than a Lambertian of the same colour: single scattering loses energy and
-            // the multiple scattering gives it back only in proportion to ρ³
+            // the multiple scattering gives it back only in proportion to ρ²
             assert!(by_sampling < crate::math::luminance(Spectrum::new(0.9, 0.4, 0.1)) as f64);
             chi2_test(&orange, wo, 15);
         }

@@ -24,6 +24,7 @@ pub use conductor::Conductor;
 pub use dielectric::{refraction_half_vector, Dielectric};
 pub use lambert::Lambert;
 pub use layered::Layered;
+pub use oren_nayar::ColourPower;
 pub use translucent::Translucent;
 
 use crate::math::{luminance, power_heuristic, Spectrum};

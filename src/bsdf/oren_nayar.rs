@@ -16,21 +16,33 @@
 //! and E's hemispherical average E_avg ≈ A·π + (2π − 5.6)/3 · B. The multiple-scattering lobe
 //! gives back what single scattering misses, shaped by what each direction lost:
 //!
-//!   f_ms = ρ²·E_avg / (π (1 − E_avg)(1 − ρ(1 − E_avg))) · (1 − E(μo))(1 − E(μi)),
+//!   f_ms = ρ·E_avg / (π (1 − E_avg)(1 − ρ(1 − E_avg))) · (1 − E(μo))(1 − E(μi)),
 //!
 //! so a white surface (ρ = 1) reflects all light. As in Cycles the whole lobe, f_ms included,
-//! is weighted by the colour ρ (f = ρ·(f_ss + f_ms); OpenPBR writes ρ·f_ss + f_ms); both
-//! are 1 at ρ = 1. Sampled as a Lambertian (cosine-weighted), as Cycles does.
+//! is weighted by the colour ρ: f = ρ·(f_ss + f_ms), which is OpenPBR's ρ·f_ss + f_ms with its
+//! ρ² in f_ms. Cycles 4.5–5.2 wrote ρ² into f_ms (ρ³ with the weight; `ColourPower::Cubed`,
+//! a rough orange surface some percent darker); Cycles 5.3 writes ρ (`ColourPower::Squared`).
+//! Both are 1 at ρ = 1. Sampled as a Lambertian (cosine-weighted), as Cycles does.
 
 use crate::math::Spectrum;
 use std::f32::consts::{FRAC_1_PI, FRAC_PI_2, PI};
+
+/// The colour's power in the multiple-scattering lobe, the lobe's weight ρ included: ρ² as
+/// OpenPBR's EON and Cycles 5.3 (the default), or ρ³ as Cycles 4.5–5.2 (module docs).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum ColourPower {
+    #[default]
+    Squared,
+    Cubed,
+}
 
 /// The precomputed lobe for one roughness and colour: f·cos θi for a pair of cosines.
 #[derive(Clone, Copy, Debug)]
 pub struct OrenNayar {
     a: f32,
     b: f32,
-    /// ρ²·E_avg / (π (1 − E_avg)(1 − ρ(1 − E_avg))), per channel.
+    /// ρ·E_avg / (π (1 − E_avg)(1 − ρ(1 − E_avg))) per channel (ρ² in the numerator for
+    /// `ColourPower::Cubed`).
     ms: Spectrum,
 }
 
@@ -48,13 +60,14 @@ pub fn g(cos: f32) -> f32 {
 
 impl OrenNayar {
     /// σ = the roughness in [0, 1], ρ = the colour (clamped to [0, 1]).
-    pub fn new(sigma: f32, rho: Spectrum) -> OrenNayar {
+    pub fn new(sigma: f32, rho: Spectrum, power: ColourPower) -> OrenNayar {
         let sigma = sigma.clamp(0.0, 1.0);
         let a = 1.0 / (PI + sigma * (FRAC_PI_2 - 2.0 / 3.0));
         let b = sigma * a;
         let e_avg = a * PI + (2.0 * PI - 5.6) / 3.0 * b;
         let rho = rho.clamp(Spectrum::ZERO, Spectrum::ONE);
-        let ms = rho * rho * (FRAC_1_PI * e_avg / (1.0 - e_avg)) / (Spectrum::ONE - rho * (1.0 - e_avg));
+        let numerator = if power == ColourPower::Cubed { rho * rho } else { rho };
+        let ms = numerator * (FRAC_1_PI * e_avg / (1.0 - e_avg)) / (Spectrum::ONE - rho * (1.0 - e_avg));
         OrenNayar { a, b, ms }
     }
 
@@ -81,6 +94,7 @@ impl OrenNayar {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use glam::Vec3;
 
     /// Numerical ∫ f_ss cos dω over the hemisphere for view cosine μ (colour 1).
     fn single_scattering_albedo(on: &OrenNayar, mu: f64) -> f64 {
@@ -110,7 +124,7 @@ mod tests {
     #[test]
     fn albedo_is_the_integral_of_the_single_scattering_lobe() {
         for sigma in [0.3f32, 1.0] {
-            let on = OrenNayar::new(sigma, Spectrum::ONE);
+            let on = OrenNayar::new(sigma, Spectrum::ONE, ColourPower::Squared);
             for mu in [1e-7f64, 0.05, 0.3, 0.6, 0.9, 1.0] {
                 let numeric = single_scattering_albedo(&on, mu);
                 let closed = on.albedo(mu as f32) as f64;
@@ -131,11 +145,49 @@ mod tests {
     /// Reciprocal: f(wo, wi)/μi = f(wi, wo)/μo.
     #[test]
     fn the_lobe_is_reciprocal() {
-        let on = OrenNayar::new(0.8, Spectrum::new(0.9, 0.5, 0.1));
+        let on = OrenNayar::new(0.8, Spectrum::new(0.9, 0.5, 0.1), ColourPower::Cubed);
         for (mo, mi, c) in [(0.9f32, 0.3f32, 0.5f32), (0.2, 0.7, -0.4), (0.5, 0.5, 0.9)] {
             let a = on.eval(mo, mi, c) / mi;
             let b = on.eval(mi, mo, c) / mo;
             assert!((a - b).abs().max_element() < 1e-6, "{a} {b}");
+        }
+    }
+
+    /// The whole lobe's albedo ρ·∫(f_ss + f_ms) cos dω, integrated numerically per channel,
+    /// is OpenPBR's EON albedo ρ·E(μ) + ρ_ms·(1 − E(μ)), ρ_ms = ρ²·E_avg / (1 − ρ(1 − E_avg)),
+    /// with `Squared` (Cycles 5.3), and ρ times its multiple-scattering part with `Cubed`
+    /// (Cycles 4.5–5.2): a mid-grey channel (ρ = 0.5) 0.7–5% apart.
+    #[test]
+    fn the_lobes_albedo_is_eons_with_either_colour_power() {
+        let rho = Spectrum::new(0.9, 0.5, 0.1);
+        for sigma in [0.5f32, 1.0] {
+            for mu in [0.2f32, 0.7] {
+                let wo = Vec3::new((1.0 - mu * mu).sqrt(), 0.0, mu);
+                let albedo = |power| {
+                    let on = OrenNayar::new(sigma, rho, power);
+                    let (nt, np) = (300, 300);
+                    let mut sum = glam::DVec3::ZERO;
+                    for i in 0..nt {
+                        let t = (i as f32 + 0.5) / nt as f32 * FRAC_PI_2;
+                        for j in 0..np {
+                            let p = (j as f32 + 0.5) / np as f32 * 2.0 * PI;
+                            let wi = Vec3::new(t.sin() * p.cos(), t.sin() * p.sin(), t.cos());
+                            sum += (rho * on.eval(wo.z, wi.z, wo.dot(wi))).as_dvec3() * t.sin() as f64;
+                        }
+                    }
+                    sum * (FRAC_PI_2 as f64 / nt as f64) * (2.0 * PI as f64 / np as f64)
+                };
+                let on = OrenNayar::new(sigma, rho, ColourPower::Squared);
+                let (e, e_avg) = (on.albedo(mu), on.a * PI + (2.0 * PI - 5.6) / 3.0 * on.b);
+                let rho_ms = rho * rho * e_avg / (Spectrum::ONE - rho * (1.0 - e_avg));
+                let (single, multiple) = ((rho * e).as_dvec3(), (rho_ms * (1.0 - e)).as_dvec3());
+                let squared = albedo(ColourPower::Squared);
+                let cubed = albedo(ColourPower::Cubed);
+                let close = |a: glam::DVec3, b: glam::DVec3| (a - b).abs().max_element() < 2e-3;
+                assert!(close(squared, single + multiple), "σ={sigma} μ={mu}: {squared} vs EON {}", single + multiple);
+                assert!(close(cubed, single + multiple * rho.as_dvec3()), "σ={sigma} μ={mu}: {cubed}");
+                assert!(squared.y > cubed.y * 1.005, "{squared} {cubed}");
+            }
         }
     }
 }

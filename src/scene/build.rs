@@ -8,6 +8,7 @@ use super::terminator::DEFAULT_GEOMETRY_OFFSET;
 use super::{
     light_select, CameraDesc, Light, LightShape, Material, MaterialDesc, MeshDesc, SceneDesc, SceneReport, Texture,
 };
+use crate::bsdf::ColourPower;
 use crate::error::SceneError;
 use crate::math::Spectrum;
 use glam::{Vec2, Vec3, Vec4};
@@ -35,6 +36,14 @@ impl Shading {
             desc.materials.iter().map(|m| Material::from_desc(m, textures.len())).collect::<Result<_, _>>()?;
         if materials.is_empty() {
             materials.push(Material::from_desc(&MaterialDesc::default(), 0)?);
+        }
+        if desc.oren_nayar_rho_cubed {
+            for m in materials.iter_mut() {
+                m.rough_diffuse_power = ColourPower::Cubed;
+                if let Some(b) = m.blend.as_mut() {
+                    b.rough_diffuse_power = ColourPower::Cubed;
+                }
+            }
         }
         // What the scene does not need is decided here, once: no transparent material → shadow
         // rays are any-hit occlusion tests; single-lobe materials → their BSDF alone, not the

@@ -120,6 +120,7 @@ pub fn cornell_box(width: u32, height: u32) -> SceneDesc {
         camera: camera_looking_along_y([0.0, -3.4, 0.0], 35.0, width, height),
         world: [0.0; 3],
         general_paths: false,
+        oren_nayar_rho_cubed: false,
     }
 }
 
@@ -332,6 +333,7 @@ pub fn furnace_sphere(albedo: f32, emission: f32, width: u32, height: u32) -> Sc
         camera: camera_looking_along_y([0.0, 0.0, 0.0], 20.0, width, height),
         world: [0.0; 3],
         general_paths: false,
+        oren_nayar_rho_cubed: false,
     }
 }
 

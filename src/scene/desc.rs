@@ -459,6 +459,10 @@ pub struct SceneDesc {
     /// any-hit shadow rays; single-lobe materials: that lobe alone). Off by default; the
     /// benchmark `skipbench` turns it on to measure what the shortcuts save.
     pub general_paths: bool,
+    /// Rough diffuse (Oren–Nayar) as Cycles 4.5–5.2 renders it, its multiple scattering ρ³
+    /// in the colour; off (the default): ρ² as OpenPBR's EON and Cycles 5.3
+    /// (`bsdf/oren_nayar.rs`). The Blender add-on sets it from the Blender it runs in.
+    pub oren_nayar_rho_cubed: bool,
 }
 
 impl LightDesc {

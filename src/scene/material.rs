@@ -4,7 +4,7 @@
 //! lobe (Transparent BSDF, alpha as coverage) that takes probability τ from all of them.
 
 use super::desc::{MaterialDesc, RayFactor};
-use crate::bsdf::{Bsdf, Coat, Conductor, Dielectric, Lambert, Layered, Translucent};
+use crate::bsdf::{Bsdf, Coat, ColourPower, Conductor, Dielectric, Lambert, Layered, Translucent};
 use crate::error::SceneError;
 use crate::math::Spectrum;
 use glam::Vec3;
@@ -17,6 +17,9 @@ pub struct Material {
     pub roughness: f32,
     /// The diffuse base's roughness σ (0 = Lambertian, above it Oren–Nayar).
     pub diffuse_roughness: f32,
+    /// How its Oren–Nayar multiple scattering takes the colour: the scene's
+    /// `SceneDesc::oren_nayar_rho_cubed` (set for every material by `Shading::new`).
+    pub rough_diffuse_power: ColourPower,
     pub metallic: f32,
     pub transmission: f32,
     pub ior: f32,
@@ -205,6 +208,7 @@ impl Material {
             emission: Vec3::from_array(d.emission),
             roughness: d.roughness.clamp(0.0, 1.0),
             diffuse_roughness: d.diffuse_roughness.clamp(0.0, 1.0),
+            rough_diffuse_power: ColourPower::Squared,
             metallic: d.metallic.clamp(0.0, 1.0),
             transmission: d.transmission.clamp(0.0, 1.0),
             // η = 1 exactly would make refraction a pass-through; keep it just off 1.
@@ -327,7 +331,7 @@ impl Material {
         // the specular layer has the same IOR seen from either side (Cycles inverts it on
         // back faces; opaque surfaces are rarely seen from behind)
         let diffuse = Layered {
-            base: Lambert::rough(base_color, self.diffuse_roughness),
+            base: Lambert { power: self.rough_diffuse_power, ..Lambert::rough(base_color, self.diffuse_roughness) },
             eta: self.specular_ior,
             roughness,
             coverage: self.specular,

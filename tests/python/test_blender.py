@@ -572,6 +572,43 @@ def test_shading_normals_are_cycles_normals(bpy_mod, tmp_out):
         assert (part > 0.05).mean() < 0.08, name  # (silhouettes: a pixel's samples see different points)
 
 
+@pytest.mark.compat
+def test_rough_diffuse_is_this_blenders_oren_nayar(bpy_mod, tmp_out):
+    """A rough (σ = 1) orange Diffuse BSDF ball under a white world: a convex ball lit by a
+    uniform sky reflects its directional albedo, so the ball's mean per channel is the rough
+    diffuse lobe's albedo, and Cycles changed that lobe between releases (its multiple
+    scattering takes the colour cubed up to 5.2, squared as OpenPBR's EON in 5.3). Per channel
+    within 1% of the Blender running the test; on bpy 5.3 GDMLT was 2–4% dark in green and
+    red (it followed 5.0; failed before), and the convergence suite's clay room −5.6%."""
+    bpy = bpy_mod
+    sys.path.insert(0, str(ROOT / "tools"))
+    import convergence
+
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    scene = bpy.context.scene
+    mat = convergence._material(bpy, "Clay", "ShaderNodeBsdfDiffuse", Color=(0.8, 0.5, 0.25, 1.0), Roughness=1.0)
+    convergence._uv_sphere(bpy, scene, "Ball", (0, 0, 0), 1.0, 48, 24, mat, smooth=True)
+    scene.world = bpy.data.worlds.new("White")
+    scene.world.use_nodes = True
+    scene.world.node_tree.nodes["Background"].inputs["Color"].default_value = (1, 1, 1, 1)
+    bpy.ops.object.camera_add(location=(0, -6, 0), rotation=(math.radians(90), 0, 0))
+    scene.camera = bpy.context.object
+    scene.camera.data.lens = 70
+    scene.render.resolution_x = scene.render.resolution_y = 48
+    ball = None
+    means = {}
+    for engine in ("CYCLES", "GDMLT"):
+        for_engine(scene, engine, 64, 1)
+        img = render_to_exr(bpy, scene, tmp_out / f"clay{engine}.exr")
+        if ball is None:  # (the world is exactly 1 in every channel; the ball is darker)
+            ball = img.max(axis=-1) < 0.99
+            assert 600 < ball.sum() < 0.9 * ball.size
+        means[engine] = img[ball].mean(axis=0)
+    c, g = means["CYCLES"], means["GDMLT"]
+    print(f"rough diffuse ball, Blender {bpy.app.version_string}: Cycles {c}, GDMLT {g}")
+    assert np.all(np.abs(g / c - 1) < 0.01), (g, c)
+
+
 def test_a_cycles_portal_sends_no_light(bpy_mod):
     """An area light marked as a portal (Object Data › Light › Portal, how artists help Cycles
     light an interior through its windows) only guides Cycles' sampling of the world and
