@@ -69,11 +69,11 @@ test-python: build
 	$(PY) -m pytest -q tests/python
 
 # Blender versions besides the default (requirements-dev.txt's bpy): the current release and
-# the long-term-support line, each as bpy in its own venv with the Python that bpy is built
+# the long-term-support lines, each as bpy in its own venv with the Python that bpy is built
 # for (tools/python_for.sh finds it: PATH, then pyenv). On each, the headless tests marked
 # `compat` (tests/python/test_blender.py: F12, export, panels, errors, Cycles agreement) run
 # with the core the default venv built (an abi3 module, on sys.path from python/).
-BLENDER_VERSIONS := 5.3.0:3.13 4.5.15:3.11
+BLENDER_VERSIONS := 5.3.0:3.13 5.2.0:3.13 4.5.15:3.11
 test-blender-versions: build
 	@for spec in $(BLENDER_VERSIONS); do \
 		bpy=$${spec%%:*}; pyv=$${spec##*:}; venv=.venv-bpy-$$bpy; \

@@ -1219,19 +1219,24 @@ def _cycles_normals(me, co, tv, tl):
 
 def _cycles_reads_point_normals():
     """Whether this Blender's Cycles shades a mesh of mixed smooth and flat faces (no sharp
-    edges, no custom normals) with vertex normals (up to 5.0) rather than corner normals."""
+    edges, no custom normals) with vertex normals (up to 5.1) rather than corner normals
+    (5.2 and 5.3: tests/python/test_blender.py's Normal-pass comparison on each)."""
     import bpy
 
-    return bpy.app.version < (5, 1, 0)
+    return bpy.app.version < (5, 2, 0)
 
 
-def _cycles_oren_nayar_rho_cubed():
-    """Whether this Blender's Cycles renders rough diffuse with its multiple scattering cubed
-    in the colour (4.5 to 5.2, read in their kernels' bsdf_oren_nayar.h) rather than squared
-    as OpenPBR's EON (5.3; src/bsdf/oren_nayar.rs)."""
+def _cycles_release_choices():
+    """Where Cycles releases render differently, whether this Blender's Cycles does what the
+    older ones do (read in each release's kernel; the scene description's switches of those
+    names, src/scene/desc.rs): rough diffuse with its multiple scattering cubed in the colour
+    rather than squared as OpenPBR's EON (bsdf_oren_nayar.h, up to 5.2), tangent-space
+    normal maps on the interpolated normal as it is rather than normalized (triangle.h's
+    triangle_smooth_normal_unnormalized*, up to 5.0)."""
     import bpy
 
-    return bpy.app.version < (5, 3, 0)
+    v = bpy.app.version
+    return {"oren_nayar_rho_cubed": v < (5, 3, 0), "normal_map_unnormalized_base": v < (5, 1, 0)}
 
 
 def _any_true(attr, n):
@@ -1702,8 +1707,7 @@ def export_scene(depsgraph, test_break=lambda: False, need_camera=True):
             "world": world, "world_texture": world_texture}
     if world_rotation is not None:
         desc["world_rotation"] = world_rotation
-    if _cycles_oren_nayar_rho_cubed():
-        desc["oren_nayar_rho_cubed"] = True
+    desc.update({k: True for k, older in _cycles_release_choices().items() if older})
     if need_camera:
         desc["camera"] = camera_dict(scene, scene.camera.evaluated_get(depsgraph), warnings)
         if backdrop is not None:

@@ -706,6 +706,7 @@ fn parse_scene(d: &Bound<'_, PyDict>) -> PyResult<SceneDesc> {
         world_texture: get_or(d, "world_texture", None, "scene")?,
         general_paths: get_or(d, "general_paths", false, "scene")?,
         oren_nayar_rho_cubed: get_or(d, "oren_nayar_rho_cubed", false, "scene")?,
+        normal_map_unnormalized_base: get_or(d, "normal_map_unnormalized_base", false, "scene")?,
         world_rotation: rotation3(d, "world_rotation", "scene")?,
     })
 }

@@ -37,13 +37,15 @@ impl Shading {
         if materials.is_empty() {
             materials.push(Material::from_desc(&MaterialDesc::default(), 0)?);
         }
-        if desc.oren_nayar_rho_cubed {
-            for m in materials.iter_mut() {
-                m.rough_diffuse_power = ColourPower::Cubed;
-                if let Some(b) = m.blend.as_mut() {
-                    b.rough_diffuse_power = ColourPower::Cubed;
-                }
-            }
+        // the choices between Cycles releases, the same for every material and its blend
+        let power = if desc.oren_nayar_rho_cubed { ColourPower::Cubed } else { ColourPower::Squared };
+        let release = |m: &mut Material| {
+            m.rough_diffuse_power = power;
+            m.normal_map_unnormalized_base = desc.normal_map_unnormalized_base;
+        };
+        for m in materials.iter_mut() {
+            release(m);
+            m.blend.as_deref_mut().map(release);
         }
         // What the scene does not need is decided here, once: no transparent material → shadow
         // rays are any-hit occlusion tests; single-lobe materials → their BSDF alone, not the

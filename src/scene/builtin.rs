@@ -121,6 +121,7 @@ pub fn cornell_box(width: u32, height: u32) -> SceneDesc {
         world: [0.0; 3],
         general_paths: false,
         oren_nayar_rho_cubed: false,
+        normal_map_unnormalized_base: false,
     }
 }
 
@@ -334,6 +335,7 @@ pub fn furnace_sphere(albedo: f32, emission: f32, width: u32, height: u32) -> Sc
         world: [0.0; 3],
         general_paths: false,
         oren_nayar_rho_cubed: false,
+        normal_map_unnormalized_base: false,
     }
 }
 

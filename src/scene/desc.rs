@@ -463,6 +463,11 @@ pub struct SceneDesc {
     /// in the colour; off (the default): ρ² as OpenPBR's EON and Cycles 5.3
     /// (`bsdf/oren_nayar.rs`). The Blender add-on sets it from the Blender it runs in.
     pub oren_nayar_rho_cubed: bool,
+    /// Tangent-space normal maps built on the interpolated corner normal as it is, shorter
+    /// than unit inside a triangle, as Cycles before 5.3 builds them; off (the default): on
+    /// that normal normalized, as Cycles 5.3 (`Scene::normal_mapped`). The Blender add-on
+    /// sets it from the Blender it runs in.
+    pub normal_map_unnormalized_base: bool,
 }
 
 impl LightDesc {

@@ -20,6 +20,9 @@ pub struct Material {
     /// How its Oren–Nayar multiple scattering takes the colour: the scene's
     /// `SceneDesc::oren_nayar_rho_cubed` (set for every material by `Shading::new`).
     pub rough_diffuse_power: ColourPower,
+    /// Its normal map's frame is built on the interpolated normal as it is, not normalized:
+    /// the scene's `SceneDesc::normal_map_unnormalized_base` (set by `Shading::new`).
+    pub normal_map_unnormalized_base: bool,
     pub metallic: f32,
     pub transmission: f32,
     pub ior: f32,
@@ -209,6 +212,7 @@ impl Material {
             roughness: d.roughness.clamp(0.0, 1.0),
             diffuse_roughness: d.diffuse_roughness.clamp(0.0, 1.0),
             rough_diffuse_power: ColourPower::Squared,
+            normal_map_unnormalized_base: false,
             metallic: d.metallic.clamp(0.0, 1.0),
             transmission: d.transmission.clamp(0.0, 1.0),
             // η = 1 exactly would make refraction a pass-through; keep it just off 1.

@@ -622,8 +622,10 @@ impl Scene {
     ///
     /// Normal map, as Cycles' Normal Map node: n' = normalize(T·c.x + B·c.y + N·c.z) with
     /// c = 2·rgb − 1, T and its sign s the MikkTSpace corner tangents interpolated at the
-    /// barycentrics `b`, N the unnormalized interpolated corner normal (the geometric one on
-    /// flat triangles), B = s·N × T; then normalize(ns + strength·(n' − ns)). A mesh without
+    /// barycentrics `b`, N the interpolated corner normal (the geometric one on flat
+    /// triangles) normalized as Cycles 5.3 takes it, or as it is as earlier Cycles took it
+    /// (the material's `normal_map_unnormalized_base`: on a coarse ball up to 0.15 apart in
+    /// the mapped normal), B = s·N × T; then normalize(ns + strength·(n' − ns)). A mesh without
     /// those tangents takes T = ∂p/∂u made orthogonal to ns and B = ±ns × T (the UV mapping's
     /// handedness).
     ///
@@ -647,7 +649,8 @@ impl Scene {
             let mikk = self.tangents.get(t).map_or(Vec4::ZERO, |c| c[0] * b[0] + c[1] * b[1] + c[2] * b[2]);
             let (tangent, sign, normal) = if mikk.truncate() != Vec3::ZERO {
                 let normal = match &self.normals[t] {
-                    Some(c) => c[0] * b[0] + c[1] * b[1] + c[2] * b[2],
+                    Some(c) if m.normal_map_unnormalized_base => c[0] * b[0] + c[1] * b[1] + c[2] * b[2],
+                    Some(c) => (c[0] * b[0] + c[1] * b[1] + c[2] * b[2]).normalize_or(self.geo_normals[t]),
                     None => self.geo_normals[t],
                 };
                 (mikk.truncate(), mikk.w, normal)

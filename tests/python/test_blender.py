@@ -2854,6 +2854,7 @@ def test_colour_attributes_agree_with_cycles(bpy_mod, tmp_out):
     assert not bad, bad
 
 
+@pytest.mark.compat
 def test_normal_maps_on_a_curved_mesh_agree_with_cycles(bpy_mod, tmp_out):
     """Tangent-space normal maps on a smooth low-poly UV sphere, as Cycles renders them: the
     tangent frame is MikkTSpace's (Blender's and Cycles'; one tangent per triangle shaded the
@@ -2861,7 +2862,9 @@ def test_normal_maps_on_a_curved_mesh_agree_with_cycles(bpy_mod, tmp_out):
     Bump Map Correction shadows it (without it the side where the map leans away from the
     light was up to 80% bright). Two balls with maps leaning four ways, lit by a sun from
     the camera's side, orthographic: noise-free but for the pixel filter, compared 4×4
-    pixel block by block where the ball faces the camera within 45°."""
+    pixel block by block where the ball faces the camera within 45°. On every Blender tested:
+    Cycles 5.2 normalizes the interpolated normal the map's frame is built on, earlier ones
+    do not (on bpy 5.3 the blocks were up to 26% off, 2.7% on average; failed before)."""
     import math
 
     def build(bpy, engine, spp, seed):
