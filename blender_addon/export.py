@@ -28,12 +28,12 @@ RAY_VISIBILITY = (("camera", "visible_camera"), ("diffuse", "visible_diffuse"), 
 
 
 def _visibility_warnings(ob, what, warnings, light=False):
-    """Warnings for the ray visibility, holdout and shadow catcher settings of `ob`, which
-    GDMLT does not render (each ray type sees it; it is rendered as an ordinary object), but
-    for the camera and shadow visibility, which are (the mesh's `visible_camera` and
+    """Warnings for the ray visibility and shadow catcher settings of `ob`, which GDMLT does
+    not render (each ray type sees it; it is rendered as an ordinary object), but for the
+    camera and shadow visibility, which are (the mesh's `visible_camera` and
     `visible_shadow`; a light's camera visibility too, and its shadow visibility means
-    nothing to Cycles). Blender keeps holdout and shadow-catcher flags on lights that Cycles
-    ignores."""
+    nothing to Cycles), and holdout (`_holdout`). Blender keeps holdout and shadow-catcher
+    flags on lights that Cycles ignores."""
     skip = ("camera", "shadow")
     off = [name for name, attr in RAY_VISIBILITY if name not in skip and not getattr(ob, attr, True)]
     if off:
@@ -45,9 +45,8 @@ def _visibility_warnings(ob, what, warnings, light=False):
                         "every object")
     if light:
         return
-    for attr, label in (("is_holdout", "holdout"), ("is_shadow_catcher", "shadow catcher")):
-        if getattr(ob, attr, False):
-            warnings.append(f"{what} '{ob.name}': {label} is not rendered; it is rendered as an ordinary object")
+    if getattr(ob, "is_shadow_catcher", False):
+        warnings.append(f"{what} '{ob.name}': shadow catcher is not rendered; it is rendered as an ordinary object")
 
 
 class ExportCancelled(Exception):
@@ -512,7 +511,19 @@ def material_params(mat, warnings, textures=None):
 
 def _leaves_material(leaves, mixed, warnings, what):
     """The material parameters of weighted shader leaves: one opaque leaf's own, else their
-    combination (`_combine`) — a Mix/Add Shader tree (`mixed`) or a leaf with pass-through."""
+    combination (`_combine`) — a Mix/Add Shader tree (`mixed`) or a leaf with pass-through.
+    Holdout leaves: all of the material, a holdout; a share of it, left out (the rest keeps
+    its weight, so to rays other than the camera's the held share is black, as in Cycles),
+    with a warning."""
+    held = sum(w for w, p in leaves if p.get("holdout"))
+    if held >= 1.0 - 1e-6:
+        return {"base_color": (0.0, 0.0, 0.0), "holdout": True}
+    if held > 0.0:
+        warnings.append(f"{what}: a Holdout mixed with other shaders is not held out (its share, {held:.2f}, "
+                        f"renders black)")
+        leaves = [(w, p) for w, p in leaves if not p.get("holdout")]
+        if not leaves:
+            return {"base_color": (0.0, 0.0, 0.0)}
     if not mixed and len(leaves) == 1 and leaves[0][0] == 1.0 and "pass" not in leaves[0][1]:
         p = dict(leaves[0][1])  # one shader node, opaque: its own parameters
         p.pop("bsdf", None)
@@ -619,6 +630,9 @@ def _blend_material(node, blend, textures, warnings, what):
         ends.append(_leaves_material(leaves, False, warnings, what)
                     if leaves else {"base_color": (0.0, 0.0, 0.0)})
     a, b = ends
+    if a.pop("holdout", False) | b.pop("holdout", False):
+        warnings.append(f"{what}: a Holdout under Mix Shader '{name}' (its factor per point) is not held out "
+                        f"(it renders black)")
     if any(a.get(k) != b.get(k) for k in NORMAL_KEYS):
         warnings.append(f"{what}: Mix Shader '{name}' mixes normal or bump maps by a texture; GDMLT renders "
                         f"those of its first shader's side only")
@@ -729,6 +743,11 @@ def _node_params(node, textures, warnings, what):
         _emission(node, "Color", "Strength", out, textures, warnings, what, (1, 1, 1, 1), 1.0)
         out["base_color"] = (0.0, 0.0, 0.0)
         out["bsdf"] = False  # no scattering lobe (matters inside Mix/Add Shaders)
+    elif t == "HOLDOUT":
+        # transparent black where the camera sees it; to other rays no lobe: black
+        out["base_color"] = (0.0, 0.0, 0.0)
+        out["bsdf"] = False
+        out["holdout"] = True
     else:
         warnings.append(f"{what}: shader node '{node.name}' ({t}) is not supported; rendered as grey diffuse")
     _normal_map(node, out, textures, warnings, what)
@@ -1239,6 +1258,23 @@ def _cycles_release_choices():
     return {"oren_nayar_rho_cubed": v < (5, 3, 0), "normal_map_unnormalized_base": v < (5, 1, 0)}
 
 
+def _holdout(ob, inst, depsgraph):
+    """Whether the camera sees `ob` held out: its Object › Visibility › Holdout, or a
+    collection of it set to Holdout in the view layer (as Cycles asks `holdout_get`), or
+    its instancer's."""
+    for o in (ob, inst.parent if inst.is_instance else None):
+        if o is None:
+            continue
+        get = getattr(o.original, "holdout_get", None)
+        try:
+            if get(view_layer=depsgraph.view_layer) if get is not None else o.is_holdout:
+                return True
+        except (TypeError, RuntimeError):
+            if getattr(o, "is_holdout", False):
+                return True
+    return False
+
+
 def _any_true(attr, n):
     """Whether boolean attribute `attr` (of `n` elements, or None) is set anywhere."""
     if attr is None or n == 0:
@@ -1694,6 +1730,8 @@ def export_scene(depsgraph, test_break=lambda: False, need_camera=True):
         for key in ("visible_camera", "visible_shadow"):  # (Object › Visibility › Ray Visibility)
             if not getattr(ob, key, True):
                 meshes[-1][key] = False
+        if _holdout(ob, inst, depsgraph):
+            meshes[-1]["holdout"] = True
         # Object › Shading › Shadow Terminator (src/scene/terminator.rs)
         offset = float(getattr(ob, "shadow_terminator_geometry_offset", 0.1))
         if abs(offset - 0.1) > 1e-6:

@@ -403,7 +403,12 @@ pub fn trace_path_guided<S: Sampler>(
             break;
         };
 
-        // 4. the surface: its emission, the vertex
+        // 4. the surface: a holdout the camera sees ends the path as the film's transparency;
+        // else its emission, the vertex
+        if camera_visibility && scene.is_holdout(hit.prim) {
+            out.transparent += (st.beta.x + st.beta.y + st.beta.z) / 3.0;
+            break;
+        }
         let si = SurfaceInteraction { camera: camera_visibility, ..scene.interaction(&hit, st.d) };
         if let Some((le, pdf_light)) = scene.surface_emission(&si, st.prev_p, st.d) {
             add(
@@ -779,6 +784,7 @@ pub fn first_hit(scene: &Scene, cam: &CameraRay, hit: Option<TriHit>) -> FirstHi
     match hit {
         None if scene.camera.film_transparent => {}
         None => out.very_direct += scene.camera_background(cam.dir),
+        Some(h) if scene.is_holdout(h.prim) => {}
         Some(h) => {
             let si = SurfaceInteraction { camera: true, ..scene.interaction(&h, cam.dir) };
             if let Some((le, _)) = scene.surface_emission(&si, cam.origin, cam.dir) {
@@ -792,9 +798,10 @@ pub fn first_hit(scene: &Scene, cam: &CameraRay, hit: Option<TriHit>) -> FirstHi
 }
 
 /// The expected throughput with which camera ray `cam` (first hitting `hit`) reaches the
-/// world straight through transparent surfaces (the product of their pass-through
-/// throughputs; 0 at an opaque surface): 1 − alpha of a transparent film, without the noise
-/// of choosing pass-through or not (the path's own `transparent` has the same mean).
+/// world (under a transparent film) or a holdout straight through transparent surfaces (the
+/// product of their pass-through throughputs; 0 at an opaque surface): 1 − alpha, without
+/// the noise of choosing pass-through or not (the path's own `transparent` has the same
+/// mean).
 pub fn camera_transparency(scene: &Scene, cam: &CameraRay, hit: Option<TriHit>, max_crossings: u32) -> f32 {
     if cam.is_dead() {
         return 0.0; // (no view there: opaque black, as a path that adds nothing leaves the film)
@@ -802,9 +809,13 @@ pub fn camera_transparency(scene: &Scene, cam: &CameraRay, hit: Option<TriHit>, 
     let mut t = Spectrum::ONE;
     let mut hit = hit;
     for _ in 0..=max_crossings {
+        let seen_through = (t.x + t.y + t.z) / 3.0;
         let Some(h) = hit else {
-            return (t.x + t.y + t.z) / 3.0;
+            return if scene.camera.film_transparent { seen_through } else { 0.0 };
         };
+        if scene.is_holdout(h.prim) {
+            return seen_through;
+        }
         let si = SurfaceInteraction { camera: true, ..scene.interaction(&h, cam.dir) };
         t *= scene.bsdf_at(&si).pass_through();
         if !(t.max_element() > 0.0) {

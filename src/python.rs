@@ -150,6 +150,7 @@ fn parse_mesh(d: &Bound<'_, PyDict>) -> PyResult<MeshDesc> {
         camera_invisible,
         shadow_invisible,
         shadow_terminator_offset,
+        holdout: get_or(d, "holdout", false, &ctx)?,
     })
 }
 
@@ -191,6 +192,7 @@ fn material_dict<'py>(py: Python<'py>, m: &MaterialDesc) -> PyResult<Bound<'py, 
     md.set_item("vertex_color", m.vertex_color)?;
     md.set_item("bump_map_correction", m.bump_map_correction)?;
     md.set_item("pass_index", m.pass_index)?;
+    md.set_item("holdout", m.holdout)?;
     for (key, value) in [
         ("base_color_texture", m.base_color_texture),
         ("roughness_texture", m.roughness_texture),
@@ -287,6 +289,7 @@ fn parse_material(d: &Bound<'_, PyDict>) -> PyResult<MaterialDesc> {
         transparency: get_or(d, "transparency", def.transparency, &ctx)?,
         transparent_color: rgb(d, "transparent_color", def.transparent_color, &ctx)?,
         pass_index: get_or(d, "pass_index", 0, &ctx)?,
+        holdout: get_or(d, "holdout", false, &ctx)?,
         blend: match item(d, "blend")? {
             Some(b) if !b.is_none() => Some(Box::new(parse_material(
                 b.cast::<PyDict>().map_err(|_| verr(format!("{ctx}: blend must be a material dict")))?,

@@ -239,8 +239,11 @@ impl<'a> Offset<'a> {
     }
 
     /// The offset path from its traced camera ray (with the base's lens sample) and what it hit.
+    /// A holdout there (its path ends, `path.rs`) fails the shift, as a base path that meets
+    /// one has no vertex to shift: the two sides of a holdout's edge are never paired.
     fn from_primary(scene: &'a Scene, base: &'a Path, primary: Option<(CameraRay, Option<TriHit>)>) -> Offset<'a> {
         let mut offset = Offset { scene, base, k: 0, state: State::Failed, step: None, bsdf: NO_BSDF };
+        let primary = primary.filter(|(_, hit)| !hit.is_some_and(|h| scene.is_holdout(h.prim)));
         if let (Some(x0), Some((ray, Some(hit)))) = (base.vertices.first(), primary) {
             let y = SurfaceInteraction { camera: true, ..scene.interaction(&hit, ray.dir) };
             offset.bsdf = scene.bsdf_at(&y);

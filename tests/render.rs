@@ -6,7 +6,7 @@ use gdmlt::integrator::{render, Method, RenderControl, RenderOutput, RenderSetti
 use gdmlt::path::PathSettings;
 use gdmlt::reconstruct::{gradients, reconstruct_rgb, Norm};
 use gdmlt::scene::builtin::{cornell_box, cornell_veil, furnace_sphere};
-use gdmlt::scene::{Scene, SceneDesc};
+use gdmlt::scene::{MaterialDesc, Scene, SceneDesc};
 
 fn run(desc: &SceneDesc, spp: u32, nee: bool, max_bounces: u32, seed: u64, threads: usize) -> Image {
     run_method(desc, Method::Pt, Norm::L2, spp, nee, max_bounces, seed, threads).layer("Combined").unwrap().clone()
@@ -1193,4 +1193,62 @@ fn a_textured_camera_backdrop_is_seen_by_the_camera_rays() {
         (a + usize::from(p[0] > 3.0 * p[2] && p[0] > 0.5), b + usize::from(p[2] > 3.0 * p[0] && p[2] > 0.5))
     });
     assert!(warm > 10 && cool > 10, "{warm} warm and {cool} cool pixels");
+}
+
+/// Holdouts (issue 47): the Cornell box with its left wall held out (Object › Visibility ›
+/// Holdout) and its tall block given a black Holdout shader, on an opaque film. The camera sees
+/// a transparent black film there; every other ray sees the wall (red light keeps bouncing
+/// off it) and the black block. For pt with the same seed, a pixel whose samples all miss
+/// the holdouts has alpha 1 and exactly the colour of the same scene without them, one whose
+/// samples all meet them alpha 0 and black; the rest lie between. Every method gives pt's
+/// alpha and image within their noise.
+#[test]
+fn holdouts_are_transparent_black_where_the_camera_sees_them() {
+    let (w, h) = (24, 24);
+    let mut plain = cornell_box(w, h);
+    let black = MaterialDesc { name: "Black".into(), base_color: [0.0; 3], ..Default::default() };
+    plain.materials.push(black);
+    let m = plain.materials.len() as u32 - 1;
+    let tall = plain.meshes.iter_mut().find(|x| x.name == "TallBlock").expect("a tall block");
+    tall.material_ids = vec![m; tall.indices.len()];
+    let mut desc = plain.clone();
+    desc.materials.last_mut().unwrap().holdout = true;
+    desc.meshes.iter_mut().find(|x| x.name == "LeftWall").unwrap().holdout = true;
+    let held = run_method(&desc, Method::Pt, Norm::L2, 64, true, 4, 5, 0);
+    let without = run_method(&plain, Method::Pt, Norm::L2, 64, true, 4, 5, 0);
+    assert!(without.layer("Alpha").is_none(), "an opaque film without holdouts has no alpha");
+    let alpha = held.layer("Alpha").expect("holdouts give an opaque film an alpha layer");
+    let (c, o) = (held.layer("Combined").unwrap(), without.layer("Combined").unwrap());
+    let (mut held_out, mut seen) = (0, 0);
+    for i in 0..(w * h) as usize {
+        let a = alpha.data[i];
+        for k in 0..3 {
+            let (got, full) = (c.data[3 * i + k], o.data[3 * i + k]);
+            if a > 1.0 - 1e-6 {
+                assert_eq!(got, full, "pixel {i}: an unheld pixel keeps its colour");
+            } else if a < 1e-6 {
+                assert_eq!(got, 0.0, "pixel {i}: a held-out pixel is black");
+            } else {
+                assert!(got <= full + 1e-5, "pixel {i}: {got} vs {full}");
+            }
+        }
+        held_out += usize::from(a < 1e-6);
+        seen += usize::from(a > 1.0 - 1e-6);
+    }
+    assert!(held_out > 60 && seen > 200, "held out {held_out}, seen {seen} pixels");
+    let mean = |img: &Image, k: usize| mean_and_stderr(img, k).0;
+    let reference = run_method(&desc, Method::Pt, Norm::L2, 2048, true, 4, 6, 0);
+    for method in [Method::Gdpt, Method::Bdpt, Method::Pssmlt, Method::Gdpssmlt] {
+        let spp = if method == Method::Bdpt { 64 } else { 256 };
+        let out = run_method(&desc, method, Norm::L2, spp, true, 4, 7, 0);
+        let a = out.layer("Alpha").expect("alpha layer");
+        let (ma, mr) = (mean(a, 0), mean(reference.layer("Alpha").unwrap(), 0));
+        assert!((ma - mr).abs() < 0.01, "{method:?} alpha mean {ma} vs pt {mr}");
+        let est = estimate(&out);
+        for k in 0..3 {
+            let (m, se) = mean_and_stderr(&est, k);
+            let r = mean(reference.layer("Combined").unwrap(), k);
+            assert!((m - r).abs() < 4.0 * se + 0.01 * r, "{method:?} channel {k}: {m} vs pt {r} (stderr {se})");
+        }
+    }
 }

@@ -390,6 +390,11 @@ fn random_walk<S: Sampler + ?Sized>(
             }
             break;
         };
+        if camera_ray && scene.is_holdout(hit.prim) {
+            // a holdout the camera sees: the film's transparency, and no vertex to join
+            out.transparent += (beta.x + beta.y + beta.z) / 3.0;
+            break;
+        }
         let si = SurfaceInteraction { camera: camera_ray, ..scene.interaction(&hit, d) };
         if first_light_hit {
             // the light's radiance as this surface receives it (module comment of scene/emit.rs)
@@ -1160,7 +1165,8 @@ pub(crate) fn sample(
         // t = 1, light tracing: join a to a lens point, splat where it lands
         let u_lens = streams.light().next_2d();
         let u_label = label_u(label_seed, jl, 0);
-        if s < max_n && !scene.camera_invisible(asi.prim) {
+        // (a holdout where the camera sees it sends it nothing)
+        if s < max_n && !scene.camera_invisible(asi.prim) && !scene.is_holdout(asi.prim) {
             let lens_p = scene.camera.lens_point(u_lens, a.p);
             if let Some((raster, we)) = scene.camera.importance(lens_p, a.p) {
                 let mut cam = camera_vertex(scene, lens_p);
@@ -1287,7 +1293,7 @@ fn render_with(scene: &Scene, settings: &RenderSettings, control: &RenderControl
         ("Denoising Albedo".into(), film.albedo()),
         ("Denoising Normal".into(), film.normal()),
     ];
-    if scene.camera.film_transparent {
+    if scene.has_alpha() {
         layers.push(("Alpha".into(), film.alpha()));
     }
     if settings.predict_pt {

@@ -291,7 +291,7 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl)
     let img = |data: Vec<f32>| Image { width: w, height: h, channels: 3, data };
     layers.push(("Denoising Albedo".into(), img(albedo)));
     layers.push(("Denoising Normal".into(), img(normal)));
-    if scene.camera.film_transparent {
+    if scene.has_alpha() {
         let data = transparent.iter().map(|t| 1.0 - t * s).collect();
         let alpha = Image { width: w, height: h, channels: 1, data };
         layers[0].1.clear_uncovered(&alpha);

@@ -783,9 +783,9 @@ impl FirstHits {
                 break;
             }
             let (from, n) = (self.spp, (target - self.spp).min(8));
-            let (film_transparent, crossings, cfg) = (scene.camera.film_transparent, self.crossings, &self.direct);
+            let (has_alpha, crossings, cfg) = (scene.has_alpha(), self.crossings, &self.direct);
             let light = self.light;
-            if film_transparent {
+            if has_alpha {
                 self.transparent.resize(w * h, 0.0);
             }
             // each row's samples are added to its sums in place (no image-sized temporary)
@@ -830,7 +830,7 @@ impl FirstHits {
                             }
                             acc[1] += f.albedo;
                             acc[2] += f.normal;
-                            if film_transparent {
+                            if has_alpha {
                                 t += camera_transparency(scene, ray, hit, crossings);
                             }
                         }
@@ -839,7 +839,7 @@ impl FirstHits {
                             sum[3 * x + 1] += a.y;
                             sum[3 * x + 2] += a.z;
                         }
-                        if film_transparent {
+                        if has_alpha {
                             transparent[x] += t;
                         }
                         if !emitted.is_empty() {

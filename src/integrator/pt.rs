@@ -146,7 +146,7 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl)
         ("Very Direct".into(), film.direct()),
         ("Variance".into(), film.variance()),
     ];
-    if scene.camera.film_transparent {
+    if scene.has_alpha() {
         layers.push(("Alpha".into(), film.alpha()));
     }
     RenderOutput {

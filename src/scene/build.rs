@@ -102,6 +102,8 @@ pub(super) struct Triangles {
 pub const RAY_CAMERA_INVISIBLE: u8 = 1;
 /// A `Triangles::ray_mask` bit: shadow rays pass through the triangle.
 pub const RAY_SHADOW_INVISIBLE: u8 = 2;
+/// A `Triangles::ray_mask` bit: the triangle is held out where the camera sees it.
+pub const RAY_HOLDOUT: u8 = 4;
 
 impl Triangles {
     /// `normal_mapped[m]`: material m has a normal map (its meshes get MikkTSpace tangents).
@@ -125,7 +127,7 @@ impl Triangles {
             ray_mask: Vec::new(),
             terminator: Vec::new(),
         };
-        let masked = meshes.iter().any(|m| m.camera_invisible || m.shadow_invisible);
+        let masked = meshes.iter().any(|m| m.camera_invisible || m.shadow_invisible || m.holdout);
         let colors = meshes.iter().any(|m| !m.corner_colors.is_empty());
         let generated = meshes.iter().any(|m| !m.corner_generated.is_empty());
         let object = meshes.iter().any(|m| !m.corner_object.is_empty());
@@ -168,7 +170,8 @@ impl Triangles {
             }
             if masked {
                 let bits = if m.camera_invisible { RAY_CAMERA_INVISIBLE } else { 0 }
-                    | if m.shadow_invisible { RAY_SHADOW_INVISIBLE } else { 0 };
+                    | if m.shadow_invisible { RAY_SHADOW_INVISIBLE } else { 0 }
+                    | if m.holdout { RAY_HOLDOUT } else { 0 };
                 t.ray_mask.resize(t.positions.len(), bits);
             }
         }

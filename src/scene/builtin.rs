@@ -24,6 +24,7 @@ fn quad(name: &str, p: [[f32; 3]; 4], mat: u32) -> MeshDesc {
         shadow_invisible: false,
         pass_index: 0,
         shadow_terminator_offset: None,
+        holdout: false,
     }
 }
 
@@ -372,5 +373,6 @@ fn flat_mesh(name: &str, positions: Vec<[f32; 3]>, indices: Vec<[u32; 3]>, mat: 
         shadow_invisible: false,
         pass_index: 0,
         shadow_terminator_offset: None,
+        holdout: false,
     }
 }

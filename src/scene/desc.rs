@@ -36,6 +36,10 @@ pub struct MeshDesc {
     /// which lifts the start of light samples' shadow rays on its smooth-shaded triangles
     /// (scene/terminator.rs).
     pub shadow_terminator_offset: Option<f32>,
+    /// Object › Visibility › Holdout: where the camera sees the object (straight, or through
+    /// transparent surfaces) the film is transparent and black, as Cycles' holdout; every
+    /// other ray sees it as its material.
+    pub holdout: bool,
 }
 
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -165,6 +169,10 @@ pub struct MaterialDesc {
     pub transparent_color: [f32; 3],
     /// The material's Pass Index (Blender's IndexMA pass).
     pub pass_index: u32,
+    /// A Holdout shader: where the camera sees the surface the film is transparent and
+    /// black (as `MeshDesc::holdout`); to every other ray it is black, as its parameters
+    /// should say (the exporter writes a black surface).
+    pub holdout: bool,
     /// A second material this one blends into by the luminance f of `blend_texture` at each
     /// point (a Mix Shader whose factor is a texture): the BSDF there is (1 − f)·this + f·that,
     /// lobe by lobe (`bsdf/blend.rs`), and the emission is (1 − f)·this + f·that. The blend's
@@ -252,6 +260,7 @@ impl Default for MaterialDesc {
             transparency: 0.0,
             transparent_color: [1.0; 3],
             pass_index: 0,
+            holdout: false,
         }
     }
 }

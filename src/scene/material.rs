@@ -23,6 +23,8 @@ pub struct Material {
     /// Its normal map's frame is built on the interpolated normal as it is, not normalized:
     /// the scene's `SceneDesc::normal_map_unnormalized_base` (set by `Shading::new`).
     pub normal_map_unnormalized_base: bool,
+    /// A Holdout shader (`MaterialDesc::holdout`).
+    pub holdout: bool,
     pub metallic: f32,
     pub transmission: f32,
     pub ior: f32,
@@ -213,6 +215,7 @@ impl Material {
             diffuse_roughness: d.diffuse_roughness.clamp(0.0, 1.0),
             rough_diffuse_power: ColourPower::Squared,
             normal_map_unnormalized_base: false,
+            holdout: d.holdout,
             metallic: d.metallic.clamp(0.0, 1.0),
             transmission: d.transmission.clamp(0.0, 1.0),
             // η = 1 exactly would make refraction a pass-through; keep it just off 1.

@@ -26,7 +26,7 @@ use crate::accel::{Accel, RayPacket, TriHit};
 use crate::bsdf::Bsdf;
 use crate::error::SceneError;
 use crate::math::{ray_epsilon, square_to_triangle, Frame, Spectrum};
-use build::{Lighting, Shading, Triangles, RAY_CAMERA_INVISIBLE, RAY_SHADOW_INVISIBLE};
+use build::{Lighting, Shading, Triangles, RAY_CAMERA_INVISIBLE, RAY_HOLDOUT, RAY_SHADOW_INVISIBLE};
 use environment::Environment;
 use glam::{Vec2, Vec3, Vec4};
 use material::RayKind;
@@ -140,6 +140,8 @@ pub struct Scene {
     /// Some material has a normal map (decided once: without one, hits never look up
     /// their material to shade).
     has_perturbed_normals: bool,
+    /// Some object or material is held out (`is_holdout`).
+    has_holdout: bool,
     pub bounds_center: Vec3,
     pub bounds_radius: f32,
     pub report: SceneReport,
@@ -193,6 +195,7 @@ impl Scene {
             textures: Vec::new(),
             has_transparency: false,
             has_perturbed_normals: false,
+            has_holdout: false,
             lights: Vec::new(),
             selector: lighting.selector,
             tri_light: Vec::new(),
@@ -253,6 +256,24 @@ impl Scene {
         (self.materials, self.textures) = (shading.materials, shading.textures);
         self.material_pass_index = shading.pass_index;
         (self.has_transparency, self.has_perturbed_normals) = (shading.has_transparency, shading.has_perturbed_normals);
+        self.has_holdout =
+            self.materials.iter().any(|m| m.holdout) || self.ray_mask.iter().any(|m| m & RAY_HOLDOUT != 0);
+    }
+
+    /// Triangle `prim` is held out where the camera sees it (its object's Holdout, or a
+    /// Holdout shader): a camera ray, straight or through transparent surfaces, that meets
+    /// it ends there, its throughput counted as the film's transparency (Cycles'
+    /// `integrate_surface_holdout`; the transparency of an object held out is not kept).
+    #[inline]
+    pub fn is_holdout(&self, prim: u32) -> bool {
+        self.has_holdout
+            && (self.masked(prim, RAY_HOLDOUT) || self.materials[self.tri_material[prim as usize] as usize].holdout)
+    }
+
+    /// The render has an alpha: a transparent film, or holdouts (which make the film
+    /// transparent where the camera sees them, also under an opaque film, as in Cycles).
+    pub fn has_alpha(&self) -> bool {
+        self.camera.film_transparent || self.has_holdout
     }
 
     /// The Pass Indices (object, material) of a triangle: Blender's IndexOB and IndexMA.
