@@ -1203,8 +1203,8 @@ def _cycles_normals(me, co, tv, tl):
       corner normals, which leave the flat faces out (a smooth floor beside a flat skirt,
       pybullet's monastery: corner and vertex normals up to 40° apart, the image −3%) —,
       and a flat one takes its own normal. Measured against Cycles' Normal pass in 4.5.15
-      and 5.0.1; 5.3.0's Cycles takes the corner normals here (as below), and so does the
-      export from 5.1 on (5.1 and 5.2 not checked);
+      and 5.0.1 (5.1.0 too); 5.2.0's and 5.3.0's Cycles take the corner normals here (as
+      below), a flat face's its polygon's normal, and so does the export from 5.2 on;
     - otherwise (domain CORNER: sharp edges or custom normals, which Cycles splits the mesh
       along) every triangle interpolates its corner normals, a flat face's corners holding its
       polygon's normal, and Cycles counts every triangle as smooth (for its shadow

@@ -8,8 +8,10 @@ EDF), else from UsdPreviewSurface (diffuseColor, metallic, roughness, ior — al
 dielectric specular layer over the diffuse base —, emissiveColor, opacity); image textures
 (UsdUVTexture, MaterialX image nodes) on base colour and roughness; UsdLux SphereLight (with
 ShapingAPI cone → spot), RectLight, DiskLight, DistantLight and DomeLight (constant colour,
-or an OpenEXR latlong texture oriented as Blender's exporter writes it: the dome's
-transform applied to Blender's Z-up equirectangular mapping) with intensity × 2^exposure ×
+or an OpenEXR latlong texture in UsdLux's orientation — OpenEXR's latlong map, its pole
+along the dome's +Y — under the dome's transform, as Blender 4.5 and 5.1 on write it; a
+stage whose documentation names Blender 5.0 keeps what 5.0 wrote, Blender's Z-up
+equirectangular mapping under the transform) with intensity × 2^exposure ×
 colour × blackbody colour of the temperature and `normalize` as UsdLux defines them,
 UsdGeomCamera (apertures and focal length in tenths of a scene unit, clipping, f-stop,
 focus distance, aperture offsets), time samples (`frame`), instance proxies and
@@ -20,6 +22,7 @@ the returned warnings with the fallback used (docs/features.md: "USD feature tab
 from __future__ import annotations
 
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -653,7 +656,8 @@ class _Reader:
                                           interpolation="Linear", extension="REPEAT"))  # row 0 at the bottom
         m = _mat(self.xcache.GetLocalToWorldTransform(prim))[:3, :3]
         m = m / np.linalg.norm(m, axis=0)
-        return scale, len(textures) - 1, np.ascontiguousarray(m.T, dtype=np.float32)
+        to_texture = m.T if _blender_5_0(self.stage) else DOME_TO_EQUIRECT @ m.T
+        return scale, len(textures) - 1, np.ascontiguousarray(to_texture, dtype=np.float32)
 
     # ---- camera ----------------------------------------------------------------------
     def camera(self, prim, width, height):
@@ -758,6 +762,20 @@ def parse_error(e) -> str:
         return found.group(1).strip().rstrip("'")
     quoted = re.findall(r" : '([^']*)'", text)
     return quoted[-1].strip() if quoted else text.strip() or type(e).__name__
+
+
+# A UsdLux DomeLight's frame (OpenEXR's latlong map: latitude ±π/2 along ±Y, longitude 0
+# along +Z and π/2 along +X) in the frame of Blender's equirectangular mapping, which the
+# core's world texture takes (pole +Z, the image's centre along +X, a quarter along +Y):
+# the columns are where the dome's +X, +Y, +Z go. (Blender's exporter from 5.1 on rotates
+# its dome by (90°, 0, 90°) about X then Z, this matrix; 4.5's does too, 5.0's did not.)
+DOME_TO_EQUIRECT = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+
+
+def _blender_5_0(stage):
+    """Whether the stage was written by Blender 5.0's exporter (its layer's documentation
+    reads "Blender v5.0..."), whose DomeLights hold Blender's own mapping, unrotated."""
+    return re.match(r"Blender v5\.0\b", stage.GetRootLayer().documentation or "") is not None
 
 
 def load(path, frame=None, width=None, height=None, camera=None):

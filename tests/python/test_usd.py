@@ -295,3 +295,31 @@ def test_colour_primvars_read_by_the_material_are_vertex_colours(tmp_path):
     stage.GetRootLayer().Save()
     desc, warnings = usd.load(path, width=16, height=16)
     assert any("paint" in w and "black" in w for w in warnings), warnings
+
+
+@pytest.mark.parametrize("writer", [None, "Blender v5.3.0", "Blender v5.0.1"])
+def test_a_dome_texture_is_oriented_as_usdlux_says(tmp_path, writer):
+    """A DomeLight's latlong texture follows UsdLux (OpenEXR's latlong map: latitude ±π/2 along
+    the dome's ±Y, longitude 0 along +Z and π/2 along +X), as Blender writes it from 5.1 on (and
+    4.5): read as Blender's own Z-up mapping before, Blender 5.3's HDRI world came back turned
+    (block differences 170× the noise; failed before). Only a stage Blender 5.0 wrote, whose
+    exporter wrote its own mapping unrotated, keeps that. Checked on the world rotation the
+    reader hands the core: where the texture's pole, centre and quarter point lie."""
+    path = _stage(tmp_path / "dome.usda")
+    exr = tmp_path / "sky.exr"
+    gdmlt.write_exr(str(exr), [("Combined", np.ones((4, 8, 3), np.float32))])
+    stage = Usd.Stage.Open(str(path))
+    if writer is not None:
+        stage.GetRootLayer().documentation = writer
+    dome = UsdLux.DomeLight.Define(stage, "/World/Sky")
+    dome.CreateTextureFileAttr(str(exr))
+    stage.GetRootLayer().Save()
+    desc, warnings = usd.load(path, width=8, height=8)
+    assert warnings == [] and desc["world_texture"] is not None
+    r = np.asarray(desc["world_rotation"], np.float64)  # world → the core's equirectangular frame
+    # the core's frame: pole +Z, the image's centre along +X, a quarter of its width along +Y
+    expected = {(0, 1, 0): (0, 0, 1), (0, 0, 1): (1, 0, 0), (1, 0, 0): (0, 1, 0)}
+    if writer == "Blender v5.0.1":
+        expected = {d: d for d in expected}
+    for world, frame in expected.items():
+        assert np.allclose(r @ np.array(world, np.float64), frame, atol=1e-6), (world, r)
