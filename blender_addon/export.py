@@ -40,9 +40,9 @@ def _visibility_warnings(ob, what, warnings, light=False):
         warnings.append(f"{what} '{ob.name}': ray visibility ({', '.join(off)} off) is not rendered; "
                         "every ray sees it")
     linking = getattr(ob, "light_linking", None)
-    if linking is not None and (linking.receiver_collection is not None or linking.blocker_collection is not None):
-        warnings.append(f"{what} '{ob.name}': light linking is not rendered; it lights, and is blocked by, "
-                        "every object")
+    if linking is not None and linking.blocker_collection is not None:
+        warnings.append(f"{what} '{ob.name}': shadow linking (its Blocker collection) is not rendered; every "
+                        "object casts its shadows")
     if light:
         return
     if getattr(ob, "is_shadow_catcher", False):
@@ -1258,6 +1258,64 @@ def _cycles_release_choices():
     return {"oren_nayar_rho_cubed": v < (5, 3, 0), "normal_map_unnormalized_base": v < (5, 1, 0)}
 
 
+def _link_states(collection):
+    """{object name: 'INCLUDE' or 'EXCLUDE'} of a light-linking collection: its objects' own
+    states, then its child collections' states for the objects in them (depth first; an
+    object's nearest entry decides)."""
+    states = {}
+
+    def walk(c, inherited):
+        for ob, entry in zip(c.objects, c.collection_objects):
+            states.setdefault(ob.name, inherited or entry.light_linking.link_state)
+        for child, entry in zip(c.children, c.collection_children):
+            walk(child, inherited or entry.light_linking.link_state)
+
+    walk(collection, None)
+    return states
+
+
+def _light_linking(meshes, lights, sources, desc, warnings):
+    """Blender's light linking (Object › Light Linking › Receiver Collection on lights and
+    emitting objects) as Cycles' light sets: an emitter lights the objects its collection
+    includes — or, when it includes none, every object it does not exclude. Objects lit by
+    the same emitters share a receiver set (mesh `light_set`; 0 for those no collection
+    names), and each emitter says which sets it lights (`light_membership`: a mesh's, or
+    the scene's per light), as src/scene/desc.rs reads them."""
+    emitters = []  # (kind, index, {object: state}, includes any)
+    for kind in ("lights", "meshes"):
+        for k, ob in enumerate(sources[kind]):
+            linking = getattr(ob.original, "light_linking", None)
+            collection = linking.receiver_collection if linking is not None else None
+            if collection is not None:
+                states = _link_states(collection)
+                emitters.append((kind, k, states, "INCLUDE" in states.values()))
+    if not emitters:
+        return
+
+    def lit(e, name):
+        state = e[2].get(name)
+        return state == "INCLUDE" or (not e[3] and state != "EXCLUDE")
+
+    default = tuple(not e[3] for e in emitters)  # what an object no collection names receives
+    sets = {default: 0}
+    for mesh, ob in zip(meshes, sources["meshes"]):
+        signature = tuple(lit(e, ob.original.name) for e in emitters)
+        if signature not in sets:
+            if len(sets) == 64:
+                warnings.append(f"object '{ob.name}': more than 63 combinations of light links; it is lit as the "
+                                f"objects no collection names")
+                continue
+            sets[signature] = len(sets)
+        if sets[signature]:
+            mesh["light_set"] = sets[signature]
+    for i, (kind, k, _, _) in enumerate(emitters):
+        bits = sum(1 << s for signature, s in sets.items() if signature[i])
+        if kind == "meshes":
+            meshes[k]["light_membership"] = bits
+        else:
+            lights[k]["light_membership"] = bits
+
+
 def _holdout(ob, inst, depsgraph):
     """Whether the camera sees `ob` held out: its Object › Visibility › Holdout, or a
     collection of it set to Holdout in the view layer (as Cycles asks `holdout_get`), or
@@ -1654,6 +1712,7 @@ def export_scene(depsgraph, test_break=lambda: False, need_camera=True):
     colour_layers = {}  # material index → the colour attribute it reads
     coordinates = {}  # material index → the mesh coordinates its procedural textures read
     meshes, lights = [], []
+    sources = {"meshes": [], "lights": []}  # the object each came from (light linking)
     cache = {}
     variants = {}  # material name → (the Object Info outputs it reads, its variants) or None
     for k, inst in enumerate(depsgraph.object_instances):
@@ -1667,6 +1726,7 @@ def export_scene(depsgraph, test_break=lambda: False, need_camera=True):
                 if not getattr(ob.data, "use_shadow", True):  # (Light › Cast Shadow off)
                     l["cast_shadow"] = False
                 lights.append(l)
+                sources["lights"].append(ob)
             continue
         if ob.type not in GEOMETRY_TYPES:
             continue
@@ -1722,6 +1782,7 @@ def export_scene(depsgraph, test_break=lambda: False, need_camera=True):
             colours = None if colours is None else colours.reshape(-1, 3, 3)[:, ::-1].reshape(-1, 3)
             points = {k: p.reshape(-1, 3, 3)[:, ::-1].reshape(-1, 3) for k, p in points.items()}
         name = ob.name if not inst.is_instance else f"{inst.parent.name if inst.parent else ''}/{ob.name}"
+        sources["meshes"].append(ob)
         meshes.append(scenedict.mesh(name, np.ascontiguousarray(pos), np.ascontiguousarray(tris, dtype=np.uint32),
                                      None if nrm is None else np.ascontiguousarray(nrm), mat_ids, uvs, ob.pass_index,
                                      None if colours is None else np.ascontiguousarray(colours)))
@@ -1746,6 +1807,7 @@ def export_scene(depsgraph, test_break=lambda: False, need_camera=True):
     if world_rotation is not None:
         desc["world_rotation"] = world_rotation
     desc.update({k: True for k, older in _cycles_release_choices().items() if older})
+    _light_linking(meshes, lights, sources, desc, warnings)
     if need_camera:
         desc["camera"] = camera_dict(scene, scene.camera.evaluated_get(depsgraph), warnings)
         if backdrop is not None:

@@ -371,6 +371,9 @@ pub fn trace_path_guided<S: Sampler>(
         let mut crossed = Spectrum::ZERO;
         let (prev_p, o, d) = (st.prev_p, st.o, st.d);
         scene.for_each_light_crossed(prev_p, o, d, t_surface, camera_visibility, |li, t, le, pdf_light| {
+            if !scene.lights_receiver(li, st.prev_prim) {
+                return; // (light linking: it does not light the vertex the ray left)
+            }
             let inf = !t.is_finite();
             let z = if inf { d } else { o + d * t };
             let pdf_light = if st.passed { scene.light_eval(li, prev_p, z).map_or(0.0, |x| x.1) } else { pdf_light };
@@ -410,7 +413,9 @@ pub fn trace_path_guided<S: Sampler>(
             break;
         }
         let si = SurfaceInteraction { camera: camera_visibility, ..scene.interaction(&hit, st.d) };
-        if let Some((le, pdf_light)) = scene.surface_emission(&si, st.prev_p, st.d) {
+        let linked = |li: Option<u32>| li.is_none_or(|li| scene.lights_receiver(li, st.prev_prim));
+        let emission = scene.surface_emission(&si, st.prev_p, st.d).filter(|_| linked(scene.triangle_light(si.prim)));
+        if let Some((le, pdf_light)) = emission {
             add(
                 &mut out,
                 &mut learn,
@@ -516,6 +521,9 @@ struct PathState {
     /// light pdfs are taken from, the pdf of the BSDF sample that left it (0: camera ray),
     /// whether that was specular or the camera (no MIS with NEE), and its BSDF·cos.
     prev_p: Vec3,
+    /// The triangle of the last scattering vertex (u32::MAX: the camera), the receiver of
+    /// the light a ray from there meets (light linking).
+    prev_prim: u32,
     prev_pdf: f32,
     prev_delta: bool,
     prev_fcos: Spectrum,
@@ -544,6 +552,7 @@ impl PathState {
             by_kind: [0; 3],
             nvert: 0,
             prev_p: cam.origin,
+            prev_prim: u32::MAX,
             prev_pdf: 0.0,
             prev_delta: true,
             prev_fcos: Spectrum::ONE,
@@ -679,6 +688,7 @@ impl PathState {
             self.pass_tint = Spectrum::ONE;
             self.last_vertex = self.nvert;
             self.prev_p = si.p;
+            self.prev_prim = si.prim;
             self.prev_pdf = bs.pdf;
             self.prev_fcos = bs.weight * bs.pdf;
             self.prev_delta = bs.lobe == crate::bsdf::LobeKind::Specular;
@@ -720,6 +730,9 @@ fn next_event(
     guide: Option<&DTree>,
 ) -> Option<NextEvent> {
     let (li, ls) = scene.sample_light(si.p, u_select, u_light)?;
+    if !scene.lights_receiver(li, si.prim) {
+        return None; // (light linking: it does not light this object)
+    }
     let wi = si.frame.to_local(ls.wi);
     let (f, pdf_b) = bsdf.eval_light_sample(wo, wi, as_cycles, (!ls.is_delta).then_some(ls.pdf));
     // every direction the BSDF has a value towards, as Cycles takes light samples: also one

@@ -151,6 +151,8 @@ fn parse_mesh(d: &Bound<'_, PyDict>) -> PyResult<MeshDesc> {
         shadow_invisible,
         shadow_terminator_offset,
         holdout: get_or(d, "holdout", false, &ctx)?,
+        light_set: get_or(d, "light_set", 0u8, &ctx)?,
+        light_membership: get_or(d, "light_membership", None, &ctx)?,
     })
 }
 
@@ -710,6 +712,10 @@ fn parse_scene(d: &Bound<'_, PyDict>) -> PyResult<SceneDesc> {
         general_paths: get_or(d, "general_paths", false, "scene")?,
         oren_nayar_rho_cubed: get_or(d, "oren_nayar_rho_cubed", false, "scene")?,
         normal_map_unnormalized_base: get_or(d, "normal_map_unnormalized_base", false, "scene")?,
+        light_membership: list("lights")?
+            .iter()
+            .map(|l| get_or(&l, "light_membership", u64::MAX, "light"))
+            .collect::<PyResult<_>>()?,
         world_rotation: rotation3(d, "world_rotation", "scene")?,
     })
 }

@@ -357,6 +357,9 @@ impl<'a> Offset<'a> {
             // a segment through transparent surfaces is not re-created from a free offset
             // vertex (neither is the offset's, in reconnect_event: shadow tests stop at them)
             State::Free(_) if e.through_transparent => None,
+            // light linking: the light does not light the offset's object (the path tracer
+            // records no such event, so the base takes full weight)
+            State::Free(f) if !scene.lights_receiver(e.light, f.y.prim) => None,
             // a light sampled or hit from a free diffuse vertex, and a delta light (no ray
             // can hit it), reconnect to the same light point
             State::Free(f) if f.diffuse || e.delta => reconnect_event(scene, e, base.vertices[k].p, &f, &self.bsdf),

@@ -349,6 +349,8 @@ fn random_walk<S: Sampler + ?Sized>(
     loop {
         let prev = path[last];
         let camera_ray = radiance && !scattered;
+        // (light linking: the object of the vertex the ray left, none from the camera)
+        let receiver = prev.si.as_ref().map_or(u32::MAX, |s| s.prim);
         let hit = if camera_ray { scene.intersect_camera(o, d, tmin, tmax) } else { scene.intersect(o, d, tmin, tmax) };
         let t_surface = hit.map_or(tmax, |h| h.t);
         if let Some(ev) = events.as_deref_mut() {
@@ -356,6 +358,9 @@ fn random_walk<S: Sampler + ?Sized>(
             let t = path.len();
             let _ = t;
             scene.for_each_light_crossed(prev.p, o, d, t_surface, camera_ray, |li, tl, le, pdf_l| {
+                if !scene.lights_receiver(li, receiver) {
+                    return; // (light linking: it does not light the vertex the ray left)
+                }
                 let inf = !tl.is_finite();
                 let z = if inf { d } else { o + d * tl };
                 let mut lv = Vertex::endpoint(Kind::Light, z);
@@ -400,6 +405,9 @@ fn random_walk<S: Sampler + ?Sized>(
             // the light's radiance as this surface receives it (module comment of scene/emit.rs)
             first_light_hit = false;
             let l0 = &path[0];
+            if !scene.lights_receiver(l0.light, si.prim) {
+                break; // (light linking: the light does not light what it meets first)
+            }
             let z = if l0.infinite { l0.dir } else { l0.p };
             let Some((le, pdf_nee)) = scene.light_eval(l0.light, si.p, z) else { break };
             let factor = if l0.infinite {
@@ -414,7 +422,10 @@ fn random_walk<S: Sampler + ?Sized>(
             let _ = pdf_nee;
         }
         if let Some(ev) = events.as_deref_mut() {
-            if let Some((le, pdf_l)) = scene.surface_emission(&si, prev.p, d) {
+            let emission = scene
+                .surface_emission(&si, prev.p, d)
+                .filter(|_| scene.triangle_light(si.prim).is_none_or(|li| scene.lights_receiver(li, receiver)));
+            if let Some((le, pdf_l)) = emission {
                 let li = scene.triangle_light(si.prim);
                 let mut lv = Vertex::endpoint(Kind::Light, si.p);
                 lv.ng = si.ng;
@@ -1086,6 +1097,9 @@ pub(crate) fn sample(
             let u_label = label_u(label_seed, 0, jc);
             let (Some(si), Some(bsdf)) = (b.si.as_ref(), b.bsdf.as_ref()) else { continue };
             let Some((li, lsmp)) = scene.sample_light(b.p, u_sel, u_l) else { continue };
+            if !scene.lights_receiver(li, si.prim) {
+                continue; // (light linking)
+            }
             let wo = direction(b, &camera[cr[t - 2] as usize]).0;
             let (lo, li_local) = (si.frame.to_local(wo), si.frame.to_local(lsmp.wi));
             let f = bsdf.eval(lo, li_local);

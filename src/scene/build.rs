@@ -96,6 +96,11 @@ pub(super) struct Triangles {
     /// Each triangle's object's Shadow Terminator Geometry Offset; empty when every object
     /// has the default (`terminator::DEFAULT_GEOMETRY_OFFSET`).
     pub terminator: Vec<f32>,
+    /// Each triangle's object's light-linking receiver set; empty when every one is 0.
+    pub light_set: Vec<u8>,
+    /// Each triangle's object's light-linking membership as an emitter; empty when every
+    /// object lights every set.
+    pub membership: Vec<u64>,
 }
 
 /// A `Triangles::ray_mask` bit: camera rays pass through the triangle.
@@ -126,7 +131,11 @@ impl Triangles {
             pass_index: Vec::new(),
             ray_mask: Vec::new(),
             terminator: Vec::new(),
+            light_set: Vec::new(),
+            membership: Vec::new(),
         };
+        let linked_sets = meshes.iter().any(|m| m.light_set != 0);
+        let memberships = meshes.iter().any(|m| m.light_membership.is_some_and(|x| x != u64::MAX));
         let masked = meshes.iter().any(|m| m.camera_invisible || m.shadow_invisible || m.holdout);
         let colors = meshes.iter().any(|m| !m.corner_colors.is_empty());
         let generated = meshes.iter().any(|m| !m.corner_generated.is_empty());
@@ -167,6 +176,12 @@ impl Triangles {
             }
             if terminators {
                 t.terminator.resize(t.positions.len(), terminator_offset(m));
+            }
+            if linked_sets {
+                t.light_set.resize(t.positions.len(), m.light_set.min(63));
+            }
+            if memberships {
+                t.membership.resize(t.positions.len(), m.light_membership.unwrap_or(u64::MAX));
             }
             if masked {
                 let bits = if m.camera_invisible { RAY_CAMERA_INVISIBLE } else { 0 }
@@ -323,6 +338,9 @@ pub(super) struct Lighting {
     pub emissive_triangles: usize,
     /// Said when nothing lights the scene.
     pub warning: Option<String>,
+    /// Per light, the receiver sets it lights (light linking); empty: all of them, and
+    /// missing at the end too.
+    pub membership: Vec<u64>,
 }
 
 impl Lighting {
@@ -339,6 +357,11 @@ impl Lighting {
         let mut lights: Vec<Light> = desc.lights.iter().map(Light::from_desc).collect::<Result<_, _>>()?;
         let mut tri_light = vec![u32::MAX; tris.positions.len()];
         let mut emissive_triangles = 0;
+        // the receiver sets each light lights (light linking; empty: every light every set)
+        let mut membership: Vec<u64> = desc.light_membership.iter().take(lights.len()).copied().collect();
+        if membership.iter().all(|&m| m == u64::MAX) {
+            membership.clear();
+        }
         // a material that blends into another by a texture: its emission estimated with the
         // textures' means (the radiance itself is evaluated per point, `Scene::emission_at`);
         // by Is Camera Ray: the emission every other ray sees
@@ -364,6 +387,10 @@ impl Lighting {
             let mat = &materials[m as usize];
             if mat.emits() {
                 tri_light[t] = lights.len() as u32;
+                if !tris.membership.is_empty() || !membership.is_empty() {
+                    membership.resize(lights.len(), u64::MAX);
+                    membership.push(tris.membership.get(t).copied().unwrap_or(u64::MAX));
+                }
                 lights.push(Light {
                     name: mat.name.clone(),
                     shape: LightShape::Triangle { prim: t as u32 },
@@ -410,7 +437,17 @@ impl Lighting {
             "the scene has no light: no emitting material, no light object and a black world; the image is black"
                 .to_string()
         });
-        Ok(Lighting { lights, selector, tri_light, hittable_lights, env, backdrop, emissive_triangles, warning })
+        Ok(Lighting {
+            lights,
+            selector,
+            tri_light,
+            hittable_lights,
+            env,
+            backdrop,
+            emissive_triangles,
+            warning,
+            membership,
+        })
     }
 
     /// The world background: a colour, or an image rotated by `world_rotation`.

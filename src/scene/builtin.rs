@@ -25,6 +25,8 @@ fn quad(name: &str, p: [[f32; 3]; 4], mat: u32) -> MeshDesc {
         pass_index: 0,
         shadow_terminator_offset: None,
         holdout: false,
+        light_set: 0,
+        light_membership: None,
     }
 }
 
@@ -123,6 +125,7 @@ pub fn cornell_box(width: u32, height: u32) -> SceneDesc {
         general_paths: false,
         oren_nayar_rho_cubed: false,
         normal_map_unnormalized_base: false,
+        light_membership: Vec::new(),
     }
 }
 
@@ -337,6 +340,7 @@ pub fn furnace_sphere(albedo: f32, emission: f32, width: u32, height: u32) -> Sc
         general_paths: false,
         oren_nayar_rho_cubed: false,
         normal_map_unnormalized_base: false,
+        light_membership: Vec::new(),
     }
 }
 
@@ -374,5 +378,7 @@ fn flat_mesh(name: &str, positions: Vec<[f32; 3]>, indices: Vec<[u32; 3]>, mat: 
         pass_index: 0,
         shadow_terminator_offset: None,
         holdout: false,
+        light_set: 0,
+        light_membership: None,
     }
 }

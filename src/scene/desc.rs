@@ -40,6 +40,11 @@ pub struct MeshDesc {
     /// transparent surfaces) the film is transparent and black, as Cycles' holdout; every
     /// other ray sees it as its material.
     pub holdout: bool,
+    /// Light linking (Blender's Light Linking, as Cycles' light sets): the receiver set the
+    /// object belongs to (0…63; 0, the default, for objects no emitter links explicitly),
+    /// and, for an emissive object, the receiver sets it lights (bit k: set k; None: all).
+    pub light_set: u8,
+    pub light_membership: Option<u64>,
 }
 
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -477,6 +482,9 @@ pub struct SceneDesc {
     /// that normal normalized, as Cycles 5.3 (`Scene::normal_mapped`). The Blender add-on
     /// sets it from the Blender it runs in.
     pub normal_map_unnormalized_base: bool,
+    /// Per light of `lights`, the receiver sets it lights (`MeshDesc::light_set`; bit k: set
+    /// k); empty, or missing at the end: every set.
+    pub light_membership: Vec<u64>,
 }
 
 impl LightDesc {

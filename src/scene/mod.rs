@@ -142,6 +142,11 @@ pub struct Scene {
     has_perturbed_normals: bool,
     /// Some object or material is held out (`is_holdout`).
     has_holdout: bool,
+    /// Light linking: each triangle's receiver set and emitter membership (empty: none set),
+    /// and each light's membership (`lights_receiver`).
+    tri_light_set: Vec<u8>,
+    tri_membership: Vec<u64>,
+    light_membership: Vec<u64>,
     pub bounds_center: Vec3,
     pub bounds_radius: f32,
     pub report: SceneReport,
@@ -196,6 +201,9 @@ impl Scene {
             has_transparency: false,
             has_perturbed_normals: false,
             has_holdout: false,
+            tri_light_set: tris.light_set,
+            tri_membership: tris.membership,
+            light_membership: lighting.membership,
             lights: Vec::new(),
             selector: lighting.selector,
             tri_light: Vec::new(),
@@ -235,6 +243,8 @@ impl Scene {
             pass_index: Vec::new(),
             ray_mask: Vec::new(),
             terminator: Vec::new(),
+            light_set: Vec::new(),
+            membership: std::mem::take(&mut self.tri_membership),
         };
         let lighting = match tris.material.iter().max() {
             Some(&m) if m as usize >= shading.materials.len() => Err(SceneError::Mesh {
@@ -244,7 +254,9 @@ impl Scene {
             _ => Lighting::new(desc, &shading, &tris, self.bounds_center),
         };
         (self.positions, self.areas, self.tri_material) = (tris.positions, tris.areas, tris.material);
+        self.tri_membership = tris.membership;
         let lighting = lighting?;
+        self.light_membership = lighting.membership.clone();
         self.report.emissive_triangles = lighting.emissive_triangles;
         (self.lights, self.selector, self.tri_light) = (lighting.lights, lighting.selector, lighting.tri_light);
         (self.hittable_lights, self.env, self.backdrop) = (lighting.hittable_lights, lighting.env, lighting.backdrop);
@@ -268,6 +280,19 @@ impl Scene {
     pub fn is_holdout(&self, prim: u32) -> bool {
         self.has_holdout
             && (self.masked(prim, RAY_HOLDOUT) || self.materials[self.tri_material[prim as usize] as usize].holdout)
+    }
+
+    /// Light linking: whether light `li` lights the object of triangle `receiver` (the
+    /// vertex a light sample is taken at, or the one a ray that meets the light left;
+    /// u32::MAX: none — a camera ray, which sees every emitter —, as Cycles'
+    /// `light_link_object_match`). The world lights everything.
+    #[inline]
+    pub fn lights_receiver(&self, li: u32, receiver: u32) -> bool {
+        if self.light_membership.is_empty() || receiver == u32::MAX {
+            return true;
+        }
+        let set = self.tri_light_set.get(receiver as usize).copied().unwrap_or(0);
+        self.light_membership.get(li as usize).is_none_or(|m| m >> set & 1 == 1)
     }
 
     /// The render has an alpha: a transparent film, or holdouts (which make the film
