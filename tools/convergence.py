@@ -633,6 +633,31 @@ def ray_visibility(bpy):
     return scene
 
 
+def light_links(bpy):
+    """Light linking as artists use it: a warm panel on the ceiling whose receiver
+    collection includes the ball alone (a key light for one object), a cool card by the
+    left wall that lights everything but the floor (its collection excludes it), and an area
+    lamp that excludes the blue block; every light still lights what it lights after a
+    bounce."""
+    scene, grey = _grey_room(bpy, smooth=False)
+    panel = _mesh(bpy, scene, "Panel", [(0.1, 0.1, 1.45), (0.7, 0.1, 1.45), (0.7, 0.7, 1.45), (0.1, 0.7, 1.45)],
+                  [(0, 3, 2, 1)], _emission(bpy, "Panel light", 10.0), smooth=False)
+    card = _mesh(bpy, scene, "Card", [(-0.95, -0.2, 0.3), (-0.95, 0.4, 0.3), (-0.95, 0.4, 0.9), (-0.95, -0.2, 0.9)],
+                 [(0, 1, 2, 3)], _emission(bpy, "Card light", 6.0), smooth=False)
+    block = _block(bpy, scene, "Block", (0.3, 0.25, 0.0), (0.5, 0.45, 0.9), _diffuse(bpy, "Blue", (0.2, 0.3, 0.7)))
+    ball = _uv_sphere(bpy, scene, "Ball", (-0.4, 0.3, 0.3), 0.3, 24, 12, grey, smooth=True)
+    lamp = _lamp(bpy, scene, "Area", "AREA", 30.0, (-0.3, -0.4, 1.4), 0.4)
+    room = bpy.data.objects["Room"]
+    for emitter, name, member, state in ((panel, "Key", ball, "INCLUDE"), (card, "Fill", room, "EXCLUDE"),
+                                         (lamp, "Top", block, "EXCLUDE")):
+        c = bpy.data.collections.new(name)
+        c.objects.link(member)
+        c.collection_objects[0].light_linking.link_state = state
+        emitter.light_linking.receiver_collection = c
+    _camera_and_world(bpy, scene)
+    return scene
+
+
 def shadowless_lamp(bpy):
     """A fill light as artists set one: an area lamp with Cast Shadow off over a ball and a
     block (they leave no shadow of it), beside a point lamp that casts shadows."""
@@ -992,6 +1017,7 @@ SCENES = {
     "procedural": (procedural, 512, 16),
     "ray_visibility": (ray_visibility, 512, 16),
     "shadowless_lamp": (shadowless_lamp, 512, 16),
+    "light_links": (light_links, 512, 16),
     "textured_mix": (textured_mix, 512, 16),
     "per_object": (per_object, 512, 16),
     "panorama": (panorama, 512, 16),
