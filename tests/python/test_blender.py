@@ -114,7 +114,7 @@ def test_glossy_distributions_rendered_as_ggx_are_named(bpy_mod):
 
 def test_what_gdmlt_leaves_out_is_named_and_kept_in_the_last_render_panel(bpy_mod, tmp_out):
     """Issue 17: hair curves, point clouds, volume objects, a material's Volume output and
-    motion blur (and, found later, a light's Cast Shadow off and light linking) were dropped silently, and the warnings that existed flashed in the status
+    motion blur (and, found later, a light's Cast Shadow off and shadow linking) were dropped silently, and the warnings that existed flashed in the status
     bar and were gone. Each is now a warning naming the object, material or setting, and the
     last render's warnings stay in the Render Properties' "Last Render" panel (its lines
     wrapped to fit) until the next render, which replaces them."""
@@ -132,27 +132,30 @@ def test_what_gdmlt_leaves_out_is_named_and_kept_in_the_last_render_panel(bpy_mo
     vol = nt.nodes.new("ShaderNodeVolumePrincipled")
     nt.links.new(vol.outputs[0], nt.get_output_node("CYCLES").inputs["Volume"])
     scene.render.use_motion_blur = True
-    # Object › Visibility › Ray Visibility, holdout, and a light's ray visibility
+    # Object › Visibility › Ray Visibility (holdout and camera are rendered), and a light's
     bpy.data.objects["TallBlock"].visible_diffuse = False
     bpy.data.objects["ShortBlock"].visible_transmission = False
     bpy.data.objects["ShortBlock"].visible_camera = False  # (rendered: no warning)
-    bpy.data.objects["ShortBlock"].is_holdout = True
+    bpy.data.objects["ShortBlock"].is_holdout = True  # (rendered: no warning)
     lamp = bpy.data.objects.new("Lamp", bpy.data.lights.new("Lamp", "POINT"))
     lamp.visible_glossy = False
     scene.collection.objects.link(lamp)
-    # a light that casts no shadow, and light linking (Blender 4's Object › Shading)
+    # a light that casts no shadow, light linking (rendered) and shadow linking (Blender 4's
+    # Object › Shading)
     fill = bpy.data.objects.new("Fill", bpy.data.lights.new("Fill", "AREA"))
     fill.data.use_shadow = False
     fill.light_linking.receiver_collection = bpy.data.collections.new("Lit")
+    fill.light_linking.blocker_collection = bpy.data.collections.new("Blockers")
     scene.collection.objects.link(fill)
     render_to_exr(bpy, scene, tmp_out / "dropped.exr")
     text = "\n".join(engine.last_warnings)
     for needle in ("object 'Hair': hair curves", "object 'Cloud': point clouds", "object 'Smoke': volumes",
                    "material 'Red': its Volume output", "motion blur", "object 'TallBlock': ray visibility (diffuse off)",
-                   "object 'ShortBlock': ray visibility (transmission off)", "object 'ShortBlock': holdout",
-                   "light 'Lamp': ray visibility (glossy off)", "light 'Fill': light linking"):
+                   "object 'ShortBlock': ray visibility (transmission off)",
+                   "light 'Lamp': ray visibility (glossy off)", "light 'Fill': shadow linking"):
         assert needle in text, (needle, engine.last_warnings)
-    assert "camera off" not in text and "shadow off" not in text and "Cast Shadow" not in text  # (rendered)
+    for rendered in ("camera off", "shadow off", "Cast Shadow", "holdout", "light linking"):
+        assert rendered not in text, (rendered, engine.last_warnings)
     assert ui.GDMLT_PT_last_render.poll(bpy.context)
     lines = [line for w in engine.last_warnings for line in ui.wrapped(w)]
     assert all(len(line) <= 72 for line in lines) and " ".join(lines).split() == text.split()
