@@ -714,7 +714,7 @@ fn parse_scene(d: &Bound<'_, PyDict>) -> PyResult<SceneDesc> {
         normal_map_unnormalized_base: get_or(d, "normal_map_unnormalized_base", false, "scene")?,
         light_membership: list("lights")?
             .iter()
-            .map(|l| get_or(&l, "light_membership", u64::MAX, "light"))
+            .map(|l| get_or(l, "light_membership", u64::MAX, "light"))
             .collect::<PyResult<_>>()?,
         world_rotation: rotation3(d, "world_rotation", "scene")?,
     })

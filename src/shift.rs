@@ -390,7 +390,12 @@ fn light_along(scene: &Scene, e: &Event, f: &Free, s: &Step) -> Option<(Spectrum
         // the base hit an emitting surface: so must the offset's ray (if it hits a surface
         // that does not emit, the offset has no such event: the base would have no event to
         // shift back from, so the pair fails symmetrically)
-        scene.surface_emission(&s.hit?, f.y.p, s.dir)?
+        // (light linking: the emitter the offset meets must light the offset's vertex)
+        let hit = s.hit?;
+        if scene.triangle_light(hit.prim).is_some_and(|l| !scene.lights_receiver(l, f.y.prim)) {
+            return None;
+        }
+        scene.surface_emission(&hit, f.y.p, s.dir)?
     } else {
         let tmax = s.hit.map_or(f32::INFINITY, |h| h.t);
         let (_, le, pdf) = scene.light_crossed(e.light, f.y.p, s.origin, s.dir, tmax)?;

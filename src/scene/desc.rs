@@ -478,8 +478,8 @@ pub struct SceneDesc {
     /// (`bsdf/oren_nayar.rs`). The Blender add-on sets it from the Blender it runs in.
     pub oren_nayar_rho_cubed: bool,
     /// Tangent-space normal maps built on the interpolated corner normal as it is, shorter
-    /// than unit inside a triangle, as Cycles before 5.3 builds them; off (the default): on
-    /// that normal normalized, as Cycles 5.3 (`Scene::normal_mapped`). The Blender add-on
+    /// than unit inside a triangle, as Cycles up to 5.0 builds them; off (the default): on
+    /// that normal normalized, as Cycles from 5.1 (`Scene::normal_mapped`). The Blender add-on
     /// sets it from the Blender it runs in.
     pub normal_map_unnormalized_base: bool,
     /// Per light of `lights`, the receiver sets it lights (`MeshDesc::light_set`; bit k: set

@@ -503,7 +503,8 @@ impl Scene {
 
     /// The walk of `transmittance` and `segment_transmittance` from `si` to `target` (a point,
     /// or at infinity a direction): surfaces whose ray mask has a bit of `skip` let the ray
-    /// pass untouched, transparent ones multiply it by τ·tint (at most
+    /// pass untouched (a camera's segment, skipping RAY_CAMERA_INVISIBLE, ends at a holdout),
+    /// transparent ones multiply it by τ·tint (at most
     /// `MAX_TRANSPARENT_BOUNCES`), any other blocks it (None); `lift`: the first segment
     /// starts lifted off a smooth triangle (a light sample's). Also whether any transparent
     /// surface was crossed.
@@ -536,7 +537,8 @@ impl Scene {
             }
             crossed += 1;
             let m = &self.materials[self.tri_material[hit.prim as usize] as usize];
-            if !m.is_transparent() {
+            // (a camera's segment ends at a holdout, transparent or not, as its rays do)
+            if !m.is_transparent() || skip & RAY_CAMERA_INVISIBLE != 0 && self.is_holdout(hit.prim) {
                 return None;
             }
             let pass = self.pass_through(m, &from);
