@@ -27,16 +27,14 @@ $(STAMP): requirements-dev.txt
 
 setup: $(STAMP)
 
-# The core twice: portable — the manylinux_2_28 wheel the Blender extension bundles, its core
-# copied into python/gdmlt/ and the checkout installed editable into the venv
-# (tools/develop.py) — and, on x86-64, with -C target-cpu=x86-64-v3 as gdmlt/_core_v3 (its
-# own target dir, so neither build evicts the other); `import gdmlt` loads the v3 one only
-# on CPUs that run it.
+# The core twice: portable (maturin, installed editable into the venv) and, on x86-64, with
+# -C target-cpu=x86-64-v3 as gdmlt/_core_v3 (its own target dir, so neither build evicts
+# the other); `import gdmlt` loads the v3 one only on CPUs that run it.
 V3_SO := python/gdmlt/_core_v3.abi3.so
 # The benchmarks live beside the product (benchmarks/gdmlt_bench), not in its wheel.
 BENCH := PYTHONPATH=benchmarks $(PY) -m gdmlt_bench
 build: $(STAMP)
-	$(PY) tools/develop.py
+	$(VENV)/bin/maturin develop --release --quiet
 	@if [ "$$(uname -m)" = x86_64 ]; then \
 		RUSTFLAGS="-C target-cpu=x86-64-v3" cargo build --release --quiet --lib --features v3-module \
 			--target-dir target/x86-64-v3 && \
@@ -91,7 +89,7 @@ test-blender-versions: build
 # Install it in Blender with Edit > Preferences > Get Extensions > Install from Disk, or
 # blender --command extension install-file -r user_default -e dist/gdmlt-<version>.zip
 addon: build
-	$(PY) tools/build_addon.py --wheel $$(ls target/addon-wheels/gdmlt-*.whl)
+	$(PY) tools/build_addon.py
 
 # Error over time on the built-in Cornell box (prints a table, draws out/bench-cornell.png).
 bench: build

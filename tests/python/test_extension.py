@@ -55,16 +55,9 @@ SCRIPT = textwrap.dedent(r'''
 
 @pytest.fixture(scope="module")
 def extension_zip(tmp_path_factory):
-    """The zip `make addon` builds: with the wheel `make build` made (tools/develop.py) where
-    its core is the one these tests import, else with a wheel built here."""
-    sys.path.insert(0, str(ROOT / "tools"))
-    from develop import WHEELS, core_of
-
     out = tmp_path_factory.mktemp("dist")
-    wheels = sorted(WHEELS.glob("gdmlt-*.whl"))
-    reuse = len(wheels) == 1 and core_of(wheels[0]) == (ROOT / "python" / "gdmlt" / "_core.abi3.so").read_bytes()
-    subprocess.run([sys.executable, str(ROOT / "tools" / "build_addon.py"), "--out-dir", str(out),
-                    *(["--wheel", str(wheels[0])] if reuse else [])], check=True, timeout=900)
+    subprocess.run([sys.executable, str(ROOT / "tools" / "build_addon.py"), "--out-dir", str(out)], check=True,
+                   timeout=900)
     zips = sorted(out.glob("gdmlt-*.zip"))
     assert len(zips) == 1, zips
     return zips[0]
