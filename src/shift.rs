@@ -1010,7 +1010,9 @@ mod tests {
         // veil (row 11) and over the lacquered floor (row 13); channel: None = luminance
         // indirect: the pairs of indirect light only (`shift_indirect`, the Metropolis
         // methods'), against path tracing's radiance minus its direct light
-        for (si, nee, row, channel, indirect) in [
+        // (the twelve cases in parallel: the longest of the library's tests otherwise)
+        use rayon::prelude::*;
+        let cases = [
             (0, true, 3.0f32, None, false),
             (0, true, 11.0, None, false),
             (0, false, 11.0, None, false),
@@ -1023,7 +1025,8 @@ mod tests {
             (1, true, 11.0, None, true),
             (3, true, 13.0, None, false),
             (3, false, 6.0, None, false),
-        ] {
+        ];
+        cases.into_par_iter().for_each(|(si, nee, row, channel, indirect)| {
             let pair = if indirect { shift_indirect } else { shift };
             let pick = |v: Spectrum| -> f64 { channel.map_or(crate::math::luminance(v), |c| v[c]) as f64 };
             let scene = &scenes[si];
@@ -1060,7 +1063,7 @@ mod tests {
                     "scene {si} nee={nee} row {row} {channel:?} indirect={indirect} pixel {x}: path tracing {pt} vs pair {gd} (se {se})"
                 );
             }
-        }
+        });
     }
 
     mod properties {

@@ -725,7 +725,8 @@ fn all_methods_converge_through_glass_with_and_without_nee() {
 }
 
 /// The Metropolis methods' image mean converges with the mutations: its spread over eight
-/// seeds shrinks with the mutations — by at least 2× for 64× the mutations.
+/// seeds shrinks with the mutations — by at least 2× for 64× the mutations (16 and 1024 per
+/// pixel; 64 and 4096 until 2026-12-07, 4× the time for the same ratio).
 /// With b estimated once from the bootstrap (100k states) the spread stayed (issue 14 §5:
 /// seed-dependent brightness on the bulb, −9% to +3% at 512 and 2048 mutations per pixel
 /// alike), and this test failed.
@@ -744,9 +745,9 @@ fn metropolis_image_mean_converges_with_the_mutations() {
             let m = means.iter().sum::<f64>() / 8.0;
             (means.iter().map(|x| (x - m).powi(2)).sum::<f64>() / 7.0).sqrt() / m
         };
-        let (few, many) = (spread(64), spread(4096));
-        println!("{method:?}: relative spread {few} at 64, {many} at 4096");
-        assert!(many < 0.5 * few, "{method:?}: relative spread of the image mean {few} at 64, {many} at 4096");
+        let (few, many) = (spread(16), spread(1024));
+        println!("{method:?}: relative spread {few} at 16, {many} at 1024");
+        assert!(many < 0.5 * few, "{method:?}: relative spread of the image mean {few} at 16, {many} at 1024");
     }
 }
 

@@ -166,6 +166,8 @@ def build_parser():
                         "a local cluster of --workers processes) and merge them")
     r.add_argument("--partials", type=_positive_int, default=4, help="with --dask: number of partials (default 4)")
     r.add_argument("--workers", type=_positive_int, default=2, help="with --dask and no address: local workers")
+    r.add_argument("--dask-timeout", type=float, default=10.0, metavar="SECONDS",
+                   help="with --dask ADDRESS: how long to keep trying to reach the scheduler (default 10)")
     ex = sub.add_parser("export", help="export a .blend to USD for render nodes without Blender",
                         description="Blender's USD exporter, plus the scene's GDMLT settings and image size "
                                     "stored in the stage, which `gdmlt render OUT.usdc` then uses as defaults.")
@@ -410,6 +412,8 @@ def _checked_render_args(args, parser):
         partial = (k, n)
     if args.dask is not None and args.partials < 1:
         parser.error("--partials must be at least 1")
+    if not args.dask_timeout > 0:  # (also NaN)
+        parser.error("--dask-timeout must be a positive number of seconds")
     suffix = Path(args.scene).suffix.lower()
     if args.scene not in BUILTIN and suffix != ".blend" and suffix not in USD_SUFFIXES:
         parser.error(f"'{args.scene}' is neither a .blend or USD file nor a built-in scene ({', '.join(BUILTIN)})")
@@ -462,7 +466,8 @@ def render_command(args, parser):
         from .distributed import render_dask
 
         layers, dropped = render_dask(src["desc"], args.partials, settings, address=args.dask or None,
-                                      workers=args.workers, log=lambda m: print(m, file=sys.stderr))
+                                      workers=args.workers, log=lambda m: print(m, file=sys.stderr),
+                                      connect_timeout=args.dask_timeout)
         write_layers(out, finish_layers(layers, denoise), not args.no_png, view=src["view"])
         print(f"wrote {out}: {args.partials - len(dropped)} of {args.partials} partials merged "
               f"in {time.perf_counter() - t0:.2f} s")

@@ -321,10 +321,11 @@ def test_the_command_line_reports_progress_with_the_time_left():
 def test_an_unreachable_dask_scheduler_is_a_message():
     """[9] an unreachable scheduler ended in a traceback."""
     r = subprocess.run([sys.executable, "-m", "gdmlt.cli", "render", "cornell", "-o", "/tmp/gdmlt-unreachable.exr",
-                        "--method", "pt", "--dask", "tcp://127.0.0.1:9", "--partials", "2"],
+                        "--method", "pt", "--dask", "tcp://127.0.0.1:9", "--partials", "2", "--dask-timeout", "1"],
                        capture_output=True, text=True, cwd=ROOT, timeout=120)
     assert r.returncode == 1, r.stderr[-2000:]
-    assert "cannot reach the Dask scheduler" in r.stderr and "Traceback" not in r.stderr, r.stderr[-2000:]
+    assert "cannot reach the Dask scheduler" in r.stderr and "within 1.0 s" in r.stderr, r.stderr[-2000:]
+    assert "Traceback" not in r.stderr, r.stderr[-2000:]
 
 
 def test_an_infinite_emission_strength_is_refused_naming_the_material():
