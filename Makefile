@@ -84,20 +84,11 @@ test-python: build
 # the long-term-support lines, each as bpy in its own venv with the Python that bpy is built
 # for (tools/python_for.sh finds it: PATH, then pyenv). On each, the headless tests marked
 # `compat` (tests/python/test_blender.py: F12, export, panels, errors, Cycles agreement) run
-# with the core the default venv built (an abi3 module, on sys.path from python/).
+# with the core the default venv built; the versions run side by side
+# (tools/test_blender_versions.sh).
 BLENDER_VERSIONS := 5.3.0:3.13 5.2.0:3.13 4.5.15:3.11
 test-blender-versions: build
-	@for spec in $(BLENDER_VERSIONS); do \
-		bpy=$${spec%%:*}; pyv=$${spec##*:}; venv=.venv-bpy-$$bpy; \
-		py=$$(tools/python_for.sh $$pyv) || { echo "Python $$pyv not found: bpy $$bpy needs it (pyenv install $$pyv)"; exit 1; }; \
-		if [ ! -e $$venv/.deps-stamp ]; then \
-			$$py -m venv $$venv && $$venv/bin/python -m pip install -q --upgrade pip && \
-			$$venv/bin/python -m pip install -q --no-compile bpy==$$bpy pyoidn==2.5.1.0 OpenEXR pytest && touch $$venv/.deps-stamp || exit 1; \
-		fi; \
-		echo "Blender $$bpy (Python $$pyv):"; \
-		PYTHONPATH=$(abspath python) VIRTUAL_ENV=$(abspath .)/$$venv PATH=$(abspath .)/$$venv/bin:$$PATH \
-			$$venv/bin/python -m pytest -q -m compat -p no:cacheprovider tests/python/test_blender.py || exit 1; \
-	done
+	tools/test_blender_versions.sh $(BLENDER_VERSIONS)
 
 # The Blender extension: dist/gdmlt-<version>.zip with the core bundled as an abi3 wheel.
 # Install it in Blender with Edit > Preferences > Get Extensions > Install from Disk, or

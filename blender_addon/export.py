@@ -487,8 +487,19 @@ def material_params(mat, warnings, textures=None):
         c = tuple(mat.diffuse_color)[:3]
         out["base_color"] = c
         return out
-    _warn_unrendered_outputs(node_out, warnings, what, skip=("Displacement",))
     surface = node_out.inputs.get("Surface")
+    volume = node_out.inputs.get("Volume")
+    if (surface is None or not surface.is_linked) and volume is not None and volume.is_linked:
+        # Cycles' rule: a material with a Volume output and no Surface is the boundary of a
+        # medium, which every ray passes unchanged (camera, scattered and shadow rays, and in
+        # alpha). The medium inside is not rendered yet: the boundary is passed as a clear
+        # Transparent BSDF (one transparent bounce per crossing, where Cycles counts crossings
+        # apart, up to 1024).
+        warnings.append(f"{what}: its Volume output is not rendered yet: the surface is passed as the "
+                        f"boundary of an empty medium (fog, smoke and absorption left out)")
+        clear = dict(DEFAULT_MATERIAL, base_color=(0.0, 0.0, 0.0), **{"pass": (1.0, 1.0, 1.0)})
+        return {**out, **_leaves_material([(1.0, clear)], False, warnings, what)}
+    _warn_unrendered_outputs(node_out, warnings, what, skip=("Displacement",))
     if surface is None or not surface.is_linked:
         out["base_color"] = (0.0, 0.0, 0.0)  # Cycles renders an unconnected surface black
         return out

@@ -924,6 +924,55 @@ def test_holdouts_agree_with_cycles(bpy_mod, tmp_out, method):
     assert np.abs(alpha - c[..., 3]).max() < 0.05
 
 
+def _fog_box(bpy, name, size, location, density):
+    """A cube whose material has a Principled Volume in its Volume output and no Surface."""
+    mesh = bpy.data.meshes.new(name)
+    h = size / 2
+    corners = [(x, y, z) for x in (-h, h) for y in (-h, h) for z in (-h, h)]
+    mesh.from_pydata(corners, [], [(0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4),
+                                   (1, 5, 7, 3)])
+    mat = bpy.data.materials.new(name)
+    mat.use_nodes = True
+    nt = mat.node_tree
+    nt.nodes.clear()
+    vol = nt.nodes.new("ShaderNodeVolumePrincipled")
+    vol.inputs["Density"].default_value = density
+    nt.links.new(vol.outputs[0], nt.nodes.new("ShaderNodeOutputMaterial").inputs["Volume"])
+    mesh.materials.append(mat)
+    ob = bpy.data.objects.new(name, mesh)
+    ob.location = location
+    bpy.context.scene.collection.objects.link(ob)
+    return ob
+
+
+@pytest.mark.parametrize("method", [pytest.param("PT", marks=pytest.mark.compat), "BDPT", "GDPSSMLT"])
+def test_a_volume_only_material_is_a_boundary_rays_pass(bpy_mod, tmp_out, method):
+    """Issue 46: a material with a Volume output and no Surface rendered as an opaque black
+    surface (a fog box around the camera: a black frame). Cycles passes such a surface (the
+    boundary of a medium) with every ray. Two empty media — a box around the whole scene,
+    camera and lights inside, and one around the card — agree with Cycles; with fog in them
+    (the medium is not rendered yet) the export says so. At 12 bounces: at the scene's 2,
+    where many paths reach the limit, GDMLT ends a path at the next surface past the limit
+    while Cycles goes on through transparent surfaces (docs/limits.md)."""
+    def build(bpy, engine, spp, seed, density=0.0):
+        scene = open_scene(bpy, "lights", engine, spp, seed, keep={"Area", "World"})
+        scene.gdmlt.max_bounces = 12
+        for_engine(scene, engine, spp, seed)
+        _fog_box(bpy, "Room", 40.0, (0, 0, 0), density)
+        _fog_box(bpy, "Haze", 1.2, tuple(bpy.data.objects["Card"].location), density)
+        if engine == "GDMLT":
+            scene.gdmlt.method = method
+        return scene
+
+    from gdmlt_blender import export
+
+    build(bpy_mod, "GDMLT", 4, 1, density=0.3)
+    _, warnings = export.export_scene(bpy_mod.context.evaluated_depsgraph_get())
+    assert sorted(w.split(":")[0] for w in warnings if "Volume output is not rendered" in w) == [
+        "material 'Haze'", "material 'Room'"], warnings
+    assert_agrees_with_cycles(bpy_mod, build, tmp_out, f"fogbox{method}")
+
+
 @pytest.mark.parametrize("method", [pytest.param("PT", marks=pytest.mark.compat), "BDPT", "GDPT", "PSSMLT"])
 def test_light_linking_agrees_with_cycles(bpy_mod, tmp_out, method):
     """Issue 47: light linking was not rendered (every light lit every object: a rim light

@@ -1,11 +1,11 @@
 """Every method, with and without next-event estimation, converges to Cycles' image on
 scenes built the way artists build them in Blender, with Cycles rendered in the same test:
-a smooth-shaded low-poly room, an area light narrowed by Spread, a room of rough diffuse clay, a scaled spot and a spot of some radius, coated paint and varnish, a translucent leaf and lampshade, a bulb in smooth, rough, frosted and orange glass, every Blender light type
+a smooth-shaded low-poly room, an area light narrowed by Spread, a room of rough diffuse clay, a scaled spot and a spot of some radius, coated paint and varnish, a translucent leaf and lampshade, a bulb in smooth and in rough orange glass, every Blender light type
 with a coloured world, mirror / glass / layered plastic, image textures (sRGB and Non-Color,
 alpha), Mix and Add shaders, texture graphs, bump maps, colour attributes through a node group, normal-mapped smooth balls, procedural textures (and a procedural bump), a light card hidden from the camera and a block that casts no shadow, a fill lamp with Cast Shadow off (its NEE rows only: `convergence.NEE_ONLY`), lights linked to what they light (a receiver collection that includes, two that exclude), Mix Shaders whose factor is a texture, an HDRI world alone, as it is and turned by a Mapping node, and a veranda under a smooth-shaded low-poly roof lit at a grazing angle (tools/convergence.py builds and
 compares them; `python tools/convergence.py` regenerates docs/convergence.md the same way).
 Tolerances come from the noise measured in the same test: the seed-to-seed spread of each
-renderer's block means, and of GDMLT's image means (six seeds).
+renderer's block means, and of GDMLT's image means (four seeds; the docs' table six).
 """
 
 import sys
@@ -24,7 +24,8 @@ def test_every_method_converges_to_cycles(bpy_mod, tmp_out, name):
     within 2.5× the noise of the two (plus 1%), and the image mean within 4σ plus 1.5%.
     Failed before the shading-normal fix (smooth_room: pt −5.3%, block difference 8.6× the
     noise), the η² fix (bulbs: every method −55% to −62%) and NEE through transmission
-    (bulb_rough: pt NEE 6% below naive) Spread (softbox: every method −21%, block difference 183%;
+    (bulb_rough, since moved to the docs' scenes — bulb_tinted's rough glass covers it: pt NEE 6%
+    below naive) Spread (softbox: every method −21%, block difference 183%;
     gdpt and gdpssmlt still −16% until the shift mapping's light re-evaluation applied it too) and the environment's
     Mapping rotation (hdri_rotated: every method −9%, block difference 100%), Multiscatter GGX
     glass (bulb_frosted, roughness 0.7: every method −14%, block difference 25%) and light
