@@ -452,11 +452,31 @@ pub fn trace_path_guided<S: Sampler>(
         let u_bsdf = sampler.next_2d();
         let u_rr = sampler.next_1d();
 
-        // 6. the bounce limits
-        if st.depth > cfg.max_bounces || st.by_kind.iter().zip(&cfg.kind_limits()).any(|(n, max)| n > max) {
-            break;
-        }
+        // 6. the bounce limits. Past them the path still goes through transparent surfaces to
+        // the light behind them, as Cycles' PATH_RAY_TERMINATE_AFTER_TRANSPARENT: only the
+        // pass-through lobe, taken with its own probability (so that the recorded vertex is
+        // the one a sampled pass-through records, and the shift follows it), no light sample.
         let wo = si.frame.to_local(-st.d);
+        if st.depth > cfg.max_bounces || st.by_kind.iter().zip(&cfg.kind_limits()).any(|(n, max)| n > max) {
+            match bsdf.pass_eval(wo) {
+                // (the top τ of u_lobe, where `Bsdf::sample` puts its pass-through)
+                Some((f, pdf, wi)) if u_lobe >= 1.0 - pdf => {
+                    let bs = crate::bsdf::BsdfSample {
+                        wi,
+                        weight: f / pdf,
+                        pdf,
+                        lobe: crate::bsdf::LobeKind::Specular,
+                        eta: 1.0,
+                        scatter: crate::bsdf::Scatter::Transparent,
+                    };
+                    if st.scatter(&si, wo, &bs, u_rr, cfg, record.as_deref_mut()) {
+                        continue;
+                    }
+                    break;
+                }
+                _ => break,
+            }
+        }
         // The continuation is sampled first: it does not depend on the light sample, so the
         // processor overlaps the two computations before the shadow ray's traversal. At a
         // guided vertex, from the guide or the BSDF.
@@ -565,11 +585,11 @@ impl PathState {
     }
 
     /// Emission found now is direct light: what the path cut at `max_bounces` 0 finds too —
-    /// before any scattering, or on the segment straight after the first (the cut path stops
-    /// at the next surface, transparent or not).
+    /// before any scattering, or on the segment straight after the first (through transparent
+    /// surfaces too: the cut path goes on through them, past its limit).
     #[inline]
     fn direct_emission(&self) -> bool {
-        self.depth == 0 || (self.depth == 1 && !self.passed)
+        self.depth <= 1
     }
 
     /// MIS weight of emission found by BSDF sampling whose light-sampling pdf is `pdf_light`.

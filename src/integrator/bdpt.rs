@@ -438,7 +438,19 @@ fn random_walk<S: Sampler + ?Sized>(
             }
         }
         if surfaces >= max_surface {
-            break; // (the segment after the last vertex found its light; no vertex beyond)
+            // (the segment after the last vertex found its light; no vertex beyond.) A camera
+            // path goes on through transparent surfaces to the light behind them, as Cycles'
+            // PATH_RAY_TERMINATE_AFTER_TRANSPARENT and pt do: their pass-through weight.
+            let pass = if radiance { scene.bsdf_at(&si).pass_through() } else { Spectrum::ZERO };
+            transparent += 1;
+            beta *= pass;
+            if !(pass.max_element() > 0.0) || transparent > cfg.transparent_bounces || !(beta.max_element() > 0.0) {
+                break;
+            }
+            o = si.spawn_origin(d);
+            tmin = 0.0;
+            tmax = if tmax.is_finite() { (tmax - si.t).max(0.0) } else { f32::INFINITY };
+            continue;
         }
         let bsdf = scene.bsdf_at(&si);
         if let (Some(t), true) = (guide, radiance) {
