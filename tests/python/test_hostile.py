@@ -41,6 +41,8 @@ def test_a_time_limit_beyond_any_clock_renders_to_the_sample_count(tmp_path):
     ["--noise-threshold", "2"],
     ["--noise-threshold", "-0.01"],
     ["--adaptive-min-samples", str(2 ** 40)],
+    ["--dask-timeout", "0"],
+    ["--dask-timeout", "nan"],
 ])
 def test_out_of_range_numbers_are_usage_errors_not_tracebacks(tmp_path, args):
     r = _cli("render", "cornell", "-o", str(tmp_path / "x.exr"), *args)
