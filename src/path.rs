@@ -454,28 +454,16 @@ pub fn trace_path_guided<S: Sampler>(
 
         // 6. the bounce limits. Past them the path still goes through transparent surfaces to
         // the light behind them, as Cycles' PATH_RAY_TERMINATE_AFTER_TRANSPARENT: only the
-        // pass-through lobe, taken with its own probability (so that the recorded vertex is
-        // the one a sampled pass-through records, and the shift follows it), no light sample.
+        // pass-through lobe, taken as `Bsdf::sample` takes it (`sample_pass_through`: the
+        // recorded vertex is the one a sampled pass-through records, the shift follows it, and
+        // the path cut at 0 bounces is the full path's direct light), no light sample.
         let wo = si.frame.to_local(-st.d);
         if st.depth > cfg.max_bounces || st.by_kind.iter().zip(&cfg.kind_limits()).any(|(n, max)| n > max) {
-            match bsdf.pass_eval(wo) {
-                // (the top τ of u_lobe, where `Bsdf::sample` puts its pass-through)
-                Some((f, pdf, wi)) if u_lobe >= 1.0 - pdf => {
-                    let bs = crate::bsdf::BsdfSample {
-                        wi,
-                        weight: f / pdf,
-                        pdf,
-                        lobe: crate::bsdf::LobeKind::Specular,
-                        eta: 1.0,
-                        scatter: crate::bsdf::Scatter::Transparent,
-                    };
-                    if st.scatter(&si, wo, &bs, u_rr, cfg, record.as_deref_mut()) {
-                        continue;
-                    }
-                    break;
-                }
-                _ => break,
+            let through = bsdf.sample_pass_through(wo, u_lobe);
+            if through.is_some_and(|bs| st.scatter(&si, wo, &bs, u_rr, cfg, record.as_deref_mut())) {
+                continue;
             }
+            break;
         }
         // The continuation is sampled first: it does not depend on the light sample, so the
         // processor overlaps the two computations before the shadow ray's traversal. At a

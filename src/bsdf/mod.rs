@@ -83,6 +83,19 @@ impl BsdfSample {
     }
 }
 
+/// The pass-through lobe's sample: straight through, f = τ·tint as a discrete measure,
+/// probability τ.
+fn straight_through(wo: Vec3, pass: f32, pass_tint: Spectrum) -> BsdfSample {
+    BsdfSample {
+        wi: -wo,
+        weight: pass_tint,
+        pdf: pass,
+        lobe: LobeKind::Specular,
+        eta: 1.0,
+        scatter: Scatter::Transparent,
+    }
+}
+
 /// A BSDF instance at one surface point. An enum, not a trait object: no allocation and
 /// static dispatch on the hot path.
 #[derive(Clone, Copy, Debug)]
@@ -318,16 +331,7 @@ impl Bsdf {
                 } else if u_lobe < c3 || *pass <= 0.0 {
                     (3, 0.0)
                 } else {
-                    // straight through: f = τ·tint as a discrete measure, probability τ
-                    let wi = -wo;
-                    return Some(BsdfSample {
-                        wi,
-                        weight: *pass_tint,
-                        pdf: *pass,
-                        lobe: LobeKind::Specular,
-                        eta: 1.0,
-                        scatter: Scatter::Transparent,
-                    });
+                    return Some(straight_through(wo, *pass, *pass_tint));
                 };
                 let mut bs = match k {
                     0 => diffuse.sample(wo, u_rest.min(0.999_999), u)?,
@@ -538,6 +542,18 @@ impl Bsdf {
                 }
                 sum
             }
+        }
+    }
+
+    /// The pass-through lobe alone, as `sample` takes it: straight through when `u_lobe` falls
+    /// in the top τ of [0, 1) (f = τ·tint as a discrete measure, probability τ). Also what a
+    /// path past its bounce limit takes (Cycles goes on through transparent surfaces there).
+    pub fn sample_pass_through(&self, wo: Vec3, u_lobe: f32) -> Option<BsdfSample> {
+        match self {
+            Bsdf::Principled { pass, pass_tint, .. } if *pass > 0.0 && u_lobe >= 1.0 - *pass => {
+                Some(straight_through(wo, *pass, *pass_tint))
+            }
+            _ => None,
         }
     }
 
