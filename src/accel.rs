@@ -13,14 +13,19 @@ use obvhs::triangle::Triangle;
 use obvhs::BvhBuildParams;
 use std::time::Duration;
 
-/// A hit: triangle index (scene order), distance and barycentrics of v1 and v2.
+/// A hit: triangle index (scene order), distance and barycentrics of v1 and v2, and the
+/// instance that placed the triangle (`NO_INSTANCE` for a triangle stored in world space).
 #[derive(Clone, Copy, Debug)]
 pub struct TriHit {
     pub prim: u32,
     pub t: f32,
     pub b1: f32,
     pub b2: f32,
+    pub inst: u32,
 }
+
+/// `TriHit::inst` of a triangle stored in world space (not instanced).
+pub const NO_INSTANCE: u32 = u32::MAX;
 
 /// Lanes of a triangle block.
 const LANES: usize = 8;
@@ -416,7 +421,7 @@ impl Accel {
             {}
         );
         let prim = *self.slot_prim.get(slot)?;
-        Some(TriHit { prim, t: ray.tmax, b1, b2 })
+        Some(TriHit { prim, t: ray.tmax, b1, b2, inst: NO_INSTANCE })
     }
 
     #[inline]
@@ -637,7 +642,7 @@ impl Accel {
             for i in 0..n {
                 if let Some(&prim) = self.slot_prim.get(sa[i] as u32 as usize) {
                     if prim != u32::MAX {
-                        out[i] = Some(TriHit { prim, t: ta[i], b1: ua[i], b2: va[i] });
+                        out[i] = Some(TriHit { prim, t: ta[i], b1: ua[i], b2: va[i], inst: NO_INSTANCE });
                     }
                 }
             }

@@ -13,6 +13,7 @@ pub mod distribution;
 pub mod error;
 pub mod film;
 pub mod guiding;
+pub mod instancing;
 pub mod integrator;
 pub mod math;
 pub mod output;

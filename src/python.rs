@@ -125,6 +125,15 @@ fn parse_mesh(d: &Bound<'_, PyDict>) -> PyResult<MeshDesc> {
         })
     };
     let (corner_generated, corner_object) = (corners("generated")?, corners("object")?);
+    let transforms = match item(d, "transforms")? {
+        Some(t) if !t.is_none() => {
+            floats(&t, 12, &format!("{ctx}: transforms (row-major 3×4 object-to-world matrices)"))?
+                .chunks_exact(12)
+                .map(|c| std::array::from_fn(|k| c[k]))
+                .collect()
+        }
+        _ => vec![],
+    };
     let pass_index = get_or(d, "pass_index", 0, &ctx)?;
     let camera_invisible = !get_or(d, "visible_camera", true, &ctx)?;
     let shadow_invisible = !get_or(d, "visible_shadow", true, &ctx)?;
@@ -139,6 +148,7 @@ fn parse_mesh(d: &Bound<'_, PyDict>) -> PyResult<MeshDesc> {
     Ok(MeshDesc {
         name,
         positions,
+        transforms,
         indices,
         corner_normals,
         material_ids,
@@ -1121,6 +1131,10 @@ fn builtin_scene<'py>(py: Python<'py>, name: &str, width: u32, height: u32) -> P
         md.set_item("indices", PyArray1::from_vec(py, idx).reshape([m.indices.len(), 3])?)?;
         md.set_item("material_ids", PyArray1::from_slice(py, &m.material_ids))?;
         md.set_item("pass_index", m.pass_index)?;
+        if !m.transforms.is_empty() {
+            let xf: Vec<f32> = m.transforms.iter().flatten().copied().collect();
+            md.set_item("transforms", PyArray1::from_vec(py, xf).reshape([m.transforms.len(), 12])?)?;
+        }
         if let Some(offset) = m.shadow_terminator_offset {
             md.set_item("shadow_terminator_offset", offset)?;
         }

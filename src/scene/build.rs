@@ -70,6 +70,11 @@ impl Shading {
 
 /// The scene's triangles, one entry per non-degenerate triangle of every mesh in order.
 pub(super) struct Triangles {
+    /// Each mesh's triangles (`from_meshes`' order).
+    pub ranges: Vec<std::ops::Range<usize>>,
+    /// Triangles `0..world` are in world space; the rest are instanced meshes' (prototypes'),
+    /// in their object space, and neither emit nor are sampled as lights.
+    pub world: usize,
     pub positions: Vec<[Vec3; 3]>,
     pub areas: Vec<f32>,
     pub material: Vec<u32>,
@@ -113,12 +118,14 @@ pub const RAY_HOLDOUT: u8 = 4;
 impl Triangles {
     /// `normal_mapped[m]`: material m has a normal map (its meshes get MikkTSpace tangents).
     pub fn from_meshes(
-        meshes: &[MeshDesc],
+        meshes: &[&MeshDesc],
         num_materials: usize,
         normal_mapped: &[bool],
         report: &mut SceneReport,
     ) -> Result<Triangles, SceneError> {
         let mut t = Triangles {
+            ranges: Vec::with_capacity(meshes.len()),
+            world: 0,
             positions: Vec::new(),
             areas: Vec::new(),
             material: Vec::new(),
@@ -145,7 +152,7 @@ impl Triangles {
                 && (m.material_ids.is_empty() && normal_mapped.first() == Some(&true)
                     || m.material_ids.iter().any(|&i| normal_mapped.get(i as usize) == Some(&true)))
         };
-        let tangents = meshes.iter().any(wants_tangents);
+        let tangents = meshes.iter().any(|m| wants_tangents(m));
         let pass_indices = meshes.iter().any(|m| m.pass_index != 0);
         let terminator_offset = |m: &MeshDesc| m.shadow_terminator_offset.unwrap_or(DEFAULT_GEOMETRY_OFFSET);
         let terminators = meshes.iter().any(|m| terminator_offset(m) != DEFAULT_GEOMETRY_OFFSET);
@@ -158,7 +165,9 @@ impl Triangles {
             .map(|m| if tangents && wants_tangents(m) { super::tangent::corner_tangents(m) } else { Vec::new() })
             .collect();
         for (m, mikk) in meshes.iter().zip(mikk) {
+            let first = t.positions.len();
             t.add_mesh(m, num_materials, &mikk, report)?;
+            t.ranges.push(first..t.positions.len());
             if tangents {
                 t.tangents.resize(t.positions.len(), [Vec4::ZERO; 3]);
             }
@@ -196,6 +205,7 @@ impl Triangles {
                 .push(format!("{} degenerate (zero-area) triangles were skipped", report.degenerate_triangles));
         }
         report.triangles = t.positions.len();
+        t.world = t.positions.len();
         Ok(t)
     }
 
@@ -383,7 +393,7 @@ impl Lighting {
                 }
             })
             .collect();
-        for (t, &m) in tris.material.iter().enumerate() {
+        for (t, &m) in tris.material.iter().enumerate().take(tris.world) {
             let mat = &materials[m as usize];
             if mat.emits() {
                 tri_light[t] = lights.len() as u32;

@@ -13,6 +13,7 @@ fn quad(name: &str, p: [[f32; 3]; 4], mat: u32) -> MeshDesc {
     MeshDesc {
         name: name.into(),
         positions: p.to_vec(),
+        transforms: vec![],
         indices: vec![[0, 1, 2], [0, 2, 3]],
         corner_normals: vec![],
         material_ids: vec![mat, mat],
@@ -366,6 +367,7 @@ fn flat_mesh(name: &str, positions: Vec<[f32; 3]>, indices: Vec<[u32; 3]>, mat: 
     MeshDesc {
         name: name.into(),
         positions,
+        transforms: vec![],
         indices,
         corner_normals: vec![],
         material_ids: vec![mat; n],

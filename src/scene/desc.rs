@@ -2,12 +2,18 @@
 //! hand to the core. `Scene::build` (scene/mod.rs) is the one place that turns it into a
 //! renderable scene, validating everything on the way in.
 
-/// One triangle mesh in world space (instances are flattened by the exporter).
+/// One triangle mesh: in world space, or in its object space placed by `transforms`.
 #[derive(Clone, Debug, Default)]
 pub struct MeshDesc {
     pub name: String,
-    /// Vertex positions, xyz.
+    /// Vertex positions, xyz (in object space when the mesh has `transforms`).
     pub positions: Vec<[f32; 3]>,
+    /// Instances: the object-to-world transforms (row-major 3×4) the mesh is placed by, the
+    /// mesh stored once for all of them (`instancing.rs`); empty: the mesh is in world
+    /// space, once. Every instance shares the mesh's other fields (materials, visibility,
+    /// pass index, light linking). An instanced mesh whose materials emit is placed as that
+    /// many world-space copies instead (each copy is a light of its own).
+    pub transforms: Vec<[f32; 12]>,
     /// Triangle vertex indices.
     pub indices: Vec<[u32; 3]>,
     /// Optional per-corner shading normals (3 per triangle, in triangle order); empty = flat.
@@ -485,6 +491,25 @@ pub struct SceneDesc {
     /// Per light of `lights`, the receiver sets it lights (`MeshDesc::light_set`; bit k: set
     /// k); empty, or missing at the end: every set.
     pub light_membership: Vec<u64>,
+}
+
+impl MeshDesc {
+    /// A copy of the mesh's per-object fields (name, materials, visibility, pass index,
+    /// light linking) without its vertex and corner arrays.
+    pub fn clone_without_geometry(&self) -> MeshDesc {
+        MeshDesc {
+            name: self.name.clone(),
+            material_ids: self.material_ids.clone(),
+            pass_index: self.pass_index,
+            camera_invisible: self.camera_invisible,
+            shadow_invisible: self.shadow_invisible,
+            shadow_terminator_offset: self.shadow_terminator_offset,
+            holdout: self.holdout,
+            light_set: self.light_set,
+            light_membership: self.light_membership,
+            ..Default::default()
+        }
+    }
 }
 
 impl LightDesc {

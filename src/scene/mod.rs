@@ -22,9 +22,10 @@ pub use light::{Light, LightSample, LightShape};
 pub use material::Material;
 pub use texture::Texture;
 
-use crate::accel::{Accel, RayPacket, TriHit};
+use crate::accel::{Accel, RayPacket, TriHit, NO_INSTANCE};
 use crate::bsdf::Bsdf;
 use crate::error::SceneError;
+use crate::instancing::{Instance, Instances};
 use crate::math::{ray_epsilon, square_to_triangle, Frame, Spectrum};
 use build::{Lighting, Shading, Triangles, RAY_CAMERA_INVISIBLE, RAY_HOLDOUT, RAY_SHADOW_INVISIBLE};
 use environment::Environment;
@@ -45,6 +46,8 @@ pub struct SurfaceInteraction {
     /// Shading frame (shading normal, also on the ray's side).
     pub frame: Frame,
     pub prim: u32,
+    /// The instance that placed the triangle (`accel::NO_INSTANCE`: stored in world space).
+    pub inst: u32,
     pub material: u32,
     pub t: f32,
     /// The ray arrived on the side the geometric normal points to (outside a closed mesh).
@@ -83,7 +86,10 @@ impl SurfaceInteraction {
 #[derive(Clone, Debug, Default)]
 pub struct SceneReport {
     pub warnings: Vec<String>,
+    /// Triangles stored (an instanced mesh's once).
     pub triangles: usize,
+    /// Instances placing the meshes stored once.
+    pub instances: usize,
     pub degenerate_triangles: usize,
     pub emissive_triangles: usize,
 }
@@ -133,7 +139,12 @@ pub struct Scene {
     /// What the camera sees where its rays leave the scene when it is not the world: a
     /// textured backdrop (`CameraDesc::backdrop_texture`; a constant one is composited).
     pub backdrop: Option<Environment>,
+    /// The BVH of the triangles stored in world space (`0..world_triangles`).
     accel: Option<Accel>,
+    world_triangles: usize,
+    /// The instanced meshes (triangles `world_triangles..`, in object space) and their
+    /// two-level BVH.
+    instances: Option<Instances>,
     /// Some material lets light through (pass-through lobe): shadow rays then cross such
     /// surfaces instead of stopping (decided once; without it shadow rays stay any-hit tests).
     has_transparency: bool,
@@ -164,13 +175,18 @@ impl Scene {
         let shading = Shading::new(desc)?;
         report.warnings.extend(shading.warnings.iter().cloned());
         let normal_mapped: Vec<bool> = shading.materials.iter().map(|m| m.normal_texture.is_some()).collect();
-        let tris = Triangles::from_meshes(&desc.meshes, shading.materials.len(), &normal_mapped, &mut report)?;
+        let (tris, instances) = Self::place_meshes(desc, &shading, &normal_mapped, &mut report)?;
+        let instances = instances.map(|(ranges, placed)| Instances::build(&tris.positions, &ranges, placed));
+        report.instances = instances.as_ref().map_or(0, |i| i.len());
         // Bounds (geometry, lights and camera) for sun power estimates and epsilons.
         let mut lo = Vec3::splat(f32::INFINITY);
         let mut hi = Vec3::splat(f32::NEG_INFINITY);
-        for v in tris.positions.iter().flatten() {
+        for v in tris.positions[..tris.world].iter().flatten() {
             lo = lo.min(*v);
             hi = hi.max(*v);
+        }
+        if let Some(i) = &instances {
+            (lo, hi) = (lo.min(i.bounds.0), hi.max(i.bounds.1));
         }
         lo = lo.min(camera.position());
         hi = hi.max(camera.position());
@@ -179,7 +195,8 @@ impl Scene {
         let lighting = Lighting::new(desc, &shading, &tris, bounds_center)?;
         report.emissive_triangles = lighting.emissive_triangles;
         report.warnings.extend(lighting.warning.clone());
-        let accel = if tris.positions.is_empty() { None } else { Some(Accel::build(&tris.positions)) };
+        let accel = if tris.world == 0 { None } else { Some(Accel::build(&tris.positions[..tris.world])) };
+        let tris_world = tris.world;
         let mut scene = Scene {
             geo_normals: tris.positions.iter().map(|v| (v[1] - v[0]).cross(v[2] - v[0]).normalize()).collect(),
             areas: tris.areas,
@@ -212,6 +229,8 @@ impl Scene {
             env: lighting.env,
             backdrop: lighting.backdrop,
             accel,
+            world_triangles: tris_world,
+            instances,
             bounds_center,
             bounds_radius,
             report,
@@ -223,6 +242,68 @@ impl Scene {
         Ok(scene)
     }
 
+    /// The scene's triangles, with the instanced meshes' last (`Triangles::world` on), and
+    /// the instances that place them: (each prototype's triangles, the instances). A mesh
+    /// with `transforms` is stored once when it has two or more and does not emit; with one,
+    /// or emitting (each copy a light of its own), it is placed as world-space copies.
+    /// Instances with a singular transform are skipped (they have no surface), with a warning.
+    #[allow(clippy::type_complexity)]
+    fn place_meshes(
+        desc: &SceneDesc,
+        shading: &Shading,
+        normal_mapped: &[bool],
+        report: &mut SceneReport,
+    ) -> Result<(Triangles, Option<(Vec<std::ops::Range<usize>>, Vec<Instance>)>), SceneError> {
+        let mats = &shading.materials;
+        let emits = |m: &MeshDesc| {
+            if m.material_ids.is_empty() {
+                mats.first().is_some_and(|x| x.emits())
+            } else {
+                m.material_ids.iter().any(|&i| mats.get(i as usize).is_some_and(|x| x.emits()))
+            }
+        };
+        let (mut copies, mut protos, mut placed, mut singular) = (Vec::new(), Vec::new(), Vec::new(), 0);
+        for m in desc.meshes.iter().filter(|m| !m.transforms.is_empty()) {
+            if m.transforms.iter().flatten().any(|x| !x.is_finite()) {
+                return Err(SceneError::Mesh {
+                    mesh: m.name.clone(),
+                    what: "has a NaN or Inf instance transform".into(),
+                });
+            }
+            if m.transforms.len() == 1 || emits(m) {
+                let before = copies.len();
+                copies.extend(m.transforms.iter().filter_map(|xf| crate::instancing::flattened(m, xf)));
+                singular += m.transforms.len() - (copies.len() - before);
+            } else {
+                let k = protos.len() as u32;
+                let before = placed.len();
+                placed.extend(m.transforms.iter().filter_map(|xf| Instance::new(xf, k)));
+                singular += m.transforms.len() - (placed.len() - before);
+                if placed.len() > before {
+                    protos.push(m);
+                }
+            }
+        }
+        if singular > 0 {
+            report.warnings.push(format!(
+                "{singular} instance(s) with a singular (zero-scale) transform were skipped: they have no surface"
+            ));
+        }
+        let mut order: Vec<&MeshDesc> = desc.meshes.iter().filter(|m| m.transforms.is_empty()).collect();
+        order.extend(copies.iter());
+        let world_meshes = order.len();
+        order.extend(protos.iter().copied());
+        let mut tris = Triangles::from_meshes(&order, shading.materials.len(), normal_mapped, report)?;
+        tris.world = tris.ranges.get(world_meshes).map_or(tris.positions.len(), |r| r.start);
+        if placed.is_empty() {
+            return Ok((tris, None));
+        }
+        // (a prototype whose triangles are all degenerate places nothing)
+        let ranges: Vec<_> = tris.ranges[world_meshes..].to_vec();
+        placed.retain(|i| !ranges[i.proto as usize].is_empty());
+        Ok((tris, (!placed.is_empty()).then_some((ranges, placed))))
+    }
+
     /// Replaces the materials, textures, lights and world of a built scene with those of
     /// `desc`, keeping its triangles, BVH and camera: for edits that do not move geometry
     /// (the viewport's material, light and world changes). `desc`'s meshes must be the
@@ -231,6 +312,8 @@ impl Scene {
     pub fn update_shading(&mut self, desc: &SceneDesc) -> Result<(), SceneError> {
         let shading = Shading::new(desc)?;
         let tris = Triangles {
+            ranges: Vec::new(),
+            world: self.world_triangles,
             positions: std::mem::take(&mut self.positions),
             areas: std::mem::take(&mut self.areas),
             material: std::mem::take(&mut self.tri_material),
@@ -251,6 +334,13 @@ impl Scene {
                 mesh: "(viewport update)".into(),
                 what: format!("uses material {m} but there are {}", shading.materials.len()),
             }),
+            // (an instanced mesh is placed as copies where it emits: `place_meshes`)
+            _ if tris.material[tris.world..].iter().any(|&m| shading.materials[m as usize].emits()) => {
+                Err(SceneError::Mesh {
+                    mesh: "(viewport update)".into(),
+                    what: "an instanced mesh's material emits now: the scene needs building again".into(),
+                })
+            }
             _ => Lighting::new(desc, &shading, &tris, self.bounds_center),
         };
         (self.positions, self.areas, self.tri_material) = (tris.positions, tris.areas, tris.material);
@@ -317,13 +407,26 @@ impl Scene {
     /// Closest surface hit along the ray in (tmin, tmax).
     #[inline]
     pub fn intersect(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> Option<TriHit> {
-        self.accel.as_ref()?.closest(o, d, tmin, tmax)
+        let hit = self.accel.as_ref().and_then(|a| a.closest(o, d, tmin, tmax));
+        match &self.instances {
+            None => hit,
+            Some(i) => i.closest(o, d, tmin, hit.map_or(tmax, |h| h.t)).or(hit),
+        }
     }
 
     /// The closest surface hit of each ray of a packet (coherent rays: see `RayPacket`).
     #[inline]
     pub fn intersect_packet(&self, rays: &RayPacket) -> [Option<TriHit>; 8] {
-        self.accel.as_ref().map_or([None; 8], |a| a.closest_packet(rays))
+        let mut hits = self.accel.as_ref().map_or([None; 8], |a| a.closest_packet(rays));
+        if let Some(inst) = &self.instances {
+            for (k, h) in hits.iter_mut().enumerate().take(rays.count.min(8)) {
+                let tmax = h.map_or(rays.tmax[k], |h| h.t);
+                if let Some(nearer) = inst.closest(rays.o[k], rays.d[k], rays.tmin[k], tmax) {
+                    *h = Some(nearer);
+                }
+            }
+        }
+        hits
     }
 
     /// The first hits of up to eight camera rays (of neighbouring samples), traced together
@@ -373,6 +476,7 @@ impl Scene {
     #[inline]
     pub fn occluded(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> bool {
         self.accel.as_ref().is_some_and(|a| a.occluded(o, d, tmin, tmax))
+            || self.instances.as_ref().is_some_and(|i| i.occluded(o, d, tmin, tmax))
     }
 
     /// The shadow ray from a surface point towards `target` (a point, or for lights at
@@ -415,7 +519,9 @@ impl Scene {
     /// grazing angle. (Flat triangles return before any arithmetic: most shadow rays.)
     fn terminator_lift(&self, si: &SurfaceInteraction, dir: Vec3) -> Vec3 {
         let t = si.prim as usize;
-        let Some(n) = &self.normals[t] else { return Vec3::ZERO };
+        if self.normals[t].is_none() {
+            return Vec3::ZERO;
+        }
         let l = dir.normalize_or_zero();
         let cutoff = self.tri_terminator.get(t).copied().unwrap_or(terminator::DEFAULT_GEOMETRY_OFFSET);
         // (Cycles' sd->N: the interpolated normal before normal and bump maps)
@@ -424,7 +530,9 @@ impl Scene {
             return Vec3::ZERO;
         }
         let b = [1.0 - si.bary.x - si.bary.y, si.bary.x, si.bary.y];
-        terminator::smooth_surface_lift(&self.positions[t], n, b, ng) * amount
+        let (v, n, _) = self.world_triangle(t, self.placed(si.inst));
+        let Some(n) = n else { return Vec3::ZERO };
+        terminator::smooth_surface_lift(&v, &n, b, ng) * amount
     }
 
     /// Nothing blocks the shadow segment from a surface point to `target` (a point, or at
@@ -553,12 +661,12 @@ impl Scene {
     /// Surface data at a hit, with normals facing the incoming ray direction `d`.
     pub fn interaction(&self, hit: &TriHit, d: Vec3) -> SurfaceInteraction {
         let t = hit.prim as usize;
-        let v = &self.positions[t];
+        let inst = self.placed(hit.inst);
+        let (v, normals, mut ng) = self.world_triangle(t, inst);
         let (b1, b2) = (hit.b1, hit.b2);
         let b0 = 1.0 - b1 - b2;
         let p = v[0] * b0 + v[1] * b1 + v[2] * b2;
-        let mut ng = self.geo_normals[t];
-        let mut ns = match &self.normals[t] {
+        let mut ns = match &normals {
             Some(n) => (n[0] * b0 + n[1] * b1 + n[2] * b2).normalize_or(ng),
             None => ng,
         };
@@ -566,7 +674,7 @@ impl Scene {
         let color = self.colors.get(t).map_or(Spectrum::ZERO, |c| c[0] * b0 + c[1] * b1 + c[2] * b2);
         let mut unmapped = ns;
         if self.has_perturbed_normals {
-            ns = self.normal_mapped(t, ns, tex, [b0, b1, b2]);
+            ns = self.normal_mapped(t, inst, ns, tex, [b0, b1, b2]);
         }
         let front = ng.dot(d) <= 0.0;
         if !front {
@@ -585,6 +693,7 @@ impl Scene {
             ng,
             frame,
             prim: hit.prim,
+            inst: hit.inst,
             material: self.tri_material[t],
             t: hit.t,
             front,
@@ -594,6 +703,30 @@ impl Scene {
             wo: frame.to_local(-d),
             camera: false,
             bary: Vec2::new(b1, b2),
+        }
+    }
+
+    /// The instance `inst` names (None: `NO_INSTANCE`, a triangle in world space).
+    #[inline]
+    fn placed(&self, inst: u32) -> Option<&Instance> {
+        if inst == NO_INSTANCE {
+            return None;
+        }
+        self.instances.as_ref().map(|i| i.get(inst))
+    }
+
+    /// Triangle `t`'s vertices, corner normals (unit) and geometric normal (unit, on its
+    /// outside) in world space, placed by instance `inst` where it is instanced.
+    #[inline]
+    fn world_triangle(&self, t: usize, inst: Option<&Instance>) -> ([Vec3; 3], Option<[Vec3; 3]>, Vec3) {
+        let (v, n, ng) = (self.positions[t], self.normals[t], self.geo_normals[t]);
+        match inst {
+            None => (v, n, ng),
+            Some(x) => (
+                v.map(|p| x.point(p)),
+                n.map(|n| n.map(|n| x.normal(n).normalize_or(n))),
+                x.normal(ng).normalize_or(ng),
+            ),
         }
     }
 
@@ -682,9 +815,9 @@ impl Scene {
     /// R_u = ∂p/∂v × N, R_v = N × ∂p/∂u, det = ∂p/∂u · R_u (the basis dual to the tangents,
     /// so that ∇h·∂p/∂u = h_u), then N' = normalize(N − distance·∇h), mixed with N by the
     /// strength.
-    fn normal_mapped(&self, t: usize, ns: Vec3, tc: TexCoord, b: [f32; 3]) -> Vec3 {
+    fn normal_mapped(&self, t: usize, inst: Option<&Instance>, ns: Vec3, tc: TexCoord, b: [f32; 3]) -> Vec3 {
         let m = &self.materials[self.tri_material[t] as usize];
-        let p = &self.positions[t];
+        let (p, normals, geo_normal) = self.world_triangle(t, inst);
         let (e1, e2) = (p[1] - p[0], p[2] - p[0]);
         // the UV mapping's tangents ∂p/∂u, ∂p/∂v (none without UVs or with degenerate ones)
         let uv_tangents = self.uvs[t].and_then(|uvs| {
@@ -694,12 +827,17 @@ impl Scene {
         });
         let mut n = ns;
         if let (Some(tex), Some((dpdu, dpdv))) = (m.normal_texture, uv_tangents) {
-            let mikk = self.tangents.get(t).map_or(Vec4::ZERO, |c| c[0] * b[0] + c[1] * b[1] + c[2] * b[2]);
+            let mut mikk = self.tangents.get(t).map_or(Vec4::ZERO, |c| c[0] * b[0] + c[1] * b[1] + c[2] * b[2]);
+            if let Some(x) = inst.filter(|_| mikk.truncate() != Vec3::ZERO) {
+                // (a mirroring placement flips the frame's handedness)
+                let sign = if x.mirrors() { -mikk.w } else { mikk.w };
+                mikk = x.vector(mikk.truncate()).normalize_or_zero().extend(sign);
+            }
             let (tangent, sign, normal) = if mikk.truncate() != Vec3::ZERO {
-                let normal = match &self.normals[t] {
+                let normal = match &normals {
                     Some(c) if m.normal_map_unnormalized_base => c[0] * b[0] + c[1] * b[1] + c[2] * b[2],
-                    Some(c) => (c[0] * b[0] + c[1] * b[1] + c[2] * b[2]).normalize_or(self.geo_normals[t]),
-                    None => self.geo_normals[t],
+                    Some(c) => (c[0] * b[0] + c[1] * b[1] + c[2] * b[2]).normalize_or(geo_normal),
+                    None => geo_normal,
                 };
                 (mikk.truncate(), mikk.w, normal)
             } else {

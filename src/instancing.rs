@@ -1,0 +1,236 @@
+//! Instancing: a mesh stored once, in its object space, and placed any number of times by
+//! affine transforms — the two-level acceleration structure of Embree, Cycles and pbrt-v4.
+//!
+//! The top level is obvhs' compressed wide BVH over the instances' world-space bounds; each
+//! of its leaves names an instance, whose prototype has its own bottom-level `Accel` over the
+//! prototype's triangles. A ray reaching a leaf is carried into the prototype's object space
+//! (o' = M⁻¹o, d' = M⁻¹d, not renormalised, so that distances t stay those of the world-space
+//! ray) and traced there; the closest hit so far bounds the rest of the traversal.
+//!
+//! Everything that reads a hit (`Scene::interaction`) takes the triangle's vertices, normals
+//! and tangents back to world space with the instance's transform (`Instance::point`,
+//! `Instance::normal`, `Instance::vector`), so that an instanced scene renders as its
+//! flattened copy.
+
+use crate::accel::{Accel, TriHit};
+use crate::scene::MeshDesc;
+use glam::{Affine3A, UVec2, Vec3, Vec3A};
+use obvhs::aabb::Aabb;
+use obvhs::cwbvh::builder::build_cwbvh;
+use obvhs::cwbvh::CwBvh;
+use obvhs::ray::Ray;
+use obvhs::BvhBuildParams;
+use std::ops::Range;
+use std::time::Duration;
+
+/// One placement of a prototype.
+#[derive(Clone, Copy, Debug)]
+pub struct Instance {
+    /// Object to world.
+    pub to_world: Affine3A,
+    /// World to object (its inverse).
+    pub to_object: Affine3A,
+    /// The prototype placed.
+    pub proto: u32,
+}
+
+impl Instance {
+    /// The instance of a row-major 3×4 object-to-world matrix; None where the matrix is
+    /// singular (a zero scale: the instance has no surface to hit) or not finite.
+    pub fn new(m: &[f32; 12], proto: u32) -> Option<Instance> {
+        let to_world =
+            Affine3A::from_cols_array(&[m[0], m[4], m[8], m[1], m[5], m[9], m[2], m[6], m[10], m[3], m[7], m[11]]);
+        let det = to_world.matrix3.determinant();
+        if !(det.abs() > 1e-30) || !to_world.is_finite() {
+            return None;
+        }
+        let to_object = to_world.inverse();
+        to_object.is_finite().then_some(Instance { to_world, to_object, proto })
+    }
+
+    /// A point of the prototype in world space.
+    #[inline]
+    pub fn point(&self, p: Vec3) -> Vec3 {
+        self.to_world.transform_point3(p)
+    }
+
+    /// A direction (tangent) of the prototype in world space.
+    #[inline]
+    pub fn vector(&self, v: Vec3) -> Vec3 {
+        self.to_world.transform_vector3(v)
+    }
+
+    /// A normal of the prototype in world space (by the inverse transpose: on the side the
+    /// prototype's normal is, also for a mirroring transform), not normalised.
+    #[inline]
+    pub fn normal(&self, n: Vec3) -> Vec3 {
+        Vec3::from(self.to_object.matrix3.transpose() * Vec3A::from(n))
+    }
+
+    /// The transform mirrors (negative determinant): the handedness of tangent frames flips.
+    #[inline]
+    pub fn mirrors(&self) -> bool {
+        self.to_world.matrix3.determinant() < 0.0
+    }
+
+    /// World-space bounds of the object-space box [lo, hi] (its eight corners placed).
+    fn bounds(&self, lo: Vec3, hi: Vec3) -> Aabb {
+        let mut b = Aabb::INVALID;
+        for k in 0..8 {
+            let c = Vec3::new(
+                if k & 1 == 0 { lo.x } else { hi.x },
+                if k & 2 == 0 { lo.y } else { hi.y },
+                if k & 4 == 0 { lo.z } else { hi.z },
+            );
+            b.extend(self.point(c).into());
+        }
+        b
+    }
+}
+
+/// A mesh stored once: its bottom-level BVH and the scene index of its first triangle (its
+/// triangles are the scene's `first..first + n`, in object space).
+struct Prototype {
+    accel: Option<Accel>,
+    first: u32,
+}
+
+/// The instances of a scene and their two-level BVH.
+pub struct Instances {
+    protos: Vec<Prototype>,
+    instances: Vec<Instance>,
+    /// The top level over the instances' world bounds; its primitive indices name instances.
+    tlas: CwBvh,
+    /// World bounds of all instances.
+    pub bounds: (Vec3, Vec3),
+}
+
+impl Instances {
+    /// Builds the bottom level of each prototype (`protos[k]`: the range of the scene's
+    /// triangles `tris` that is prototype k) and the top level over `instances` (none of
+    /// which places an empty prototype).
+    pub fn build(tris: &[[Vec3; 3]], protos: &[Range<usize>], instances: Vec<Instance>) -> Instances {
+        let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+        let mut proto_bounds = Vec::with_capacity(protos.len());
+        let protos: Vec<Prototype> = protos
+            .iter()
+            .map(|r| {
+                let (mut a, mut b) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+                for v in tris[r.clone()].iter().flatten() {
+                    (a, b) = (a.min(*v), b.max(*v));
+                }
+                proto_bounds.push((a, b));
+                Prototype { accel: (!r.is_empty()).then(|| Accel::build(&tris[r.clone()])), first: r.start as u32 }
+            })
+            .collect();
+        let boxes: Vec<Aabb> = instances
+            .iter()
+            .map(|i| {
+                let (a, b) = proto_bounds[i.proto as usize];
+                let bx = i.bounds(a, b);
+                (lo, hi) = (lo.min(bx.min.into()), hi.max(bx.max.into()));
+                bx
+            })
+            .collect();
+        let tlas = build_cwbvh(&boxes, BvhBuildParams::medium_build(), &mut Duration::default());
+        Instances { protos, instances, tlas, bounds: (lo, hi) }
+    }
+
+    /// Instance `i`.
+    #[inline]
+    pub fn get(&self, i: u32) -> &Instance {
+        &self.instances[i as usize]
+    }
+
+    pub fn len(&self) -> usize {
+        self.instances.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.instances.is_empty()
+    }
+
+    /// Bytes held by the instances and both levels of the BVH.
+    pub fn bytes(&self) -> usize {
+        self.instances.len() * std::mem::size_of::<Instance>()
+            + self.tlas.nodes.len() * std::mem::size_of::<obvhs::cwbvh::node::CwBvhNode>()
+            + self.tlas.primitive_indices.len() * 4
+            + self.protos.iter().filter_map(|p| p.accel.as_ref()).map(Accel::bytes).sum::<usize>()
+    }
+
+    /// The closest hit of an instanced triangle along the ray in (tmin, tmax): its scene
+    /// triangle index, and the instance in `TriHit::inst`.
+    #[inline]
+    pub fn closest(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> Option<TriHit> {
+        let d = d + Vec3::ZERO; // (negative zeros made positive, as `Accel` does)
+        let mut ray = Ray::new(o.into(), d.into(), tmin, tmax);
+        let mut best = None;
+        let mut state = self.tlas.new_traversal(ray.direction);
+        let mut node;
+        obvhs::traverse!(self.tlas, node, state, node.intersect_ray(&ray, state.oct_inv4), {
+            let i = self.tlas.primitive_indices[state.primitive_id as usize];
+            let inst = &self.instances[i as usize];
+            let proto = &self.protos[inst.proto as usize];
+            let (lo, ld) = (inst.to_object.transform_point3(o), inst.to_object.transform_vector3(d));
+            if let Some(h) = proto.accel.as_ref().and_then(|a| a.closest(lo, ld, tmin, ray.tmax)) {
+                ray.tmax = h.t;
+                best = Some(TriHit { prim: h.prim + proto.first, inst: i, ..h });
+            }
+        });
+        best
+    }
+
+    /// Whether any instanced triangle lies along the ray in (tmin, tmax).
+    #[inline]
+    pub fn occluded(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> bool {
+        let d = d + Vec3::ZERO;
+        let ray = Ray::new(o.into(), d.into(), tmin, tmax);
+        let mut state = self.tlas.new_traversal(ray.direction);
+        let mut node;
+        'traversal: {
+            obvhs::traverse!(self.tlas, node, state, node.intersect_ray(&ray, state.oct_inv4), {
+                let inst = &self.instances[self.tlas.primitive_indices[state.primitive_id as usize] as usize];
+                let proto = &self.protos[inst.proto as usize];
+                let (lo, ld) = (inst.to_object.transform_point3(o), inst.to_object.transform_vector3(d));
+                if proto.accel.as_ref().is_some_and(|a| a.occluded(lo, ld, tmin, tmax)) {
+                    break 'traversal true;
+                }
+            });
+            false
+        }
+    }
+}
+
+/// Mesh `m` placed in world space by the row-major 3×4 matrix `xf`, as one mesh of its own
+/// (no `transforms`): positions by the matrix, normals by its inverse transpose, and, for a
+/// mirroring matrix, each triangle's corners reversed, so that its winding still gives the
+/// outside (what an exporter flattening the instance does, and how Cycles treats negatively
+/// scaled objects). None where the matrix is singular or not finite.
+pub fn flattened(m: &MeshDesc, xf: &[f32; 12]) -> Option<MeshDesc> {
+    let inst = Instance::new(xf, 0)?;
+    let mirror = inst.mirrors();
+    let corners = |c: &[[f32; 3]], f: &dyn Fn(Vec3) -> Vec3| -> Vec<[f32; 3]> {
+        let mut out: Vec<[f32; 3]> = c.iter().map(|v| f(Vec3::from_array(*v)).to_array()).collect();
+        if mirror {
+            out.chunks_exact_mut(3).for_each(|t| t.reverse());
+        }
+        out
+    };
+    let mut uvs = m.corner_uvs.clone();
+    if mirror {
+        uvs.chunks_exact_mut(3).for_each(|t| t.reverse());
+    }
+    let same = |v: Vec3| v;
+    Some(MeshDesc {
+        name: m.name.clone(),
+        positions: m.positions.iter().map(|p| inst.point(Vec3::from_array(*p)).to_array()).collect(),
+        transforms: Vec::new(),
+        indices: if mirror { m.indices.iter().map(|&[a, b, c]| [c, b, a]).collect() } else { m.indices.clone() },
+        corner_normals: corners(&m.corner_normals, &|n| inst.normal(n)),
+        corner_uvs: uvs,
+        corner_colors: corners(&m.corner_colors, &same),
+        corner_generated: corners(&m.corner_generated, &same),
+        corner_object: corners(&m.corner_object, &same),
+        ..m.clone_without_geometry()
+    })
+}
