@@ -1,10 +1,11 @@
 """Evaluated depsgraph → scene arrays (the dict layout that gdmlt.Scene takes).
 
-Geometry is read with foreach_get into numpy (no per-vertex Python objects); instances from
-`depsgraph.object_instances` are flattened into world space, with the triangulated mesh of
-each instanced object read once and reused for its instances (memory grows with the number
-of instanced triangles). Lights follow Cycles' conventions; the conversion to radiance
-happens in the core. Everything unsupported is reported as a warning with a fallback.
+Geometry is read with foreach_get into numpy (no per-vertex Python objects). An object is
+exported in world space; instances from `depsgraph.object_instances` (Geometry Nodes,
+particle and collection instances) are exported as one mesh in object space with the
+transforms of its instances, which the core stores once (src/instancing.rs). Lights follow
+Cycles' conventions; the conversion to radiance happens in the core. Everything unsupported
+is reported as a warning with a fallback.
 """
 
 import hashlib
@@ -1725,6 +1726,8 @@ def export_scene(depsgraph, test_break=lambda: False, need_camera=True):
     meshes, lights = [], []
     sources = {"meshes": [], "lights": []}  # the object each came from (light linking)
     cache = {}
+    groups = {}  # an instanced mesh's arrays and object settings → its instances' transforms
+    instanced = []  # (mesh dict, its group)
     variants = {}  # material name → (the Object Info outputs it reads, its variants) or None
     for k, inst in enumerate(depsgraph.object_instances):
         if k % 64 == 0 and test_break():
@@ -1779,37 +1782,55 @@ def export_scene(depsgraph, test_break=lambda: False, need_camera=True):
         table = np.array(slot_to_global or [0], dtype=np.uint32)
         mat_ids = table[np.clip(mat_local, 0, len(table) - 1)]
         m = _matrix(inst.matrix_world)
-        pos = (co.astype(np.float64) @ m[:3, :3].T + m[:3, 3]).astype(np.float32)
-        det = np.linalg.det(m[:3, :3])
-        nmat = np.linalg.inv(m[:3, :3]).T if abs(det) > 1e-30 else m[:3, :3]
-        nrm = None if normals is None else (normals.astype(np.float64) @ nmat.T).astype(np.float32)
-        if det < 0:
-            # a mirroring transform winds the faces inside out; the core takes the outside
-            # (how glass refracts) from the winding, so wind them back, as Cycles negates
-            # the geometric normal of negatively scaled objects
-            tris = tris[:, ::-1]
-            nrm = None if nrm is None else nrm.reshape(-1, 3, 3)[:, ::-1].reshape(-1, 3)
-            uvs = None if uvs is None else uvs.reshape(-1, 3, 2)[:, ::-1].reshape(-1, 2)
-            colours = None if colours is None else colours.reshape(-1, 3, 3)[:, ::-1].reshape(-1, 3)
-            points = {k: p.reshape(-1, 3, 3)[:, ::-1].reshape(-1, 3) for k, p in points.items()}
-        name = ob.name if not inst.is_instance else f"{inst.parent.name if inst.parent else ''}/{ob.name}"
+        visibility = tuple(key for key in ("visible_camera", "visible_shadow")  # (Object › Visibility › Ray Visibility)
+                           if not getattr(ob, key, True))
+        holdout = _holdout(ob, inst, depsgraph)
+        # Object › Shading › Shadow Terminator (src/scene/terminator.rs)
+        offset = float(getattr(ob, "shadow_terminator_geometry_offset", 0.1))
+        if getattr(ob, "shadow_terminator_shading_offset", 0.0) > 0.0:
+            warnings.append(f"object '{ob.name}': Shadow Terminator › Shading Offset is not rendered (0 is used)")
+        if inst.is_instance:
+            # an instance: its mesh is stored once, in object space, with the transforms of
+            # every instance that shares its materials and object settings (the core places
+            # them; src/instancing.rs)
+            group = (key, tuple(slot_to_global), visibility, holdout, ob.pass_index, offset)
+            if group in groups:
+                groups[group].append(m[:3, :].reshape(12))
+                continue
+            groups[group] = [m[:3, :].reshape(12)]
+            pos, nrm = co, normals
+            name = f"{inst.parent.name if inst.parent else ''}/{ob.name}"
+        else:
+            pos = (co.astype(np.float64) @ m[:3, :3].T + m[:3, 3]).astype(np.float32)
+            det = np.linalg.det(m[:3, :3])
+            nmat = np.linalg.inv(m[:3, :3]).T if abs(det) > 1e-30 else m[:3, :3]
+            nrm = None if normals is None else (normals.astype(np.float64) @ nmat.T).astype(np.float32)
+            if det < 0:
+                # a mirroring transform winds the faces inside out; the core takes the outside
+                # (how glass refracts) from the winding, so wind them back, as Cycles negates
+                # the geometric normal of negatively scaled objects
+                tris = tris[:, ::-1]
+                nrm = None if nrm is None else nrm.reshape(-1, 3, 3)[:, ::-1].reshape(-1, 3)
+                uvs = None if uvs is None else uvs.reshape(-1, 3, 2)[:, ::-1].reshape(-1, 2)
+                colours = None if colours is None else colours.reshape(-1, 3, 3)[:, ::-1].reshape(-1, 3)
+                points = {k: p.reshape(-1, 3, 3)[:, ::-1].reshape(-1, 3) for k, p in points.items()}
+            name = ob.name
         sources["meshes"].append(ob)
         meshes.append(scenedict.mesh(name, np.ascontiguousarray(pos), np.ascontiguousarray(tris, dtype=np.uint32),
                                      None if nrm is None else np.ascontiguousarray(nrm), mat_ids, uvs, ob.pass_index,
                                      None if colours is None else np.ascontiguousarray(colours)))
+        if inst.is_instance:
+            instanced.append((meshes[-1], group))
         for space, p in points.items():
             meshes[-1][space.lower()] = np.ascontiguousarray(p)
-        for key in ("visible_camera", "visible_shadow"):  # (Object › Visibility › Ray Visibility)
-            if not getattr(ob, key, True):
-                meshes[-1][key] = False
-        if _holdout(ob, inst, depsgraph):
+        for flag in visibility:
+            meshes[-1][flag] = False
+        if holdout:
             meshes[-1]["holdout"] = True
-        # Object › Shading › Shadow Terminator (src/scene/terminator.rs)
-        offset = float(getattr(ob, "shadow_terminator_geometry_offset", 0.1))
         if abs(offset - 0.1) > 1e-6:
             meshes[-1]["shadow_terminator_offset"] = min(max(offset, 0.0), 1.0)
-        if getattr(ob, "shadow_terminator_shading_offset", 0.0) > 0.0:
-            warnings.append(f"object '{ob.name}': Shadow Terminator › Shading Offset is not rendered (0 is used)")
+    for mesh, group in instanced:
+        mesh["transforms"] = np.ascontiguousarray(groups[group], dtype=np.float32)
     world, world_texture, world_rotation, backdrop = _world(scene, warnings, textures)
     if scene.render.use_motion_blur:
         warnings.append("motion blur is not rendered yet: the frame is rendered at its shutter's start")

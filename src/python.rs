@@ -861,9 +861,15 @@ impl Scene {
     fn warnings(&self) -> Vec<String> {
         self.inner.report.warnings.clone()
     }
+    /// Triangles stored (an instanced mesh's once).
     #[getter]
     fn triangles(&self) -> usize {
         self.inner.num_triangles()
+    }
+    /// Instances placing the meshes stored once.
+    #[getter]
+    fn instances(&self) -> usize {
+        self.inner.report.instances
     }
     #[getter]
     fn size(&self) -> (u32, u32) {
