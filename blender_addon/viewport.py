@@ -140,7 +140,12 @@ class ViewportSession:
             self.core = gdmlt.Scene(dict(self.desc, camera=camera))
         else:
             if self._pending == "shading":
-                self.core.update_shading(dict(self.desc, meshes=[], camera=camera))
+                try:
+                    self.core.update_shading(dict(self.desc, meshes=[], camera=camera))
+                except ValueError:
+                    # an edit the triangles cannot take as they are (an instanced mesh's
+                    # material emits now: the core places it as copies): build again
+                    self.core = gdmlt.Scene(dict(self.desc, camera=camera))
             if self._core_camera is not camera:
                 self.core.set_camera(camera)
         self._pending, self._core_camera = "none", camera

@@ -168,6 +168,35 @@ def test_each_edit_rebuilds_only_what_it_changed(bpy_mod):
     assert session.update(export_now()) == "geometry"
 
 
+def test_a_material_edit_that_makes_an_instanced_mesh_emit_rebuilds_the_scene(bpy_mod):
+    """An instanced mesh whose material starts to emit cannot be swapped in as shading (the
+    core places an emitting mesh as copies, each a light): the session builds the scene
+    again and renders what a fresh session renders. Before, the update raised."""
+    from gdmlt_blender import viewport
+
+    desc = gdmlt.builtin_scene("cornell", 24, 24)
+    camera = desc.pop("camera")
+    block = next(m for m in desc["meshes"] if m["material_ids"][0] == 0 and len(m["indices"]) > 2)
+    block["transforms"] = np.array([[1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0],
+                                    [0.5, 0, 0, 0.3, 0, 0.5, 0, 0.2, 0, 0, 0.5, 0.4]], np.float32)
+    block["material_ids"] = np.full(len(block["indices"]), len(desc["materials"]), np.uint32)
+    desc["materials"].append(dict(desc["materials"][0], name="Glow"))
+    settings = {"max_bounces": 4, "threads": 1}
+    session = viewport.ViewportSession()
+    session.update(desc)
+    session.look_through(camera)
+    session._coarse = []
+    session.step(settings)
+    edited = dict(desc, materials=[*desc["materials"][:-1], dict(desc["materials"][-1], emission=[2.0, 1.0, 0.5])])
+    assert session.update(edited) == "shading"
+    updated = session.step(settings)
+    fresh = viewport.ViewportSession()
+    fresh.update(edited)
+    fresh.look_through(camera)
+    fresh._coarse = []
+    np.testing.assert_array_equal(updated, fresh.step(settings))
+
+
 def test_passes_average_progressively_up_to_the_viewport_samples(bpy_mod):
     """After a change: coarse passes first (at most 64, then 256 pixels across), then
     one-sample passes at the region's size whose running mean is exactly the mean of those
