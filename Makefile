@@ -14,7 +14,7 @@ export PATH := $(abspath $(VENV))/bin:$(PATH)
 # Keep Blender's user config out of $HOME during demos and tests.
 export BLENDER_USER_RESOURCES := $(abspath out/blender-user)
 
-.PHONY: all setup build demo test lint test-rust test-rust-v3 test-python test-blender-versions examples addon bench bench-monastery bench-peers bench-lights bench-hard bench-denoise scalebench skipbench raybench clean
+.PHONY: all setup build demo test lint test-rust test-rust-v3 test-python test-blender-versions examples addon bench bench-monastery bench-peers bench-lights bench-hard bench-denoise bench-scale scalebench skipbench raybench clean
 
 all: demo
 
@@ -168,6 +168,11 @@ bench-denoise: build
 # Time per mutation / per path as the scene grows from 10k to 10M triangles and threads 1 → all.
 scalebench: build
 	$(BENCH) scalebench
+
+# Scatters of 10^3..10^6 instances (and one realized into a 5M-triangle mesh) against Cycles:
+# F12 wall time and peak memory, each render in its own process.
+bench-scale: build
+	$(BENCH) instancebench
 
 # What skipping what a scene does not need saves: samples/s with and without the shortcuts.
 skipbench: build

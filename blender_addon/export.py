@@ -1727,6 +1727,7 @@ def export_scene(depsgraph, test_break=lambda: False, need_camera=True):
     sources = {"meshes": [], "lights": []}  # the object each came from (light linking)
     cache = {}
     groups = {}  # an instanced mesh's arrays and object settings → its instances' transforms
+    same_group = {}  # (object, mesh, instancer) names → its group, where no material reads the instance
     instanced = []  # (mesh dict, its group)
     variants = {}  # material name → (the Object Info outputs it reads, its variants) or None
     for k, inst in enumerate(depsgraph.object_instances):
@@ -1747,14 +1748,24 @@ def export_scene(depsgraph, test_break=lambda: False, need_camera=True):
         if ob.type in NOT_RENDERED:
             warnings.append(f"object '{ob.name}': {NOT_RENDERED[ob.type]} are not rendered yet; it is left out")
             continue
+        if inst.is_instance:
+            # another instance of an object whose materials read nothing of the instance
+            # (no Object Info): only its transform is new
+            fast = (ob.name, ob.data.name if ob.data is not None else "", inst.parent.name if inst.parent else "")
+            group = same_group.get(fast)
+            if group is not None:
+                groups[group].append(np.array(inst.matrix_world, dtype=np.float32)[:3].reshape(12))
+                continue
         _visibility_warnings(ob, "object", warnings)
         slot_to_global = []
+        per_instance = False  # a material reads Object Info
         for slot in ob.material_slots:
             mat = slot.material
             if mat is None:
                 slot_to_global.append(0)
                 continue
             info = _object_info(inst, ob, mat, variants, warnings)
+            per_instance |= info is not None
             key = mat.name if info is None else (mat.name, info)
             if key not in mat_index:
                 mat_index[key] = len(materials)
@@ -1794,6 +1805,8 @@ def export_scene(depsgraph, test_break=lambda: False, need_camera=True):
             # every instance that shares its materials and object settings (the core places
             # them; src/instancing.rs)
             group = (key, tuple(slot_to_global), visibility, holdout, ob.pass_index, offset)
+            if not per_instance:
+                same_group[fast] = group
             if group in groups:
                 groups[group].append(m[:3, :].reshape(12))
                 continue

@@ -4,7 +4,7 @@ them. `make bench`, `make bench-lights`, `make bench-peers`, ... run them with
 PYTHONPATH=benchmarks.
 
 Commands: bench (error over time against a reference, with --peers Cycles, LuxCore, Mitsuba),
-pathbench, raybench, reconbench, scalebench, skipbench."""
+instancebench, pathbench, raybench, reconbench, scalebench, skipbench."""
 
 import argparse
 import sys
@@ -44,6 +44,13 @@ def build_parser():
                     help="instead: peak bytes per pixel of each method by image size and thread count")
     sb.add_argument("--images", default="512x512,1024x1024,1920x1080",
                     help="with --memory: comma-separated WxH image sizes")
+    ib = sub.add_parser("instancebench", help="Geometry Nodes scatters of 10^3 to 10^6 instances against Cycles",
+                        description="Wall time and peak memory of F12 (pt, 16 spp, 128x96) on scatters of a "
+                                    "5,120-triangle sphere and on the instances realized into one mesh, GDMLT and "
+                                    "Cycles in the same run, each render in its own process.")
+    ib.add_argument("--counts", default="1000,10000,100000,1000000", help="comma-separated instance counts")
+    ib.add_argument("--realized", default="1000", help="comma-separated counts rendered realized into one mesh")
+    ib.add_argument("--keep", help="a folder to keep the rendered images in")
     cb = sub.add_parser("reconbench", help="seconds of the L1 and L2 reconstruction by image size",
                         description="Times gdmlt.reconstruct (L1 and L2) on synthetic noisy RGB inputs and prints "
                                     "the MSE of each result against the image the inputs were made from.")
@@ -145,6 +152,16 @@ def main(argv=None):
         except ValueError:
             parser.error(f"--sizes: '{args.sizes}' is not a comma-separated list of triangle counts")
         scalebench(sizes, args.size)
+        return 0
+    if args.command == "instancebench":
+        from .instancebench import run as instancebench
+
+        try:
+            counts = tuple(int(x) for x in args.counts.split(",") if x.strip())
+            realized = tuple(int(x) for x in args.realized.split(",") if x.strip())
+        except ValueError:
+            parser.error("--counts and --realized take comma-separated instance counts")
+        instancebench(counts, realized, keep=args.keep)
         return 0
     if args.command == "reconbench":
         from .reconbench import run as reconbench
