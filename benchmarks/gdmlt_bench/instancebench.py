@@ -24,7 +24,7 @@ bpy = import_bpy()
 count, realize, path = int(sys.argv[1]), sys.argv[2] == "1", sys.argv[3]
 bpy.ops.wm.read_factory_settings(use_empty=True)
 scene = bpy.context.scene
-bpy.ops.mesh.primitive_ico_sphere_add(subdivisions=4, radius=1.0, location=(0, 0, -50))
+bpy.ops.mesh.primitive_ico_sphere_add(subdivisions=5, radius=1.0, location=(0, 0, -50))
 rock = bpy.context.active_object
 rock.name, rock.hide_render = "Rock", True
 bpy.ops.object.shade_smooth()

@@ -15,8 +15,9 @@ equirectangular mapping under the transform) with intensity × 2^exposure ×
 colour × blackbody colour of the temperature and `normalize` as UsdLux defines them,
 UsdGeomCamera (apertures and focal length in tenths of a scene unit, clipping, f-stop,
 focus distance, aperture offsets), time samples (`frame`), instance proxies and
-PointInstancers of meshes (flattened: copies per instance). Everything else is reported in
-the returned warnings with the fallback used (docs/features.md: "USD feature table").
+PointInstancers of meshes (as instances: each prototype mesh once, with its instances'
+transforms). Everything else is reported in the returned warnings with the fallback used
+(docs/features.md: "USD feature table").
 """
 
 from __future__ import annotations
@@ -545,33 +546,43 @@ class _Reader:
         return out
 
     def point_instancer(self, prim):
-        """Meshes of every instance of a UsdGeomPointInstancer (flattened: each instance's
-        triangles are copied, memory grows with the instance count)."""
+        """The meshes of a UsdGeomPointInstancer's prototypes, each once in its prototype's
+        space, with the transforms of every instance that uses it (the core stores a mesh
+        once and places it; src/instancing.rs). Vectorized: no Python work per instance."""
         UsdGeom, Usd = self.pxr.UsdGeom, self.pxr.Usd
         inst = UsdGeom.PointInstancer(prim)
         xforms = inst.ComputeInstanceTransformsAtTime(self.time, self.time)
-        indices = inst.GetProtoIndicesAttr().Get(self.time) or []
+        indices = np.asarray(inst.GetProtoIndicesAttr().Get(self.time) or [], dtype=np.int64)
         targets = inst.GetPrototypesRel().GetTargets()
-        world = self.xcache.GetLocalToWorldTransform(prim)
-        protos = []
-        for path in targets:
+        # row-vector matrices (USD's p' = p·M), one per instance
+        x = np.array(xforms, dtype=np.float64).reshape(-1, 4, 4) if len(xforms) else np.zeros((0, 4, 4))
+        world = np.array(self.xcache.GetLocalToWorldTransform(prim), dtype=np.float64)
+        n = min(len(indices), len(x))
+        bad = (indices[:n] < 0) | (indices[:n] >= len(targets))
+        if bad.any():
+            i = int(np.argmax(bad))
+            self.warn(f"'{prim.GetPath()}': {int(bad.sum())} instance(s) use a prototype out of range (instance {i} "
+                      f"uses prototype {int(indices[i])} of {len(targets)}); skipped")
+        out = []
+        for k, path in enumerate(targets):
             root = self.stage.GetPrimAtPath(path)
             inv = self.xcache.GetLocalToWorldTransform(root).GetInverse()
             parts = [(p, self.xcache.GetLocalToWorldTransform(p) * inv)
                      for p in Usd.PrimRange(root, Usd.TraverseInstanceProxies()) if p.IsA(UsdGeom.Mesh)]
             if not parts and root.IsA(UsdGeom.Gprim):
                 self.warn(f"'{path}': {root.GetTypeName()} prototypes are not supported (only Mesh); skipped")
-            protos.append(parts)
-        out = []
-        for i, (k, x) in enumerate(zip(indices, xforms)):
-            if not 0 <= k < len(protos):
-                self.warn(f"'{prim.GetPath()}': instance {i} uses prototype {k} of {len(protos)}; skipped")
+            mine = x[:n][(indices[:n] == k) & ~bad]
+            if len(mine) == 0:
                 continue
-            for part, rel in protos[k]:
-                m = self.mesh(part, to_world=_mat(rel * x * world))
-                if m is not None:
-                    m["name"] = f"{prim.GetPath()}[{i}]{part.GetPath()}"
-                    out.append(m)
+            for part, rel in parts:
+                m = self.mesh(part, to_world=np.eye(4))
+                if m is None:
+                    continue
+                full = np.array(rel, dtype=np.float64) @ mine @ world  # (row-vector) part → world
+                cols = np.transpose(full, (0, 2, 1))[:, :3, :]  # column-vector rows 0..2
+                m["name"] = f"{prim.GetPath()}[{k}]{part.GetPath()}"
+                m["transforms"] = np.ascontiguousarray(cols.reshape(-1, 12), dtype=np.float32)
+                out.append(m)
         return out
 
     # ---- lights ----------------------------------------------------------------------

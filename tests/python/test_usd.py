@@ -157,7 +157,8 @@ def test_a_mirrored_mesh_keeps_its_outside(tmp_path, orientation):
 
 def test_point_instancer_places_every_instance(tmp_path):
     """A PointInstancer of a unit quad at three positions (one scaled by 2, one rotated) is
-    flattened into three world-space copies with the instancer's own transform applied."""
+    one mesh with three transforms, the instancer's own transform applied, which the core
+    stores once and places three times."""
     path = _stage(tmp_path / "i.usda")
     stage = Usd.Stage.Open(str(path))
     inst = UsdGeom.PointInstancer.Define(stage, "/World/Inst")
@@ -175,14 +176,17 @@ def test_point_instancer_places_every_instance(tmp_path):
                                  Gf.Quath(0.7071068, 0.7071068, 0, 0)])  # 90° about x
     stage.GetRootLayer().Save()
     desc, warnings = usd.load(path, width=8, height=8)
-    copies = [m for m in desc["meshes"] if "/World/Inst[" in m["name"]]
-    assert len(copies) == 3, [m["name"] for m in desc["meshes"]]
+    placed = [m for m in desc["meshes"] if "/World/Inst[" in m["name"]]
+    assert len(placed) == 1 and placed[0]["transforms"].shape == (3, 12), [m["name"] for m in desc["meshes"]]
+    xf = placed[0]["transforms"].astype(np.float64).reshape(-1, 3, 4)
+    copies = [{"positions": placed[0]["positions"] @ t[:, :3].T + t[:, 3]} for t in xf]
     centres = sorted(tuple(np.round(m["positions"].mean(axis=0), 4)) for m in copies)
     assert centres == sorted([(0.0, 0.0, 1.0), (3.0, 0.0, 1.0), (0.0, 3.0, 1.0)])
     ext = {tuple(np.round(m["positions"].mean(axis=0), 4)): np.ptp(m["positions"], axis=0) for m in copies}
     assert np.allclose(ext[(3.0, 0.0, 1.0)], (2, 2, 0))  # scaled by 2
     assert np.allclose(ext[(0.0, 3.0, 1.0)], (1, 0, 1), atol=1e-3)  # stood up by the rotation (half floats)
     assert not any(m["name"] == "/World/Inst/Protos/Quad" for m in desc["meshes"])  # prototype not rendered alone
+    assert gdmlt.Scene(desc).instances == 3
 
 
 @pytest.mark.parametrize("opacity, threshold, seen", [(0.25, 0.0, 0.75), (0.25, 0.5, 1.0), (0.75, 0.5, 0.0)])
