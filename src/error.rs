@@ -16,6 +16,8 @@ pub enum SceneError {
     Camera(String),
     #[error("world: {0}")]
     World(String),
+    #[error("not enough memory to build the scene: {0}")]
+    Memory(String),
 }
 
 #[derive(Debug, Error)]

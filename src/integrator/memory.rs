@@ -76,7 +76,8 @@ pub fn check(method: Method, width: u32, height: u32, available: Option<u64>) ->
     }
 }
 
-fn human(b: u64) -> String {
+/// Bytes in GiB or MiB, for messages.
+pub fn human(b: u64) -> String {
     let gb = b as f64 / (1u64 << 30) as f64;
     if gb >= 1.0 {
         format!("{gb:.1} GiB")

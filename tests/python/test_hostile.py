@@ -593,3 +593,32 @@ def test_usd_out_of_range_inputs_reach_the_user_as_warnings(tmp_path):
              "--height", "8", "--no-png", "--no-denoise")
     assert r.returncode == 0, r.stderr
     assert "roughness 5 is outside 0…1; 1 is used" in r.stderr and "Grey" in r.stderr, r.stderr
+
+
+def test_a_scene_larger_than_memory_is_refused_before_building(tmp_path):
+    """Issue 49: a mesh too large for the memory there (12M triangles under a 4 GB address
+    space) aborted the process in an allocation while the scene was built; now gdmlt.Scene
+    raises ValueError saying how much it needs and how much there is."""
+    import resource
+
+    def limit():
+        resource.setrlimit(resource.RLIMIT_AS, (4_000_000 * 1024, resource.RLIM_INFINITY))
+
+    code = """
+import numpy as np, gdmlt
+k = 2450  # a k×k grid of quads: 12M triangles
+x, y = np.meshgrid(np.arange(k + 1, dtype=np.float32), np.arange(k + 1, dtype=np.float32))
+pos = np.stack([x, y, np.zeros_like(x)], -1).reshape(-1, 3)
+v = (np.arange(k)[:, None] * (k + 1) + np.arange(k)[None, :]).reshape(-1).astype(np.uint32)
+tris = np.concatenate([np.stack([v, v + 1, v + k + 2], -1), np.stack([v, v + k + 2, v + k + 1], -1)])
+desc = gdmlt.builtin_scene("cornell", 8, 8)
+desc["meshes"].append({"name": "Grid", "positions": pos, "indices": tris})
+try:
+    gdmlt.Scene(desc)
+except ValueError as e:
+    print("refused:", e)
+"""
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=300,
+                       preexec_fn=limit)
+    assert r.returncode == 0, (r.returncode, r.stderr[-2000:])
+    assert "refused: not enough memory to build the scene" in r.stdout and "GiB" in r.stdout, r.stdout
