@@ -752,7 +752,7 @@ impl Scene {
     fn new(py: Python<'_>, desc: &Bound<'_, PyDict>) -> PyResult<Self> {
         let d = parse_scene(desc)?;
         let unknown = scene_key_warnings(desc);
-        let built = py.detach(|| std::panic::catch_unwind(|| scene::Scene::build(&d)));
+        let built = py.detach(|| std::panic::catch_unwind(move || scene::Scene::build_from(d)));
         match built {
             Ok(Ok(mut s)) => {
                 s.report.warnings.extend(unknown);

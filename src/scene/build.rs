@@ -411,6 +411,9 @@ impl Lighting {
                 emissive_triangles += 1;
             }
         }
+        if emissive_triangles == 0 {
+            tri_light = Vec::new(); // (none emits: `Scene::triangle_light` reads a missing entry as none)
+        }
         let env = Self::world(desc, textures)?;
         let backdrop = Self::backdrop(&desc.camera, textures)?;
         // a textured emitter: its image's mean brightness scales the selection weight (the

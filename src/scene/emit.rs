@@ -94,7 +94,7 @@ impl Scene {
                     return 0.0;
                 }
                 let area = match l.shape {
-                    LightShape::Triangle { prim } => self.areas[prim as usize],
+                    LightShape::Triangle { prim } => self.area(prim as usize),
                     _ => 0.0,
                 };
                 l.power_estimate(r, area)
@@ -131,7 +131,7 @@ impl Scene {
                 let v = &self.positions[t];
                 let (b1, b2) = square_to_triangle(u_pos);
                 let p = v[0] * (1.0 - b1 - b2) + v[1] * b1 + v[2] * b2;
-                let n = self.geo_normals[t];
+                let n = self.geo_normal(t);
                 // the side from the first sample's half, then a cosine-weighted direction
                 let (side, ux) = if u_dir.x < 0.5 { (n, 2.0 * u_dir.x) } else { (-n, 2.0 * u_dir.x - 1.0) };
                 let dir = Frame::from_normal(side).to_world(square_to_cosine_hemisphere(Vec2::new(ux, u_dir.y)));
@@ -140,7 +140,7 @@ impl Scene {
                     p,
                     n,
                     dir,
-                    pdf_origin: pmf / self.areas[t],
+                    pdf_origin: pmf / self.area(t),
                     pdf_emit: cosine_pdf(n, dir, true),
                     delta: false,
                     infinite: false,
@@ -236,7 +236,7 @@ impl Scene {
             return pmf * self.env.pdf(z);
         }
         match &self.lights[li as usize].shape {
-            LightShape::Triangle { prim } => pmf / self.areas[*prim as usize],
+            LightShape::Triangle { prim } => pmf / self.area(*prim as usize),
             LightShape::Planar { area, .. } => pmf / area,
             LightShape::Sphere { radius, .. } if *radius > 0.0 => pmf / (4.0 * PI * radius * radius),
             LightShape::Sphere { .. } => pmf,
