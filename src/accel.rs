@@ -293,6 +293,62 @@ impl obvhs::Boundable for BuildTri {
     }
 }
 
+/// A scene triangle by reference, for a build over some of them (`unique_triangles`).
+struct TriRef<'a>(&'a [Vec3; 3]);
+
+impl obvhs::Boundable for TriRef<'_> {
+    #[inline]
+    fn aabb(&self) -> Aabb {
+        BuildTri(*self.0).aabb()
+    }
+}
+
+/// The indices of the triangles that are not exact copies of an earlier one (the same three
+/// vertices, bit for bit, in any order), or None when none is a copy (the usual case: one
+/// hash and a parallel sort, 16 bytes a triangle for the moment).
+fn unique_triangles(tris: &[[Vec3; 3]]) -> Option<Vec<u32>> {
+    use rayon::prelude::*;
+    let key = |t: &[Vec3; 3]| {
+        let mut v = t.map(|p| p.to_array().map(f32::to_bits));
+        v.sort_unstable();
+        v
+    };
+    let hash = |t: &[Vec3; 3]| {
+        key(t).iter().flatten().fold(0xcbf2_9ce4_8422_2325u64, |h, &x| (h ^ x as u64).wrapping_mul(0x0100_0000_01b3))
+    };
+    let mut order: Vec<(u64, u32)> = tris.par_iter().enumerate().map(|(i, t)| (hash(t), i as u32)).collect();
+    order.par_sort_unstable();
+    let mut copy: Vec<u32> = Vec::new();
+    let mut run = 0;
+    while run < order.len() {
+        let mut end = run + 1;
+        while end < order.len() && order[end].0 == order[run].0 {
+            end += 1;
+        }
+        if end - run > 1 {
+            // equal hashes: sorted by vertices, then index, the first of equal triangles is kept
+            let mut r: Vec<_> = order[run..end].iter().map(|&(_, i)| (key(&tris[i as usize]), i)).collect();
+            r.sort_unstable();
+            copy.extend(r.windows(2).filter(|w| w[0].0 == w[1].0).map(|w| w[1].1));
+        }
+        run = end;
+    }
+    if copy.is_empty() {
+        return None;
+    }
+    copy.sort_unstable();
+    let mut kept = Vec::with_capacity(tris.len() - copy.len());
+    let mut c = copy.iter().peekable();
+    for i in 0..tris.len() as u32 {
+        if c.peek() == Some(&&i) {
+            c.next();
+        } else {
+            kept.push(i);
+        }
+    }
+    Some(kept)
+}
+
 pub struct Accel {
     bvh: CwBvh,
     /// Leaf triangles: node n's leaf triangles k = 0..24 (its hit-mask bits) are slot
@@ -330,9 +386,26 @@ impl Accel {
         // scene's own triangles (`BuildTri`), not a copy of them in obvhs' layout (48 bytes a
         // triangle more at the build's peak).
         let params = BvhBuildParams::medium_build();
-        // SAFETY: `BuildTri` is `repr(transparent)` over `[Vec3; 3]`: the same layout.
-        let view: &[BuildTri] = unsafe { std::slice::from_raw_parts(tris.as_ptr() as *const BuildTri, tris.len()) };
-        let mut bvh = build_cwbvh(view, params, &mut Duration::default());
+        // Exact copies of a triangle are left out of the BVH but the first: a ray meets them
+        // all at one distance, and every walk along a ray steps past that distance at once,
+        // so only one of them is ever seen either way — while PLOC, which pairs mutual
+        // nearest neighbours, merges only one pair of identical boxes per round (32,000
+        // copies of one triangle took 18 s, quadratic).
+        let kept = unique_triangles(tris);
+        let mut bvh = match &kept {
+            None => {
+                // SAFETY: `BuildTri` is `repr(transparent)` over `[Vec3; 3]`: the same layout.
+                let view: &[BuildTri] =
+                    unsafe { std::slice::from_raw_parts(tris.as_ptr() as *const BuildTri, tris.len()) };
+                build_cwbvh(view, params, &mut Duration::default())
+            }
+            Some(kept) => {
+                let refs: Vec<TriRef> = kept.iter().map(|&i| TriRef(&tris[i as usize])).collect();
+                let mut bvh = build_cwbvh(&refs, params, &mut Duration::default());
+                bvh.primitive_indices.iter_mut().for_each(|p| *p = kept[*p as usize]);
+                bvh
+            }
+        };
         // Lay each node's leaf triangles out as whole blocks of eight starting at a block
         // boundary, in the order of its hit-mask bits.
         // (sized exactly first: growing by doubling would hold up to twice the blocks at once)
@@ -714,6 +787,42 @@ mod tests {
                 [c, c + Vec3::new(r(1.0), r(1.0), r(1.0)), c + Vec3::new(r(1.0), r(1.0), r(1.0))]
             })
             .collect()
+    }
+
+    /// Issue 49: exact copies of triangles (20,000 of one, copies of soup triangles with their
+    /// vertices rotated, among distinct ones) are left out of the build (32,000 copies of one
+    /// took 18 s, quadratic in obvhs' PLOC; 200,000 now 0.05 s, `make bench-scale`'s
+    /// neighbour) and every ray finds what brute force finds: the distance, on a kept triangle;
+    /// occlusion too.
+    #[test]
+    fn exact_copies_of_triangles_build_fast_and_are_found_as_brute_force_finds_them() {
+        let mut s = IndependentSampler::new(11, 0);
+        let mut r = |k: f32| (s.next_1d() - 0.5) * k;
+        let mut tris = triangle_soup(&mut r, 2000);
+        let one = [Vec3::new(-1.0, -1.0, 0.5), Vec3::new(1.0, -1.0, 0.3), Vec3::new(0.0, 1.5, 0.4)];
+        tris.extend(std::iter::repeat_n(one, 20_000));
+        for k in 0..500 {
+            let t = tris[k * 3];
+            tris.push([t[1], t[2], t[0]]); // (the same triangle, its corners rotated)
+        }
+        let kept = unique_triangles(&tris).expect("copies found");
+        assert_eq!(kept.len(), 2001);
+        let accel = Accel::build(&tris); // (over the 2001 kept: the builder never sees the copies)
+        for _ in 0..500 {
+            let o = Vec3::new(r(14.0), r(14.0), r(14.0));
+            let d = (Vec3::new(r(2.0), r(2.0), r(2.0)) - o * 0.1).normalize();
+            let want = brute_force(&tris, o, d);
+            let got = accel.closest(o, d, 0.0, f32::INFINITY);
+            match (want, got) {
+                (Some((p, t)), Some(h)) => {
+                    assert!((h.t - t).abs() <= 1e-4 * (1.0 + t), "t {} against {t}", h.t);
+                    assert!(kept.binary_search(&h.prim).is_ok(), "prim {} (against {p}) is a copy", h.prim);
+                }
+                (None, None) => {}
+                (w, g) => panic!("{w:?} against {g:?}"),
+            }
+            assert_eq!(accel.occluded(o, d, 0.0, f32::INFINITY), want.is_some());
+        }
     }
 
     /// The AVX2 node test (x86-64-v3 build) returns exactly obvhs' hit masks, for every node
