@@ -20,6 +20,7 @@ use obvhs::cwbvh::builder::build_cwbvh;
 use obvhs::cwbvh::CwBvh;
 use obvhs::ray::Ray;
 use obvhs::BvhBuildParams;
+use rayon::prelude::*;
 use std::ops::Range;
 use std::time::Duration;
 
@@ -99,8 +100,12 @@ struct Prototype {
 pub struct Instances {
     protos: Vec<Prototype>,
     instances: Vec<Instance>,
-    /// The top level over the instances' world bounds; its primitive indices name instances.
+    /// The top level over the instances' distinct world bounds; its primitive indices name
+    /// groups of instances with the same bounds (almost always one each): group g is
+    /// `by_group[group_start[g]..group_start[g + 1]]`.
     tlas: CwBvh,
+    group_start: Vec<u32>,
+    by_group: Vec<u32>,
     /// World bounds of all instances.
     pub bounds: (Vec3, Vec3),
 }
@@ -132,8 +137,32 @@ impl Instances {
                 bx
             })
             .collect();
-        let tlas = build_cwbvh(&boxes, BvhBuildParams::medium_build(), &mut Duration::default());
-        Instances { protos, instances, tlas, bounds: (lo, hi) }
+        // Instances with bit-identical bounds (a scatter onto coincident points) share one
+        // primitive of the top level: PLOC pairs mutual nearest neighbours and merges one pair
+        // of identical boxes per round, quadratic in them (as for copies of a triangle,
+        // `accel::unique_triangles`).
+        let key = |b: &Aabb| [b.min.x, b.min.y, b.min.z, b.max.x, b.max.y, b.max.z].map(f32::to_bits);
+        let mut by_group: Vec<u32> = (0..instances.len() as u32).collect();
+        by_group.par_sort_unstable_by_key(|&i| (key(&boxes[i as usize]), i));
+        let mut group_start = Vec::with_capacity(instances.len() + 1);
+        let mut group_boxes = Vec::with_capacity(instances.len());
+        for (k, &i) in by_group.iter().enumerate() {
+            if k == 0 || key(&boxes[by_group[k - 1] as usize]) != key(&boxes[i as usize]) {
+                group_start.push(k as u32);
+                group_boxes.push(boxes[i as usize]);
+            }
+        }
+        group_start.push(by_group.len() as u32);
+        drop(boxes);
+        let tlas = build_cwbvh(&group_boxes, BvhBuildParams::medium_build(), &mut Duration::default());
+        Instances { protos, instances, tlas, group_start, by_group, bounds: (lo, hi) }
+    }
+
+    /// The instances of top-level primitive `p` (a group of instances with equal bounds).
+    #[inline]
+    fn group(&self, p: u32) -> &[u32] {
+        let g = self.tlas.primitive_indices[p as usize] as usize;
+        &self.by_group[self.group_start[g] as usize..self.group_start[g + 1] as usize]
     }
 
     /// Instance `i`.
@@ -154,7 +183,7 @@ impl Instances {
     pub fn bytes(&self) -> usize {
         self.instances.len() * std::mem::size_of::<Instance>()
             + self.tlas.nodes.len() * std::mem::size_of::<obvhs::cwbvh::node::CwBvhNode>()
-            + self.tlas.primitive_indices.len() * 4
+            + (self.tlas.primitive_indices.len() + self.group_start.len() + self.by_group.len()) * 4
             + self.protos.iter().filter_map(|p| p.accel.as_ref()).map(Accel::bytes).sum::<usize>()
     }
 
@@ -168,13 +197,14 @@ impl Instances {
         let mut state = self.tlas.new_traversal(ray.direction);
         let mut node;
         obvhs::traverse!(self.tlas, node, state, node.intersect_ray(&ray, state.oct_inv4), {
-            let i = self.tlas.primitive_indices[state.primitive_id as usize];
-            let inst = &self.instances[i as usize];
-            let proto = &self.protos[inst.proto as usize];
-            let (lo, ld) = (inst.to_object.transform_point3(o), inst.to_object.transform_vector3(d));
-            if let Some(h) = proto.accel.as_ref().and_then(|a| a.closest(lo, ld, tmin, ray.tmax)) {
-                ray.tmax = h.t;
-                best = Some(TriHit { prim: h.prim + proto.first, inst: i, ..h });
+            for &i in self.group(state.primitive_id) {
+                let inst = &self.instances[i as usize];
+                let proto = &self.protos[inst.proto as usize];
+                let (lo, ld) = (inst.to_object.transform_point3(o), inst.to_object.transform_vector3(d));
+                if let Some(h) = proto.accel.as_ref().and_then(|a| a.closest(lo, ld, tmin, ray.tmax)) {
+                    ray.tmax = h.t;
+                    best = Some(TriHit { prim: h.prim + proto.first, inst: i, ..h });
+                }
             }
         });
         best
@@ -189,11 +219,13 @@ impl Instances {
         let mut node;
         'traversal: {
             obvhs::traverse!(self.tlas, node, state, node.intersect_ray(&ray, state.oct_inv4), {
-                let inst = &self.instances[self.tlas.primitive_indices[state.primitive_id as usize] as usize];
-                let proto = &self.protos[inst.proto as usize];
-                let (lo, ld) = (inst.to_object.transform_point3(o), inst.to_object.transform_vector3(d));
-                if proto.accel.as_ref().is_some_and(|a| a.occluded(lo, ld, tmin, tmax)) {
-                    break 'traversal true;
+                for &i in self.group(state.primitive_id) {
+                    let inst = &self.instances[i as usize];
+                    let proto = &self.protos[inst.proto as usize];
+                    let (lo, ld) = (inst.to_object.transform_point3(o), inst.to_object.transform_vector3(d));
+                    if proto.accel.as_ref().is_some_and(|a| a.occluded(lo, ld, tmin, tmax)) {
+                        break 'traversal true;
+                    }
                 }
             });
             false
@@ -233,4 +265,55 @@ pub fn flattened(m: &MeshDesc, xf: &[f32; 12]) -> Option<MeshDesc> {
         corner_object: corners(&m.corner_object, &same),
         ..m.clone_without_geometry()
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sampler::{IndependentSampler, Sampler};
+
+    /// Issue 49: 20,000 instances placed by one transform (a scatter onto coincident points)
+    /// are one primitive of the top level, as PLOC would merge their identical boxes one pair
+    /// per round; rays meet what they meet in the placed triangles, tested one by one.
+    #[test]
+    fn instances_with_equal_bounds_share_a_top_level_primitive() {
+        let tet = [Vec3::ZERO, Vec3::X, Vec3::Y, Vec3::Z];
+        let tris: Vec<[Vec3; 3]> = [[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]].map(|f| f.map(|i| tet[i])).to_vec();
+        let mut s = IndependentSampler::new(5, 0);
+        let mut r = |k: f32| (s.next_1d() - 0.5) * k;
+        let same = [0.5, 0.1, 0.0, 1.0, 0.0, 0.6, 0.0, -2.0, 0.0, 0.0, 0.4, 0.5];
+        let mut xfs = vec![same; 20_000];
+        for _ in 0..30 {
+            xfs.push([0.4, 0.0, 0.0, r(8.0), 0.0, 0.4, 0.0, r(8.0), 0.0, 0.0, -0.4, r(8.0)]);
+        }
+        let placed: Vec<Instance> = xfs.iter().map(|m| Instance::new(m, 0).unwrap()).collect();
+        let inst = Instances::build(&tris, &[0..4], placed.clone());
+        assert_eq!(inst.group_start.len() - 1, 31);
+        // every placed triangle, for brute force
+        let world: Vec<[Vec3; 3]> = placed
+            .iter()
+            .take(1)
+            .chain(&placed[20_000..])
+            .flat_map(|i| tris.iter().map(move |t| t.map(|p| i.point(p))))
+            .collect();
+        for _ in 0..400 {
+            let o = Vec3::new(r(12.0), r(12.0), r(12.0));
+            let d = (Vec3::new(r(4.0), r(4.0), r(4.0)) - o).normalize();
+            let want = world
+                .iter()
+                .filter_map(|t| {
+                    let (e1, e2) = (t[1] - t[0], t[2] - t[0]);
+                    let p = d.cross(e2);
+                    let det = e1.dot(p);
+                    let s = o - t[0];
+                    let (u, q) = (s.dot(p) / det, s.cross(e1));
+                    let (v, tt) = (d.dot(q) / det, e2.dot(q) / det);
+                    (det != 0.0 && u >= 0.0 && v >= 0.0 && u + v <= 1.0 && tt > 0.0).then_some(tt)
+                })
+                .fold(f32::INFINITY, f32::min);
+            let got = inst.closest(o, d, 0.0, f32::INFINITY).map_or(f32::INFINITY, |h| h.t);
+            assert!(got == want || (got - want).abs() <= 1e-4 * (1.0 + want), "{got} against {want}");
+            assert_eq!(inst.occluded(o, d, 0.0, f32::INFINITY), want.is_finite());
+        }
+    }
 }
