@@ -287,7 +287,8 @@ mod tests {
             xfs.push([0.4, 0.0, 0.0, r(8.0), 0.0, 0.4, 0.0, r(8.0), 0.0, 0.0, -0.4, r(8.0)]);
         }
         let placed: Vec<Instance> = xfs.iter().map(|m| Instance::new(m, 0).unwrap()).collect();
-        let inst = Instances::build(&tris, &[0..4], placed.clone());
+        let protos = vec![std::ops::Range { start: 0, end: 4 }];
+        let inst = Instances::build(&tris, &protos, placed.clone());
         assert_eq!(inst.group_start.len() - 1, 31);
         // every placed triangle, for brute force
         let world: Vec<[Vec3; 3]> = placed
