@@ -403,7 +403,7 @@ impl Lighting {
                 }
                 lights.push(Light {
                     name: mat.name.clone(),
-                    shape: LightShape::Triangle { prim: t as u32 },
+                    shape: LightShape::Triangle { prim: t as u32, area: tris.areas[t] },
                     emission: emission[m as usize],
                     visible_camera: true,
                     cast_shadow: true,

@@ -94,7 +94,7 @@ impl Scene {
                     return 0.0;
                 }
                 let area = match l.shape {
-                    LightShape::Triangle { prim } => self.area(prim as usize),
+                    LightShape::Triangle { area, .. } => area,
                     _ => 0.0,
                 };
                 l.power_estimate(r, area)
@@ -126,7 +126,7 @@ impl Scene {
         }
         let light = &self.lights[li];
         let o = match &light.shape {
-            LightShape::Triangle { prim } => {
+            LightShape::Triangle { prim, area } => {
                 let t = *prim as usize;
                 let v = &self.positions[t];
                 let (b1, b2) = square_to_triangle(u_pos);
@@ -140,7 +140,7 @@ impl Scene {
                     p,
                     n,
                     dir,
-                    pdf_origin: pmf / self.area(t),
+                    pdf_origin: pmf / area,
                     pdf_emit: cosine_pdf(n, dir, true),
                     delta: false,
                     infinite: false,
@@ -236,7 +236,7 @@ impl Scene {
             return pmf * self.env.pdf(z);
         }
         match &self.lights[li as usize].shape {
-            LightShape::Triangle { prim } => pmf / self.area(*prim as usize),
+            LightShape::Triangle { area, .. } => pmf / area,
             LightShape::Planar { area, .. } => pmf / area,
             LightShape::Sphere { radius, .. } if *radius > 0.0 => pmf / (4.0 * PI * radius * radius),
             LightShape::Sphere { .. } => pmf,

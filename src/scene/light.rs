@@ -25,7 +25,7 @@ pub enum LightShape {
     /// Distant light towards `dir` (unit, pointing at the light); `cos_half` of its cone.
     Distant { dir: Vec3, cos_half: f32, frame: Frame },
     /// Emissive triangle `prim` of the scene mesh.
-    Triangle { prim: u32 },
+    Triangle { prim: u32, area: f32 },
 }
 
 /// Blender's area light Spread, as Cycles models it: a soft box whose grid of slats lets

@@ -169,7 +169,7 @@ impl LightSelector {
         for (i, l) in lights.iter().enumerate() {
             let lum = luminance(l.emission).max(0.0);
             let entry = match &l.shape {
-                LightShape::Triangle { prim } => {
+                LightShape::Triangle { prim, .. } => {
                     let m = tri_material[*prim as usize];
                     let power = lum * 2.0 * PI * areas[*prim as usize] * emission_scale[m as usize];
                     let g = groups.entry(m).or_default();
@@ -205,7 +205,7 @@ impl LightSelector {
             let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
             let mut area = 0.0;
             for &li in &members {
-                let LightShape::Triangle { prim } = lights[li as usize].shape else { continue };
+                let LightShape::Triangle { prim, .. } = lights[li as usize].shape else { continue };
                 for v in tri_positions[prim as usize] {
                     lo = lo.min(v);
                     hi = hi.max(v);

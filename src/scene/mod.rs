@@ -761,11 +761,13 @@ impl Scene {
         self.geo_normals[t]
     }
 
-    /// Triangle `t`'s area (of emissive triangles, which are in world space).
+    /// The area of triangle light `li` (0 for another kind of light).
     #[inline]
-    fn area(&self, t: usize) -> f32 {
-        let v = &self.positions[t];
-        0.5 * (v[1] - v[0]).cross(v[2] - v[0]).length()
+    fn light_area(&self, li: u32) -> f32 {
+        match self.lights[li as usize].shape {
+            LightShape::Triangle { area, .. } => area,
+            _ => 0.0,
+        }
     }
 
     /// The instance `inst` names (None: `NO_INSTANCE`, a triangle in world space).
@@ -1081,7 +1083,7 @@ impl Scene {
         }
         let light = &self.lights[li];
         let mut ls = match light.shape {
-            LightShape::Triangle { prim } => {
+            LightShape::Triangle { prim, area } => {
                 let v = &self.positions[prim as usize];
                 let (b1, b2) = square_to_triangle(u);
                 let lp = v[0] * (1.0 - b1 - b2) + v[1] * b1 + v[2] * b2;
@@ -1106,7 +1108,7 @@ impl Scene {
                     wi,
                     dist,
                     radiance,
-                    pdf: d2 * dist / (to_n.abs() * self.area(prim as usize)),
+                    pdf: d2 * dist / (to_n.abs() * area),
                     is_delta: false,
                 }
             }
@@ -1138,11 +1140,8 @@ impl Scene {
         let le = self.emission_at(si.prim as usize, self.lights[li as usize].emission, si.tex, si.camera);
         let cos_l = dir.dot(si.ng).abs();
         let d2 = (si.p - from).length_squared();
-        let pdf = if cos_l > 0.0 {
-            self.selector.pmf(li as usize, from) * d2 / (cos_l * self.area(si.prim as usize))
-        } else {
-            0.0
-        };
+        let pdf =
+            if cos_l > 0.0 { self.selector.pmf(li as usize, from) * d2 / (cos_l * self.light_area(li)) } else { 0.0 };
         Some((le, pdf))
     }
 
@@ -1230,14 +1229,14 @@ impl Scene {
         let light = self.lights.get(li as usize)?;
         let pmf = self.selector.pmf(li as usize, from);
         match &light.shape {
-            LightShape::Triangle { prim } => {
+            LightShape::Triangle { prim, area } => {
                 let n = self.geo_normal(*prim as usize);
                 let to = from - z;
                 let d2 = to.length_squared();
                 let cos = (to.dot(n) / d2.sqrt()).abs();
                 let (b1, b2) = self.barycentrics(*prim as usize, z);
                 let le = self.triangle_radiance(*prim as usize, light.emission, b1, b2);
-                (cos > 1e-7).then(|| (le, pmf * d2 / (cos * self.area(*prim as usize))))
+                (cos > 1e-7).then(|| (le, pmf * d2 / (cos * area)))
             }
             LightShape::Planar { normal, area, spread, .. } => {
                 let to = from - z;
@@ -1275,7 +1274,7 @@ impl Scene {
     /// Surface normal of light `li` at its point `z` (zero for points and distant lights).
     pub fn light_normal(&self, li: u32, z: Vec3) -> Vec3 {
         match self.lights.get(li as usize).map(|l| &l.shape) {
-            Some(LightShape::Triangle { prim }) => self.geo_normal(*prim as usize),
+            Some(LightShape::Triangle { prim, .. }) => self.geo_normal(*prim as usize),
             Some(LightShape::Planar { normal, .. }) => *normal,
             Some(LightShape::Sphere { center, radius, .. }) if *radius > 0.0 => (z - *center).normalize_or_zero(),
             _ => Vec3::ZERO,
