@@ -1,7 +1,8 @@
 """`gdmlt raybench`: ray throughput of the core's BVH (obvhs CWBVH, as the renderer uses it)
 against Intel Embree (PyPI `embreex`) on the same triangles and the same rays, in one run.
 Closest-hit and occlusion; coherent (camera) and incoherent (random origins in the scene
-bounds, random directions) rays; 1 thread and all threads. Both sides are timed from
+bounds, random directions) rays; 1 thread and all threads (Embree: the batch split over as
+many forked processes, since embreex traces a call on one thread). Both sides are timed from
 Python around one batch call (array conversion included for both). Prints Mrays/s and the
 ratio core/Embree, and checks that both find the same hits. It measures; it does not pass
 or fail."""
@@ -45,6 +46,38 @@ def rays(kind: str, n: int, lo, hi, rng):
         d = rng.normal(size=(n, 3))
     d /= np.linalg.norm(d, axis=1, keepdims=True)
     return np.ascontiguousarray(o, np.float32), np.ascontiguousarray(d, np.float32)
+
+
+_SHARED = {}  # what forked Embree workers trace (set before the pool is made)
+
+
+def _embree_chunk(span):
+    """One worker's share of an Embree batch (a forked process: the scene and the rays are
+    inherited); returns the number of hits only, so that no arrays travel back."""
+    es, o, d, occl = _SHARED["batch"]
+    a, b = span
+    if occl:
+        return int(np.count_nonzero(np.asarray(es.run(o[a:b], d[a:b], query="OCCLUDED")) != -1))
+    return int(np.count_nonzero(es.run(o[a:b], d[a:b], output=1)["primID"] != -1))
+
+
+def _embree_parallel(es, o, d, occl, threads, repeat=3):
+    """Best wall time of Embree tracing the batch on `threads` cores for real: embreex traces
+    a call on one thread, so the batch is split over as many forked processes (the pool made
+    and warmed up outside the timing)."""
+    import multiprocessing as mp
+
+    _SHARED["batch"] = (es, o, d, occl)
+    edges = np.linspace(0, len(o), threads + 1).astype(int)
+    spans = [(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:])]
+    with mp.get_context("fork").Pool(threads) as pool:
+        pool.map(_embree_chunk, [(0, 1)] * threads)
+        best = float("inf")
+        for _ in range(repeat):
+            t = time.perf_counter()
+            pool.map(_embree_chunk, spans, chunksize=1)
+            best = min(best, time.perf_counter() - t)
+    return best
 
 
 def _time(f, repeat=3):
@@ -98,6 +131,8 @@ def run(triangles=1_000_000, n_rays=1_000_000, out=print):
                 packets = query == "closest8"
                 if query != "closest8":  # the same Embree figure serves both closest rows
                     te, eh = _time(lambda: es.run(o, d, query="OCCLUDED") if occl else es.run(o, d, output=1))
+                if query != "closest8" and threads > 1:
+                    te_all = _embree_parallel(es, o, d, occl, threads)
                 for th in sorted({1, threads}):
                     tc, (tt, prim) = _time(lambda: scene.trace_rays(o, d, threads=th, occlusion=occl, packets=packets))
                     if occl:
@@ -106,13 +141,13 @@ def run(triangles=1_000_000, n_rays=1_000_000, out=print):
                         e_hit = eh["primID"] != -1
                         agree = np.mean((e_hit == (prim != -1)) &
                                         (~e_hit | (np.abs(eh["tfar"] - tt) <= 1e-3 * np.maximum(1, np.abs(tt)))))
-                    # embreex traces on one thread: the ratio is per thread at 1, whole machine else
-                    mc, me = len(o) / tc / 1e6, len(o) / te / 1e6
-                    ratio = mc / (me if th == 1 else me * th)
+                    # (all threads: Embree over as many processes, each a share of the batch)
+                    mc, me = len(o) / tc / 1e6, len(o) / (te if th == 1 else te_all) / 1e6
+                    ratio = mc / me
                     rows.append((label, kind, query, th, mc, me, ratio, agree))
                     out(f"{label:14} {kind:11} {query:8} {th:>7} {mc:13.2f} {me:15.2f} {ratio:6.2f} {agree:6.4f}")
-    out("# ratio = core Mrays/s ÷ Embree Mrays/s; with all threads Embree's one-thread figure is scaled by the "
-        "thread count (embreex traces a batch on one thread)")
+    out("# ratio = core Mrays/s ÷ Embree Mrays/s; with all threads Embree traces the batch split over as many "
+        "forked processes (embreex traces a call on one thread), timed around the whole split batch")
     out("# closest8 = the core's packet traversal, eight consecutive rays at a time (as pt's camera rays), "
         "against Embree's single-ray closest hits (embreex has no packet call)")
     return rows
