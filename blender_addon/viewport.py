@@ -47,14 +47,37 @@ def _normal_mapped(desc):
     return [m.get("normal_texture") is not None for m in desc.get("materials", [])]
 
 
+def _moved_instances(old, new) -> bool:
+    """The two mesh lists differ only in the transforms of instanced meshes, each still
+    placed as many times (a moved instancer)."""
+    if len(old) != len(new):
+        return False
+    for a, b in zip(old, new):
+        if a.keys() != b.keys() or any(not same(a[k], b[k]) for k in a if k != "transforms"):
+            return False
+        if "transforms" in a and np.shape(a["transforms"]) != np.shape(b["transforms"]):
+            return False
+    return True
+
+
+# what each change rebuilds, least first (a pending change keeps the larger)
+CHANGES = ("none", "shading", "instances", "geometry")
+
+
 def scene_change(old, new) -> str:
     """What differs between two exported scene dicts, for the viewport: "geometry" (the
     meshes, material ids included: rebuild everything — so too when a material gains or
-    loses a normal map, whose meshes' tangents are computed with the triangles), "shading"
-    (materials, textures, lights, world: swap them in), or "none". The camera is not
-    compared (the viewport looks through its own)."""
-    if old is None or not same(old.get("meshes", []), new.get("meshes", [])):
+    loses a normal map, whose meshes' tangents are computed with the triangles),
+    "instances" (only instanced meshes' transforms: place them again, the meshes' BVHs
+    kept; the shading is taken too), "shading" (materials, textures, lights, world: swap
+    them in), or "none". The camera is not compared (the viewport looks through its own)."""
+    if old is None:
         return "geometry"
+    if not same(old.get("meshes", []), new.get("meshes", [])):
+        if _normal_mapped(old) != _normal_mapped(new) or not _moved_instances(old.get("meshes", []),
+                                                                             new.get("meshes", [])):
+            return "geometry"
+        return "instances"
     if _normal_mapped(old) != _normal_mapped(new):
         return "geometry"
     rest = {k for k in old.keys() | new.keys() if k not in ("meshes", "camera")}
@@ -127,8 +150,7 @@ class ViewportSession:
         change = scene_change(self.desc, desc)
         if change != "none":
             self.desc = desc
-            if self._pending != "geometry":
-                self._pending = change
+            self._pending = max(self._pending, change, key=CHANGES.index)
             self.restart()
         return change
 
@@ -139,6 +161,12 @@ class ViewportSession:
         if self._pending == "geometry" or self.core is None:
             self.core = gdmlt.Scene(dict(self.desc, camera=camera))
         else:
+            if self._pending == "instances":
+                try:
+                    self.core.update_transforms(dict(self.desc, camera=camera))
+                except ValueError:
+                    # (a mesh the core placed as copies moved, or other meshes are instanced)
+                    self.core = gdmlt.Scene(dict(self.desc, camera=camera))
             if self._pending == "shading":
                 try:
                     self.core.update_shading(dict(self.desc, meshes=[], camera=camera))

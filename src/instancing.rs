@@ -94,6 +94,8 @@ impl Instance {
 struct Prototype {
     accel: Option<Accel>,
     first: u32,
+    /// Object-space bounds of its triangles.
+    bounds: (Vec3, Vec3),
 }
 
 /// The instances of a scene and their two-level BVH.
@@ -115,8 +117,6 @@ impl Instances {
     /// triangles `tris` that is prototype k) and the top level over `instances` (none of
     /// which places an empty prototype).
     pub fn build(tris: &[[Vec3; 3]], protos: &[Range<usize>], instances: Vec<Instance>) -> Instances {
-        let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
-        let mut proto_bounds = Vec::with_capacity(protos.len());
         let protos: Vec<Prototype> = protos
             .iter()
             .map(|r| {
@@ -124,14 +124,40 @@ impl Instances {
                 for v in tris[r.clone()].iter().flatten() {
                     (a, b) = (a.min(*v), b.max(*v));
                 }
-                proto_bounds.push((a, b));
-                Prototype { accel: (!r.is_empty()).then(|| Accel::build(&tris[r.clone()])), first: r.start as u32 }
+                Prototype {
+                    accel: (!r.is_empty()).then(|| Accel::build(&tris[r.clone()])),
+                    first: r.start as u32,
+                    bounds: (a, b),
+                }
             })
             .collect();
+        let mut out = Instances {
+            protos,
+            instances: Vec::new(),
+            tlas: CwBvh::default(),
+            group_start: Vec::new(),
+            by_group: Vec::new(),
+            bounds: (Vec3::ZERO, Vec3::ZERO),
+        };
+        out.place(instances);
+        out
+    }
+
+    /// The number of prototypes.
+    pub fn prototypes(&self) -> usize {
+        self.protos.len()
+    }
+
+    /// Places the prototypes by `instances` instead, keeping their bottom levels: the top
+    /// level is built again (a moved instancer in the viewport).
+    pub fn place(&mut self, mut instances: Vec<Instance>) {
+        // (a prototype whose triangles are all degenerate places nothing)
+        instances.retain(|i| self.protos[i.proto as usize].accel.is_some());
+        let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
         let boxes: Vec<Aabb> = instances
             .iter()
             .map(|i| {
-                let (a, b) = proto_bounds[i.proto as usize];
+                let (a, b) = self.protos[i.proto as usize].bounds;
                 let bx = i.bounds(a, b);
                 (lo, hi) = (lo.min(bx.min.into()), hi.max(bx.max.into()));
                 bx
@@ -154,8 +180,8 @@ impl Instances {
         }
         group_start.push(by_group.len() as u32);
         drop(boxes);
-        let tlas = build_cwbvh(&group_boxes, BvhBuildParams::medium_build(), &mut Duration::default());
-        Instances { protos, instances, tlas, group_start, by_group, bounds: (lo, hi) }
+        self.tlas = build_cwbvh(&group_boxes, BvhBuildParams::medium_build(), &mut Duration::default());
+        (self.instances, self.group_start, self.by_group, self.bounds) = (instances, group_start, by_group, (lo, hi));
     }
 
     /// The instances of top-level primitive `p` (a group of instances with equal bounds).

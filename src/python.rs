@@ -847,6 +847,14 @@ impl Scene {
         self.exclusive()?.camera = camera;
         Ok(())
     }
+    /// Places the instanced meshes by the transforms of `desc` (a scene dict of the same
+    /// meshes, instancers moved), keeping the triangles and the meshes' BVHs, and takes its
+    /// materials, lights and world: for the viewport. ValueError where it needs a full build.
+    fn update_transforms(&mut self, py: Python<'_>, desc: &Bound<'_, PyDict>) -> PyResult<()> {
+        let d = parse_scene(desc)?;
+        let scene = self.exclusive()?;
+        py.detach(|| scene.update_transforms(&d)).map_err(|e| verr(e.to_string()))
+    }
     /// Takes the materials, textures, lights and world of `desc` (a scene dict; its meshes
     /// are not read) and keeps the triangles, BVH and camera: for edits that move no
     /// geometry. The meshes the scene was built from must still be the scene's, with the

@@ -141,6 +141,10 @@ pub struct Scene {
     /// The BVH of the triangles stored in world space (`0..world_triangles`).
     accel: Option<Accel>,
     world_triangles: usize,
+    /// Bounds of the triangles stored in world space.
+    world_bounds: (Vec3, Vec3),
+    /// How the description's meshes with transforms were placed (`update_transforms`).
+    placement: Placement,
     /// The instanced meshes (triangles `world_triangles..`, in object space) and their
     /// two-level BVH.
     instances: Option<Instances>,
@@ -189,6 +193,56 @@ fn check_memory(triangles: u64, instances: u64, available: Option<u64>) -> Resul
     }
 }
 
+/// How the meshes with transforms are placed: stored once and instanced (two or more
+/// transforms, no emitting material), or as world-space copies (`place_meshes`).
+#[derive(Clone, Debug, Default)]
+struct Placement {
+    /// The mesh (index in the description) of each prototype.
+    protos: Vec<usize>,
+    /// The instances of the prototypes (singular transforms skipped; taken out once placed).
+    placed: Vec<Instance>,
+    /// The meshes placed as copies, and (kept by the scene) their transforms.
+    copied: Vec<usize>,
+    copied_transforms: Vec<Vec<[f32; 12]>>,
+    /// Instances skipped for a singular transform.
+    singular: usize,
+}
+
+impl Placement {
+    fn of(meshes: &[MeshDesc], materials: &[Material]) -> Result<Placement, SceneError> {
+        let emits = |m: &MeshDesc| {
+            if m.material_ids.is_empty() {
+                materials.first().is_some_and(|x| x.emits())
+            } else {
+                m.material_ids.iter().any(|&i| materials.get(i as usize).is_some_and(|x| x.emits()))
+            }
+        };
+        let mut p = Placement::default();
+        for (i, m) in meshes.iter().enumerate().filter(|(_, m)| !m.transforms.is_empty()) {
+            if m.transforms.iter().flatten().any(|x| !x.is_finite()) {
+                return Err(SceneError::Mesh {
+                    mesh: m.name.clone(),
+                    what: "has a NaN or Inf instance transform".into(),
+                });
+            }
+            if m.transforms.len() == 1 || emits(m) {
+                p.copied.push(i);
+                p.copied_transforms.push(m.transforms.clone());
+                p.singular += m.transforms.iter().filter(|xf| Instance::new(xf, 0).is_none()).count();
+            } else {
+                let k = p.protos.len() as u32;
+                let before = p.placed.len();
+                p.placed.extend(m.transforms.iter().filter_map(|xf| Instance::new(xf, k)));
+                p.singular += m.transforms.len() - (p.placed.len() - before);
+                if p.placed.len() > before {
+                    p.protos.push(i);
+                }
+            }
+        }
+        Ok(p)
+    }
+}
+
 impl Scene {
     /// Builds a scene from its description, in four steps: the camera; the shading inputs
     /// (textures, materials); the triangles (validated, degenerate ones skipped) and their
@@ -213,7 +267,7 @@ impl Scene {
         let shading = Shading::new(desc)?;
         report.warnings.extend(shading.warnings.iter().cloned());
         let normal_mapped: Vec<bool> = shading.materials.iter().map(|m| m.normal_texture.is_some()).collect();
-        let (tris, instances) = Self::place_meshes(meshes.borrow(), &shading, &normal_mapped, &mut report)?;
+        let (tris, instances, placement) = Self::place_meshes(meshes.borrow(), &shading, &normal_mapped, &mut report)?;
         drop(meshes);
         let instances = instances.map(|(ranges, placed)| Instances::build(&tris.positions, &ranges, placed));
         report.instances = instances.as_ref().map_or(0, |i| i.len());
@@ -224,6 +278,7 @@ impl Scene {
             lo = lo.min(*v);
             hi = hi.max(*v);
         }
+        let world_bounds = (lo, hi);
         if let Some(i) = &instances {
             (lo, hi) = (lo.min(i.bounds.0), hi.max(i.bounds.1));
         }
@@ -268,6 +323,8 @@ impl Scene {
             backdrop: lighting.backdrop,
             accel,
             world_triangles: tris_world,
+            world_bounds,
+            placement,
             instances,
             bounds_center,
             bounds_radius,
@@ -281,67 +338,79 @@ impl Scene {
     }
 
     /// The scene's triangles, with the instanced meshes' last (`Triangles::world` on), and
-    /// the instances that place them: (each prototype's triangles, the instances). A mesh
-    /// with `transforms` is stored once when it has two or more and does not emit; with one,
-    /// or emitting (each copy a light of its own), it is placed as world-space copies.
-    /// Instances with a singular transform are skipped (they have no surface), with a warning.
+    /// the instances that place them: (each prototype's triangles, the instances), and how
+    /// the meshes were placed (`Placement`, kept for `update_transforms`).
     #[allow(clippy::type_complexity)]
     fn place_meshes(
         meshes: &[MeshDesc],
         shading: &Shading,
         normal_mapped: &[bool],
         report: &mut SceneReport,
-    ) -> Result<(Triangles, Option<(Vec<std::ops::Range<usize>>, Vec<Instance>)>), SceneError> {
-        let mats = &shading.materials;
-        let emits = |m: &MeshDesc| {
-            if m.material_ids.is_empty() {
-                mats.first().is_some_and(|x| x.emits())
-            } else {
-                m.material_ids.iter().any(|&i| mats.get(i as usize).is_some_and(|x| x.emits()))
-            }
-        };
-        let (mut copies, mut protos, mut placed, mut singular) = (Vec::new(), Vec::new(), Vec::new(), 0);
-        for m in meshes.iter().filter(|m| !m.transforms.is_empty()) {
-            if m.transforms.iter().flatten().any(|x| !x.is_finite()) {
-                return Err(SceneError::Mesh {
-                    mesh: m.name.clone(),
-                    what: "has a NaN or Inf instance transform".into(),
-                });
-            }
-            if m.transforms.len() == 1 || emits(m) {
-                let before = copies.len();
-                copies.extend(m.transforms.iter().filter_map(|xf| crate::instancing::flattened(m, xf)));
-                singular += m.transforms.len() - (copies.len() - before);
-            } else {
-                let k = protos.len() as u32;
-                let before = placed.len();
-                placed.extend(m.transforms.iter().filter_map(|xf| Instance::new(xf, k)));
-                singular += m.transforms.len() - (placed.len() - before);
-                if placed.len() > before {
-                    protos.push(m);
-                }
-            }
+    ) -> Result<(Triangles, Option<(Vec<std::ops::Range<usize>>, Vec<Instance>)>, Placement), SceneError> {
+        let mut placement = Placement::of(meshes, &shading.materials)?;
+        let mut copies = Vec::new();
+        for &i in &placement.copied {
+            let m = &meshes[i];
+            copies.extend(m.transforms.iter().filter_map(|xf| crate::instancing::flattened(m, xf)));
         }
-        if singular > 0 {
+        if placement.singular > 0 {
             report.warnings.push(format!(
-                "{singular} instance(s) with a singular (zero-scale) transform were skipped: they have no surface"
+                "{} instance(s) with a singular (zero-scale) transform were skipped: they have no surface",
+                placement.singular
             ));
         }
         let mut order: Vec<&MeshDesc> = meshes.iter().filter(|m| m.transforms.is_empty()).collect();
         order.extend(copies.iter());
         let world_meshes = order.len();
-        order.extend(protos.iter().copied());
+        order.extend(placement.protos.iter().map(|&i| &meshes[i]));
         let stored = order.iter().map(|m| m.indices.len() as u64).sum();
-        check_memory(stored, placed.len() as u64, crate::integrator::memory::available())?;
+        check_memory(stored, placement.placed.len() as u64, crate::integrator::memory::available())?;
         let mut tris = Triangles::from_meshes(&order, shading.materials.len(), normal_mapped, report)?;
         tris.world = tris.ranges.get(world_meshes).map_or(tris.positions.len(), |r| r.start);
+        let mut placed = std::mem::take(&mut placement.placed);
         if placed.is_empty() {
-            return Ok((tris, None));
+            return Ok((tris, None, placement));
         }
         // (a prototype whose triangles are all degenerate places nothing)
         let ranges: Vec<_> = tris.ranges[world_meshes..].to_vec();
         placed.retain(|i| !ranges[i.proto as usize].is_empty());
-        Ok((tris, (!placed.is_empty()).then_some((ranges, placed))))
+        Ok((tris, (!placed.is_empty()).then_some((ranges, placed)), placement))
+    }
+
+    /// Places the instanced meshes by the transforms of `desc` (a scene dict of the same
+    /// meshes, their transforms moved: a moved instancer in the viewport), keeping the
+    /// triangles and the prototypes' BVHs; the top level, the scene's bounds and the lighting
+    /// (which reads them) are built again. An error where it takes a full build: a mesh the
+    /// core placed as copies (emitting, or placed once) moved, or which meshes are instanced
+    /// changed.
+    pub fn update_transforms(&mut self, desc: &SceneDesc) -> Result<(), SceneError> {
+        let rebuild = |what: &str| SceneError::Mesh {
+            mesh: "(viewport update)".into(),
+            what: format!("{what}: the scene needs building again"),
+        };
+        let mut placement = Placement::of(&desc.meshes, &self.materials)?;
+        if placement.protos != self.placement.protos {
+            return Err(rebuild("other meshes are instanced now"));
+        }
+        if placement.copied != self.placement.copied
+            || placement
+                .copied
+                .iter()
+                .zip(&self.placement.copied_transforms)
+                .any(|(&i, old)| &desc.meshes[i].transforms != old)
+        {
+            return Err(rebuild("a mesh placed as copies moved"));
+        }
+        let Some(instances) = self.instances.as_mut() else { return Err(rebuild("no instances")) };
+        instances.place(std::mem::take(&mut placement.placed));
+        self.report.instances = instances.len();
+        let (mut lo, mut hi) = self.world_bounds;
+        (lo, hi) = (lo.min(instances.bounds.0), hi.max(instances.bounds.1));
+        (lo, hi) = (lo.min(self.camera.position()), hi.max(self.camera.position()));
+        self.bounds_center = (lo + hi) * 0.5;
+        self.bounds_radius = ((hi - lo).length() * 0.5).max(1e-3);
+        self.placement = placement;
+        self.update_shading(desc)
     }
 
     /// Replaces the materials, textures, lights and world of a built scene with those of

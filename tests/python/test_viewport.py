@@ -197,6 +197,63 @@ def test_a_material_edit_that_makes_an_instanced_mesh_emit_rebuilds_the_scene(bp
     np.testing.assert_array_equal(updated, fresh.step(settings))
 
 
+def test_a_moved_instancer_places_the_instances_again_without_rebuilding_the_meshes(bpy_mod):
+    """Instances moved (an instanced mesh's transforms changed, as many) are an "instances"
+    change: the core places them again, keeping the meshes' BVHs, and renders what a fresh
+    session renders; a moved emitting mesh (placed as copies by the core) falls back to a
+    full build, and a changed instance count is a geometry change."""
+    from gdmlt_blender import viewport
+
+    desc = gdmlt.builtin_scene("cornell", 24, 24)
+    camera = desc.pop("camera")
+    block = next(m for m in desc["meshes"] if m["material_ids"][0] == 0 and len(m["indices"]) > 2)
+    block["transforms"] = np.array([[1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0],
+                                    [0.5, 0, 0, 0.3, 0, 0.5, 0, 0.2, 0, 0, 0.5, 0.4]], np.float32)
+    settings = {"max_bounces": 4, "threads": 1}
+    session = viewport.ViewportSession()
+    session.update(desc)
+    session.look_through(camera)
+    session._coarse = []
+    before = session.step(settings)
+    core = session.core
+
+    def fresh(d):
+        f = viewport.ViewportSession()
+        f.update(d)
+        f.look_through(camera)
+        f._coarse = []
+        return f.step(settings)
+
+    moved = dict(desc, meshes=[dict(m) for m in desc["meshes"]])
+    mb = next(m for m in moved["meshes"] if "transforms" in m)
+    mb["transforms"] = mb["transforms"].copy()
+    mb["transforms"][1, [3, 7]] = (-0.4, -0.3)
+    assert session.update(moved) == "instances"
+    updated = session.step(settings)
+    assert session.core is core, "the core scene was updated in place, not built again"
+    assert not np.array_equal(updated, before)
+    np.testing.assert_array_equal(updated, fresh(moved))
+
+    # the light placed twice (emitting: copies in the core) and moved: a full build
+    lit = dict(moved, meshes=[dict(m) for m in moved["meshes"]])
+    light = next(m for m in lit["meshes"] if m["name"] == "Light")
+    light["transforms"] = np.array([[1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0]] * 2, np.float32)
+    assert session.update(lit) == "geometry"
+    session.step(settings)
+    lit2 = dict(lit, meshes=[dict(m) for m in lit["meshes"]])
+    l2 = next(m for m in lit2["meshes"] if m["name"] == "Light")
+    l2["transforms"] = l2["transforms"].copy()
+    l2["transforms"][1, 7] = -0.3
+    core = session.core
+    assert session.update(lit2) == "instances"
+    np.testing.assert_array_equal(session.step(settings), fresh(lit2))
+    assert session.core is not core  # (built again: the core refused the in-place update)
+    one_more = dict(lit2, meshes=[dict(m) for m in lit2["meshes"]])
+    ob = next(m for m in one_more["meshes"] if "transforms" in m and m["name"] != "Light")
+    ob["transforms"] = np.concatenate([ob["transforms"], ob["transforms"][:1]])
+    assert session.update(one_more) == "geometry"
+
+
 def test_passes_average_progressively_up_to_the_viewport_samples(bpy_mod):
     """After a change: coarse passes first (at most 64, then 256 pixels across), then
     one-sample passes at the region's size whose running mean is exactly the mean of those
