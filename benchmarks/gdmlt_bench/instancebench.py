@@ -17,6 +17,8 @@ import sys
 import tempfile
 import time
 
+from .membench import STATUS
+
 _BUILD = r"""
 import sys
 from gdmlt.blend import import_bpy
@@ -102,14 +104,7 @@ scene.render.filepath = out
 t1 = time.perf_counter()
 bpy.ops.render.render(write_still=True)
 t2 = time.perf_counter()
-
-def status(key):
-    with open("/proc/self/status") as f:
-        for line in f:
-            if line.startswith(key):
-                return int(line.split()[1]) * 1024
-    return 0
-
+""" + STATUS + r"""
 print("RESULT", {"load": t1 - t0, "render": t2 - t1, "peak": status("VmHWM:")})
 """
 

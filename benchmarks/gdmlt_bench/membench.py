@@ -12,18 +12,21 @@ import os
 import subprocess
 import sys
 
-_CHILD = r"""
-import json, sys
-import gdmlt
-method, w, h, threads = sys.argv[1], int(sys.argv[2]), int(sys.argv[3]), int(sys.argv[4])
-
+# `status(key)`: a byte figure of /proc/self/status (VmRSS:, VmHWM:) in a child script
+STATUS = r"""
 def status(key):
     with open("/proc/self/status") as f:
         for line in f:
             if line.startswith(key):
                 return int(line.split()[1]) * 1024
     return 0
+"""
 
+_CHILD = r"""
+import json, sys
+import gdmlt
+method, w, h, threads = sys.argv[1], int(sys.argv[2]), int(sys.argv[3]), int(sys.argv[4])
+""" + STATUS + r"""
 scene = gdmlt.Scene(gdmlt.builtin_scene("cornell", w, h))
 before = status("VmRSS:")
 out = gdmlt.render(scene, method=method, spp=1, seed=1, threads=threads, reconstruction="l1")
