@@ -3263,7 +3263,7 @@ def test_bump_and_displacement_reach_the_core(bpy_mod):
     assert "bump_texture" in p and len(warnings) == 1 and "DISPLACEMENT" in warnings[0], warnings
 
 
-def _scatter(bpy, engine, spp, seed, count=30):
+def _scatter(bpy, engine, spp, seed, count=30, method="PT", nee=True):
     """A ground plane with a Geometry Nodes scatter (Distribute Points on Faces → Instance on
     Points of a smooth ico sphere, random rotation and non-uniform scale), a mirrored
     collection instance of the same sphere, a sun and a sky colour; orthographic from above
@@ -3337,7 +3337,10 @@ def _scatter(bpy, engine, spp, seed, count=30):
     scene.camera = ob
     r = scene.render
     r.resolution_x, r.resolution_y, r.resolution_percentage = 64, 64, 100
-    return for_engine(scene, engine, spp, seed, method="PT")
+    scene = for_engine(scene, engine, spp, seed, method=method)
+    if engine == "GDMLT":
+        scene.gdmlt.use_nee = nee
+    return scene
 
 
 def test_a_geometry_nodes_scatter_is_exported_as_instances(bpy_mod):
@@ -3361,7 +3364,12 @@ def test_a_geometry_nodes_scatter_is_exported_as_instances(bpy_mod):
     assert (core.triangles, core.instances) == (2 + 3 * 320, rocks)
 
 
-def test_a_geometry_nodes_scatter_agrees_with_cycles(bpy_mod, tmp_out):
-    """The scatter rendered by `pt` against Cycles: rotated, non-uniformly scaled and mirrored
-    instances of a smooth sphere, lit by a sun and the sky (block means within the noise)."""
-    assert_agrees_with_cycles(bpy_mod, _scatter, tmp_out, "scatter", spp=(64, 128), block=6)
+@pytest.mark.parametrize("method, nee", [("PT", True), ("BDPT", True), ("GDPT", True), ("PSSMLT", True),
+                                         ("GDPSSMLT", True), ("PT", False), ("GDPSSMLT", False)])
+def test_a_geometry_nodes_scatter_agrees_with_cycles(bpy_mod, tmp_out, method, nee):
+    """The scatter rendered by every method (NEE, and naive for pt and gdpssmlt) against
+    Cycles: rotated, non-uniformly scaled and mirrored instances of a smooth sphere, lit by a
+    sun and the sky (block means within the noise)."""
+    spp = (64, 128 if nee else 512)
+    build = lambda bpy, engine, n, seed: _scatter(bpy, engine, n, seed, method=method, nee=nee)  # noqa: E731
+    assert_agrees_with_cycles(bpy_mod, build, tmp_out, f"scatter{method}{nee}", spp=spp, block=6)
