@@ -143,11 +143,6 @@ impl Instances {
         out
     }
 
-    /// The number of prototypes.
-    pub fn prototypes(&self) -> usize {
-        self.protos.len()
-    }
-
     /// Places the prototypes by `instances` instead, keeping their bottom levels: the top
     /// level is built again (a moved instancer in the viewport).
     pub fn place(&mut self, mut instances: Vec<Instance>) {
@@ -203,14 +198,6 @@ impl Instances {
 
     pub fn is_empty(&self) -> bool {
         self.instances.is_empty()
-    }
-
-    /// Bytes held by the instances and both levels of the BVH.
-    pub fn bytes(&self) -> usize {
-        self.instances.len() * std::mem::size_of::<Instance>()
-            + self.tlas.nodes.len() * std::mem::size_of::<obvhs::cwbvh::node::CwBvhNode>()
-            + (self.tlas.primitive_indices.len() + self.group_start.len() + self.by_group.len()) * 4
-            + self.protos.iter().filter_map(|p| p.accel.as_ref()).map(Accel::bytes).sum::<usize>()
     }
 
     /// The closest hit of an instanced triangle along the ray in (tmin, tmax): its scene
