@@ -490,17 +490,18 @@ def material_params(mat, warnings, textures=None):
         return out
     surface = node_out.inputs.get("Surface")
     volume = node_out.inputs.get("Volume")
+    if volume is not None and volume.is_linked:
+        medium = _volume(volume.links[0].from_node, 1.0, warnings, what)
+        if medium is not None:
+            out["volume"] = medium
     if (surface is None or not surface.is_linked) and volume is not None and volume.is_linked:
         # Cycles' rule: a material with a Volume output and no Surface is the boundary of a
         # medium, which every ray passes unchanged (camera, scattered and shadow rays, and in
-        # alpha). The medium inside is not rendered yet: the boundary is passed as a clear
-        # Transparent BSDF (one transparent bounce per crossing, where Cycles counts crossings
-        # apart, up to 1024).
-        warnings.append(f"{what}: its Volume output is not rendered yet: the surface is passed as the "
-                        f"boundary of an empty medium (fog, smoke and absorption left out)")
+        # alpha): a clear Transparent BSDF (one transparent bounce per crossing, where Cycles
+        # counts crossings apart, up to 1024), the medium inside it.
         clear = dict(DEFAULT_MATERIAL, base_color=(0.0, 0.0, 0.0), **{"pass": (1.0, 1.0, 1.0)})
         return {**out, **_leaves_material([(1.0, clear)], False, warnings, what)}
-    _warn_unrendered_outputs(node_out, warnings, what, skip=("Displacement",))
+    _warn_unrendered_outputs(node_out, warnings, what, skip=("Displacement", "Volume"))
     if surface is None or not surface.is_linked:
         out["base_color"] = (0.0, 0.0, 0.0)  # Cycles renders an unconnected surface black
         return out
@@ -519,6 +520,83 @@ def material_params(mat, warnings, textures=None):
     elif displaced:
         out.update(displaced)
     return out
+
+
+def _volume(node, weight, warnings, what):
+    """The homogeneous medium of a Volume output's shader tree — Principled Volume, Volume
+    Scatter and Volume Absorption, summed through Add Shader and weighted through Mix Shader —
+    as the core's volume dict (coefficients per unit distance, as Cycles' volume closures:
+    Principled Volume's scattering Color × Density and absorption (1 − Color)(1 − √Absorption
+    Color) × Density; Volume Scatter's Color × Density; Volume Absorption's (1 − Color) ×
+    Density; emission Strength × Color). None when it holds nothing. A density or colour
+    from a texture is taken at its unlinked value (heterogeneous media are not rendered
+    yet), with a warning."""
+    acc = {"scattering": [0.0] * 3, "absorption": [0.0] * 3, "emission": [0.0] * 3}
+    g_weighted = [0.0]
+    _volume_leaves(node, weight, acc, g_weighted, warnings, what, set())
+    if not any(x > 0.0 for v in acc.values() for x in v):
+        return None
+    s = sum(acc["scattering"])
+    return {**{k: tuple(v) for k, v in acc.items()}, "anisotropy": g_weighted[0] / s if s > 0.0 else 0.0}
+
+
+def _volume_leaves(node, weight, acc, g_weighted, warnings, what, seen):
+    while node is not None and node.type == "REROUTE":
+        node = node.inputs[0].links[0].from_node if node.inputs[0].is_linked else None
+    if node is None or weight <= 0.0 or node.name in seen:
+        return
+    seen = seen | {node.name}
+
+    def value(name, default):
+        return _input_value(node, name, warnings, what, default)
+
+    def colour(name):
+        c = value(name, (1.0, 1.0, 1.0, 1.0))
+        return [max(float(x), 0.0) for x in tuple(c)[:3]]
+
+    def add(key, c, scale):
+        for i in range(3):
+            acc[key][i] += weight * scale * c[i]
+
+    if node.type == "ADD_SHADER":
+        for sock in node.inputs:
+            if sock.is_linked:
+                _volume_leaves(sock.links[0].from_node, weight, acc, g_weighted, warnings, what, seen)
+        return
+    if node.type == "MIX_SHADER":
+        f = min(max(float(value("Fac", 0.5)), 0.0), 1.0)
+        shaders = [sock for sock in node.inputs if sock.type == "SHADER"]
+        for sock, w in zip(shaders, (1.0 - f, f)):
+            if sock.is_linked:
+                _volume_leaves(sock.links[0].from_node, weight * w, acc, g_weighted, warnings, what, seen)
+        return
+    if node.type not in ("PRINCIPLED_VOLUME", "VOLUME_SCATTER", "VOLUME_ABSORPTION"):
+        warnings.append(f"{what}: volume shader node '{node.name}' ({node.type}) is not rendered (left out)")
+        return
+    density = max(float(value("Density", 1.0)), 0.0)
+    color = colour("Color")
+    if node.type in ("PRINCIPLED_VOLUME", "VOLUME_SCATTER"):
+        g = min(max(float(value("Anisotropy", 0.0)), -0.999), 0.999)
+        add("scattering", color, density)
+        g_weighted[0] += weight * density * sum(color) * g
+        phase = getattr(node, "phase", "HENYEY_GREENSTEIN")
+        if phase != "HENYEY_GREENSTEIN":
+            warnings.append(f"{what}: the {phase.replace('_', '-').title()} phase function of '{node.name}' is "
+                            f"rendered as Henyey-Greenstein with its anisotropy")
+    if node.type == "VOLUME_ABSORPTION":
+        add("absorption", [max(1.0 - c, 0.0) for c in color], density)
+    if node.type == "PRINCIPLED_VOLUME":
+        a = colour("Absorption Color")
+        add("absorption", [max(1.0 - c, 0.0) * max(1.0 - x ** 0.5, 0.0) for c, x in zip(color, a)], density)
+        strength = max(float(value("Emission Strength", 0.0)), 0.0)
+        if strength > 0.0:
+            add("emission", colour("Emission Color"), strength)
+        if float(value("Blackbody Intensity", 0.0)) > 1e-3:
+            warnings.append(f"{what}: the blackbody emission of '{node.name}' is not rendered yet (left out)")
+        for attr in ("Density Attribute", "Color Attribute", "Temperature Attribute"):
+            sock = node.inputs.get(attr)
+            if sock is not None and sock.is_linked:
+                warnings.append(f"{what}: '{node.name}' reads {attr} from a grid; grids are not rendered yet")
 
 
 def _leaves_material(leaves, mixed, warnings, what):

@@ -59,6 +59,7 @@ class GDMLTRenderSettings(bpy.types.PropertyGroup):
     diffuse_bounces: _kind_bounces("Diffuse", "diffuse reflection", "diffuse_bounces")
     glossy_bounces: _kind_bounces("Glossy", "glossy reflection", "glossy_bounces")
     transmission_bounces: _kind_bounces("Transmission", "transmission (through glass)", "transmission_bounces")
+    volume_bounces: _kind_bounces("Volume", "scattering in a volume (fog, smoke)", "volume_bounces")
     transparent_max_bounces: IntProperty(name="Transparent", default=D["transparent_bounces"], min=0, max=1024,
                                          description="Maximum number of transparent surfaces a path crosses, as "
                                                      "Cycles' Transparent Max Bounces (crossings are not bounces)")

@@ -67,6 +67,7 @@ class GDMLT_PT_light_paths(GDMLTRenderPanel, bpy.types.Panel):
         col.prop(s, "diffuse_bounces")
         col.prop(s, "glossy_bounces")
         col.prop(s, "transmission_bounces")
+        col.prop(s, "volume_bounces")
         col.prop(s, "transparent_max_bounces")
         col = layout.column(align=True, heading="Clamping")
         col.prop(s, "clamp_direct")

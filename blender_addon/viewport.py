@@ -27,7 +27,7 @@ import numpy as np
 # the coarse passes shown right after a change: at most this many pixels across
 COARSE_SIZES = (64, 256)
 # settings of gdmlt.render a viewport pass takes from the scene (the rest are F12's)
-PASS_SETTINGS = ("max_bounces", "nee", "diffuse_bounces", "glossy_bounces", "transmission_bounces",
+PASS_SETTINGS = ("max_bounces", "nee", "diffuse_bounces", "glossy_bounces", "transmission_bounces", "volume_bounces",
                  "transparent_bounces", "clamp_direct", "clamp_indirect")
 
 

@@ -16,6 +16,7 @@ pub mod guiding;
 pub mod instancing;
 pub mod integrator;
 pub mod math;
+pub mod medium;
 pub mod output;
 pub mod path;
 pub mod pixel_filter;

@@ -4,8 +4,10 @@
 //! supplying a mutated primary-sample stream instead of independent numbers.
 //!
 //! Primary samples are consumed in a fixed order — lens (2), then per vertex: light choice
-//! (1), light point (2), BSDF lobe (1), BSDF direction (2), Russian roulette (1) — whether or
-//! not they are used, so that a coordinate always means the same thing to a Markov chain.
+//! (1), light point (2), BSDF lobe (1), BSDF direction (2), Russian roulette (1), and the
+//! free-flight distance of the segment that reached it (1) — whether or not they are used,
+//! so that a coordinate always means the same thing to a Markov chain. A vertex in a medium
+//! (`crate::medium`) reads the same eight: its phase function takes the BSDF direction's.
 //!
 //! Bounce limit as in Cycles' "Max Bounces" B: a path scatters at most B+1 times, so B = 0
 //! is direct lighting (light sampled at, or hit after, the first surface).
@@ -14,6 +16,7 @@ use crate::accel::TriHit;
 use crate::bsdf::{Guide, Scatter};
 use crate::guiding::{self, DTree, Guiding, PathRecords};
 use crate::math::{is_finite_spectrum, power_heuristic, Frame, Spectrum};
+use crate::medium::{Medium, MediumStack};
 use crate::sampler::Sampler;
 use crate::scene::{CameraRay, Scene, SurfaceInteraction, TexCoord};
 use glam::{Vec2, Vec3};
@@ -44,7 +47,7 @@ pub const RR_START_DEPTH: u32 = 3;
 /// (`PathSettings::transparent_bounces`).
 pub const MAX_TRANSPARENT_BOUNCES: u32 = 16;
 /// Primary samples used per path vertex (see the module comment).
-pub const SAMPLES_PER_VERTEX: usize = 7;
+pub const SAMPLES_PER_VERTEX: usize = 8;
 
 /// Path length limits, with Cycles' meaning: a path may scatter `max_bounces` times in all
 /// and at most `diffuse_bounces` / `glossy_bounces` / `transmission_bounces` times of each
@@ -59,6 +62,9 @@ pub struct PathSettings {
     pub diffuse_bounces: u32,
     pub glossy_bounces: u32,
     pub transmission_bounces: u32,
+    /// Scatterings in media (Cycles' "Volume" bounces; Blender's default is 0: single
+    /// scattering, light sampled at the first scattering in a medium and no further).
+    pub volume_bounces: u32,
     pub transparent_bounces: u32,
     /// Cycles' Clamp Direct / Clamp Indirect (0 = off): a light contribution whose RGB sum
     /// exceeds 3 × the limit is scaled down to it (Cycles' scale: the sum of three channels) — direct for light reaching the camera ray or
@@ -98,8 +104,8 @@ impl PathSettings {
 
     /// The per-kind limits: diffuse, glossy, transmission.
     #[inline]
-    fn kind_limits(&self) -> [u32; 3] {
-        [self.diffuse_bounces, self.glossy_bounces, self.transmission_bounces]
+    fn kind_limits(&self) -> [u32; 4] {
+        [self.diffuse_bounces, self.glossy_bounces, self.transmission_bounces, self.volume_bounces]
     }
 }
 
@@ -111,6 +117,7 @@ impl Default for PathSettings {
             diffuse_bounces: NO_KIND_LIMIT,
             glossy_bounces: NO_KIND_LIMIT,
             transmission_bounces: NO_KIND_LIMIT,
+            volume_bounces: NO_KIND_LIMIT,
             transparent_bounces: MAX_TRANSPARENT_BOUNCES,
             clamp_direct: 0.0,
             clamp_indirect: 0.0,
@@ -236,6 +243,10 @@ pub struct Event {
     /// offset re-evaluates a light sample *and* a BSDF hit with it, since either may shift
     /// to a pair of directions there that only light sampling reaches.
     pub as_cycles_light: bool,
+    /// A medium touched the path up to this light (a segment through one, a scattering in
+    /// one, a vertex on a medium's boundary) or the light's own segment: the shift does not
+    /// follow paths through media (`shift.rs`, the base then takes full weight).
+    pub medium: bool,
 }
 
 impl Event {
@@ -346,13 +357,14 @@ pub fn trace_path_guided<S: Sampler>(
     if primary.ray.is_dead() {
         return out; // (outside a fisheye's circle: no light)
     }
-    let mut st = PathState::new(primary.ray, cfg.nee && scene.has_lights(), !cfg.strict_glass_nee);
+    let mut st =
+        PathState::new(primary.ray, cfg.nee && scene.has_lights(), !cfg.strict_glass_nee, scene.camera_media());
     let mut pending_hit = Some(primary.hit); // the camera ray's, traced by the caller
     let mut guide = Some(Spectrum::ONE); // the denoising guides' throughput, until they are written
                                          // what the path brings back through its guidable vertices, for the guide's training
     let mut learn = guiding.filter(|g| g.record).map(|_| PathRecords::default());
     loop {
-        // 1. the segment
+        // 1. the segment, and the primary samples of the vertex it reaches
         out.segments += 1;
         let hit = match pending_hit.take() {
             Some(h) => h,
@@ -360,16 +372,38 @@ pub fn trace_path_guided<S: Sampler>(
             None if st.depth == 0 => scene.intersect_camera(st.o, st.d, st.tmin, st.tmax),
             None => scene.intersect(st.o, st.d, st.tmin, st.tmax),
         };
-        let t_surface = hit.map_or(st.tmax, |h| h.t);
+        let mut t_surface = hit.map_or(st.tmax, |h| h.t);
         // the camera ray itself (very-direct light); lamps stay invisible to the camera
         // through transparent surfaces too (depth counts scattering, not crossings)
         let camera_ray = st.nvert == 0;
         let camera_visibility = st.depth == 0;
+        let u = VertexSamples::draw(sampler);
 
-        // 2. analytic lights crossed before the surface (lights are transparent). After
+        // 2. the medium the segment runs through, if any: its emission, then a free flight
+        // that may end before the surface (the segment's light is attenuated by T/P)
+        let (mut in_medium, mut pass_weight) = (None, Spectrum::ONE);
+        if let Some(m) = scene.medium(&st.media) {
+            st.touched_medium = true;
+            let emitted = m.emitted(t_surface);
+            if emitted.max_element() > 0.0 {
+                let c = cfg.clamp(st.beta * emitted, st.depth);
+                add(&mut out, &mut learn, c, camera_ray, st.direct_emission());
+                st.record_medium_emission(&mut record, c);
+            }
+            match m.sample_distance(u.distance, t_surface) {
+                crate::medium::FreeFlight::Scatter { t, weight } => {
+                    in_medium = Some((m, t, weight));
+                    t_surface = t;
+                }
+                crate::medium::FreeFlight::Pass { weight } => pass_weight = weight,
+            }
+        }
+
+        // 3. analytic lights crossed before the surface (lights are transparent). After
         // pass-throughs the light pdf is NEE's from the vertex the segment started at.
         let mut crossed = Spectrum::ZERO;
         let (prev_p, o, d) = (st.prev_p, st.o, st.d);
+        let medium = scene.medium(&st.media);
         scene.for_each_light_crossed(prev_p, o, d, t_surface, camera_visibility, |li, t, le, pdf_light| {
             if !scene.lights_receiver(li, st.prev_prim) {
                 return; // (light linking: it does not light the vertex the ray left)
@@ -377,12 +411,30 @@ pub fn trace_path_guided<S: Sampler>(
             let inf = !t.is_finite();
             let z = if inf { d } else { o + d * t };
             let pdf_light = if st.passed { scene.light_eval(li, prev_p, z).map_or(0.0, |x| x.1) } else { pdf_light };
+            // (in a medium: reached with T(t) where the free flight went past t, P(t))
+            let le = match medium {
+                Some(m) => le * m.transmittance(t) / m.pass_probability(t).max(1e-30),
+                None => le,
+            };
             crossed += le * st.mis(pdf_light);
             st.record_emission(&mut record, li, z, inf, le, pdf_light);
         });
         add(&mut out, &mut learn, cfg.clamp(st.beta * crossed, st.depth), camera_ray, st.direct_emission());
+        st.beta *= pass_weight;
+        if !(st.beta.max_element() > 0.0) {
+            break; // (a medium absorbed every channel the path carried)
+        }
 
-        // 3. a miss: the world, or the film's transparency
+        // 4. a scattering in the medium: a vertex of its own (light sample, phase function)
+        if let Some((m, t, weight)) = in_medium {
+            st.beta *= weight;
+            if !st.scatter_in_medium(scene, cfg, &m, t, &u, &mut out, &mut learn, record.as_deref_mut()) {
+                break;
+            }
+            continue;
+        }
+
+        // 5. a miss: the world, or the film's transparency
         let Some(hit) = hit else {
             if camera_visibility && scene.camera.film_transparent {
                 // the world behind the camera ray (or behind the transparent surfaces it
@@ -406,7 +458,7 @@ pub fn trace_path_guided<S: Sampler>(
             break;
         };
 
-        // 4. the surface: a holdout the camera sees ends the path as the film's transparency;
+        // 6. the surface: a holdout the camera sees ends the path as the film's transparency;
         // else its emission, the vertex
         if camera_visibility && scene.is_holdout(hit.prim) {
             out.transparent += (st.beta.x + st.beta.y + st.beta.z) / 3.0;
@@ -426,6 +478,8 @@ pub fn trace_path_guided<S: Sampler>(
             let li = scene.triangle_light(si.prim).unwrap_or(u32::MAX);
             st.record_emission(&mut record, li, si.p, false, le, pdf_light);
         }
+        // (a medium's boundary: the shift does not follow the path past it)
+        st.touched_medium |= scene.has_medium(si.material);
         let bsdf = scene.bsdf_at(&si);
         if let Some(t) = guide {
             // the denoising guides: this surface, or through it if it is mirror-like
@@ -444,15 +498,11 @@ pub fn trace_path_guided<S: Sampler>(
         if let Some(p) = record.as_deref_mut() {
             p.vertices.push(Vertex::at(&si, -st.d, st.beta, st.prev_pdf, bsdf.is_diffuse()));
         }
+        let VertexSamples {
+            light_select: u_light_select, light: u_light, lobe: u_lobe, bsdf: u_bsdf, rr: u_rr, ..
+        } = u;
 
-        // 5. this vertex's primary samples, consumed in their fixed order
-        let u_light_select = sampler.next_1d();
-        let u_light = sampler.next_2d();
-        let u_lobe = sampler.next_1d();
-        let u_bsdf = sampler.next_2d();
-        let u_rr = sampler.next_1d();
-
-        // 6. the bounce limits. Past them the path still goes through transparent surfaces to
+        // 7. the bounce limits. Past them the path still goes through transparent surfaces to
         // the light behind them, as Cycles' PATH_RAY_TERMINATE_AFTER_TRANSPARENT: only the
         // pass-through lobe, taken as `Bsdf::sample` takes it (`sample_pass_through`: the
         // recorded vertex is the one a sampled pass-through records, the shift follows it, and
@@ -460,7 +510,7 @@ pub fn trace_path_guided<S: Sampler>(
         let wo = si.frame.to_local(-st.d);
         if st.depth > cfg.max_bounces || st.by_kind.iter().zip(&cfg.kind_limits()).any(|(n, max)| n > max) {
             let through = bsdf.sample_pass_through(wo, u_lobe);
-            if through.is_some_and(|bs| st.scatter(&si, wo, &bs, u_rr, cfg, record.as_deref_mut())) {
+            if through.is_some_and(|bs| st.scatter(scene, &si, wo, &bs, u_rr, cfg, record.as_deref_mut())) {
                 continue;
             }
             break;
@@ -476,24 +526,25 @@ pub fn trace_path_guided<S: Sampler>(
             None => bsdf.sample(wo, u_lobe, u_bsdf),
         };
 
-        // 7. next-event estimation
+        // 8. next-event estimation
         if st.use_nee && !bsdf.is_delta() {
-            let nee = next_event(scene, &si, &bsdf, wo, u_light_select, u_light, st.as_cycles_light, dist);
+            let nee = next_event(scene, &si, &bsdf, wo, u_light_select, u_light, st.as_cycles_light, dist, st.media);
             if let Some(e) = nee {
                 let c = cfg.clamp(st.beta * e.f * e.le * (e.weight / e.pdf_l), st.depth);
                 add(&mut out, &mut learn, c, false, st.depth == 0);
                 let numerator = st.beta * e.f * e.le;
                 if let (Some(p), true) = (record.as_deref_mut(), numerator.max_element() > 0.0) {
-                    p.events.push(Event { vertex: st.nvert, numerator, direct: st.depth == 0, ..e.event });
+                    let medium = st.touched_medium || e.event.medium;
+                    p.events.push(Event { vertex: st.nvert, numerator, direct: st.depth == 0, medium, ..e.event });
                 }
             }
         }
 
-        // 8. the BSDF sample that continues the path
+        // 9. the BSDF sample that continues the path
         let Some(bs) = sampled else {
             break;
         };
-        if !st.scatter(&si, wo, &bs, u_rr, cfg, record.as_deref_mut()) {
+        if !st.scatter(scene, &si, wo, &bs, u_rr, cfg, record.as_deref_mut()) {
             break;
         }
         if let (Some(l), Some(g)) = (learn.as_mut(), guided) {
@@ -522,7 +573,7 @@ struct PathState {
     /// crossings, and scattering events of each kind (diffuse, glossy, transmission).
     depth: u32,
     transparent: u32,
-    by_kind: [u32; 3],
+    by_kind: [u32; 4],
     /// Surface vertices so far (the index of the next one).
     nvert: u32,
     /// The last scattering vertex (the camera's position at first): where the segment's
@@ -545,10 +596,14 @@ struct PathState {
     /// Light events are evaluated with what Cycles' light sampling adds through rough glass
     /// (NEE on, `strict_glass_nee` off).
     as_cycles_light: bool,
+    /// The media the segment runs through, and whether any medium has touched the path yet
+    /// (`Event::medium`).
+    media: MediumStack,
+    touched_medium: bool,
 }
 
 impl PathState {
-    fn new(cam: CameraRay, use_nee: bool, as_cycles_light: bool) -> PathState {
+    fn new(cam: CameraRay, use_nee: bool, as_cycles_light: bool, media: MediumStack) -> PathState {
         PathState {
             o: cam.origin,
             d: cam.dir,
@@ -557,7 +612,7 @@ impl PathState {
             beta: Spectrum::ONE,
             depth: 0,
             transparent: 0,
-            by_kind: [0; 3],
+            by_kind: [0; 4],
             nvert: 0,
             prev_p: cam.origin,
             prev_prim: u32::MAX,
@@ -569,6 +624,8 @@ impl PathState {
             last_vertex: CAMERA_VERTEX,
             use_nee,
             as_cycles_light: use_nee && as_cycles_light,
+            media,
+            touched_medium: false,
         }
     }
 
@@ -633,6 +690,7 @@ impl PathState {
                 through_transparent: self.passed,
                 direct: self.direct_emission(),
                 as_cycles_light: self.as_cycles_light,
+                medium: self.touched_medium,
             });
         }
     }
@@ -640,8 +698,10 @@ impl PathState {
     /// Continues the path with the BSDF sample `bs` at `si`: the throughput, the bounce
     /// counts, the recorded vertex's outgoing half, Russian roulette (after RR_START_DEPTH
     /// scatterings, `u_rr`) and the next segment. False when the path ends here.
+    #[allow(clippy::too_many_arguments)]
     fn scatter(
         &mut self,
+        scene: &Scene,
         si: &SurfaceInteraction,
         wo: Vec3,
         bs: &crate::bsdf::BsdfSample,
@@ -702,8 +762,177 @@ impl PathState {
             self.prev_delta = bs.lobe == crate::bsdf::LobeKind::Specular;
         }
         self.nvert += 1;
+        self.media = scene.media_towards(self.media, si, wi_world);
         self.o = si.spawn_origin(wi_world);
         self.d = wi_world;
+        self.tmin = 0.0;
+        self.tmax = f32::INFINITY;
+        true
+    }
+}
+
+/// A vertex's primary samples (the module comment's order).
+#[derive(Clone, Copy, Debug)]
+struct VertexSamples {
+    light_select: f32,
+    light: Vec2,
+    lobe: f32,
+    bsdf: Vec2,
+    rr: f32,
+    /// The free-flight distance of the segment that reaches the vertex.
+    distance: f32,
+}
+
+impl VertexSamples {
+    #[inline]
+    fn draw<S: Sampler>(sampler: &mut S) -> VertexSamples {
+        let light_select = sampler.next_1d();
+        let light = sampler.next_2d();
+        let lobe = sampler.next_1d();
+        let bsdf = sampler.next_2d();
+        let rr = sampler.next_1d();
+        let distance = sampler.next_1d();
+        VertexSamples { light_select, light, lobe, bsdf, rr, distance }
+    }
+}
+
+impl PathState {
+    /// Records light gathered along a segment in a medium (its emission) as an event the
+    /// shift does not follow (`Event::medium`): numerator `c`, pdf 1.
+    fn record_medium_emission(&self, rec: &mut Option<&mut Path>, c: Spectrum) {
+        let Some(p) = rec.as_deref_mut().filter(|_| c.max_element() > 0.0) else { return };
+        let vertex = match (self.nvert == 0, self.last_vertex) {
+            (true, _) => CAMERA_VERTEX,
+            (false, CAMERA_VERTEX) => 0,
+            (false, v) => v,
+        };
+        p.events.push(Event {
+            nee: false,
+            vertex,
+            light: u32::MAX,
+            z: self.o,
+            at_infinity: false,
+            delta: false,
+            le: c,
+            f: Spectrum::ONE,
+            pdf_b: 1.0,
+            pdf_l: 0.0,
+            numerator: c,
+            through_transparent: self.passed,
+            direct: self.direct_emission(),
+            as_cycles_light: self.as_cycles_light,
+            medium: true,
+        });
+    }
+
+    /// A scattering in medium `m` at distance `t` along the segment (the throughput already
+    /// weighted by the free flight): the vertex's bounce limits, a light sample through the
+    /// media on its way (phase function × transmittance, MIS with phase sampling), and the
+    /// phase-function sample that continues the path (with Russian roulette). False when
+    /// the path ends here. The recorded vertex has no surface (`material` u32::MAX).
+    #[allow(clippy::too_many_arguments)]
+    fn scatter_in_medium(
+        &mut self,
+        scene: &Scene,
+        cfg: &PathSettings,
+        m: &Medium,
+        t: f32,
+        u: &VertexSamples,
+        out: &mut PathContribution,
+        learn: &mut Option<PathRecords>,
+        mut record: Option<&mut Path>,
+    ) -> bool {
+        let p = self.o + self.d * t;
+        let wo = -self.d;
+        // (a point with no surface: no normal to offset rays along, no triangle)
+        let at = SurfaceInteraction {
+            p,
+            ng: Vec3::ZERO,
+            frame: Frame::from_normal(wo),
+            prim: u32::MAX,
+            inst: crate::accel::NO_INSTANCE,
+            material: u32::MAX,
+            t,
+            front: true,
+            tex: TexCoord::default(),
+            color: Spectrum::ZERO,
+            unmapped: Vec3::Z,
+            wo: Vec3::Z,
+            camera: false,
+            bary: Vec2::ZERO,
+        };
+        if let Some(rec) = record.as_deref_mut() {
+            rec.vertices.push(Vertex::at(&at, wo, self.beta, self.prev_pdf, true));
+        }
+        // 1. the bounce limits (a medium has no pass-through: the path ends)
+        if self.depth > cfg.max_bounces || self.by_kind.iter().zip(&cfg.kind_limits()).any(|(n, max)| n > max) {
+            return false;
+        }
+        // 2. a light sample, through the media between
+        if self.use_nee {
+            if let Some((li, ls)) = scene.sample_light(p, u.light_select, u.light) {
+                let f = m.phase.eval(wo, ls.wi);
+                let reach = if scene.casts_shadow(li) {
+                    scene.transmittance_in(&at, &ls, self.media)
+                } else {
+                    Some((Spectrum::ONE, false, false))
+                };
+                if let (true, Some((tr, crossed, _))) = (f > 0.0, reach) {
+                    let weight = if ls.is_delta { 1.0 } else { power_heuristic(ls.pdf, f) };
+                    let le = ls.radiance * tr;
+                    let numerator = self.beta * f * le;
+                    add(out, learn, cfg.clamp(numerator * (weight / ls.pdf), self.depth), false, self.depth == 0);
+                    if let (Some(rec), true) = (record.as_deref_mut(), numerator.max_element() > 0.0) {
+                        let at_infinity = !ls.dist.is_finite();
+                        rec.events.push(Event {
+                            nee: true,
+                            vertex: self.nvert,
+                            light: li,
+                            z: if at_infinity { ls.wi } else { ls.p },
+                            at_infinity,
+                            delta: ls.is_delta,
+                            le,
+                            f: Spectrum::splat(f),
+                            pdf_b: if ls.is_delta { 0.0 } else { f },
+                            pdf_l: ls.pdf,
+                            numerator,
+                            through_transparent: crossed,
+                            direct: self.depth == 0,
+                            as_cycles_light: false,
+                            medium: true,
+                        });
+                    }
+                }
+            }
+        }
+        // 3. the phase function's sample (its weight is 1), Russian roulette
+        let (wi, pdf) = m.phase.sample(wo, u.bsdf);
+        self.depth += 1;
+        self.by_kind[3] += 1;
+        let q = if self.depth >= RR_START_DEPTH { survival_probability(self.beta) } else { 1.0 };
+        if let Some(v) = record.and_then(|p| p.vertices.last_mut()) {
+            (v.wi, v.f_out, v.pdf_out, v.rr) = (wi, Spectrum::splat(pdf), pdf, q);
+        }
+        if q < 1.0 {
+            if !(q > 0.0) || u.rr >= q {
+                return false;
+            }
+            self.beta /= q;
+        }
+        if !is_finite_spectrum(self.beta) || self.beta.max_element() <= 0.0 || !(pdf > 0.0) {
+            return false;
+        }
+        self.passed = false;
+        self.pass_tint = Spectrum::ONE;
+        self.last_vertex = self.nvert;
+        self.prev_p = p;
+        self.prev_prim = u32::MAX;
+        self.prev_pdf = pdf;
+        self.prev_fcos = Spectrum::splat(pdf);
+        self.prev_delta = false;
+        self.nvert += 1;
+        self.o = p;
+        self.d = wi;
         self.tmin = 0.0;
         self.tmax = f32::INFINITY;
         true
@@ -736,6 +965,7 @@ fn next_event(
     u_light: Vec2,
     as_cycles: bool,
     guide: Option<&DTree>,
+    media: MediumStack,
 ) -> Option<NextEvent> {
     let (li, ls) = scene.sample_light(si.p, u_select, u_light)?;
     if !scene.lights_receiver(li, si.prim) {
@@ -752,9 +982,10 @@ fn next_event(
     if !(f.max_element() > 0.0) {
         return None;
     }
-    // (a light whose Cast Shadow is off reaches every point it faces)
-    let (tr, crossed_transparent) =
-        if scene.casts_shadow(li) { scene.transmittance(si, &ls)? } else { (Spectrum::ONE, false) };
+    // (a light whose Cast Shadow is off reaches every point it faces; media still attenuate)
+    let media = scene.media_towards(media, si, ls.wi);
+    let (tr, crossed_transparent, medium) =
+        if scene.casts_shadow(li) { scene.transmittance_in(si, &ls, media)? } else { (Spectrum::ONE, false, false) };
     let radiance = ls.radiance * tr;
     let pdf_b = match guide.filter(|_| !ls.is_delta) {
         Some(d) => guiding::mixture_pdf(d, ls.wi, pdf_b), // (BSDF sampling draws from the mixture here)
@@ -777,6 +1008,7 @@ fn next_event(
         through_transparent: crossed_transparent,
         direct: false, // set by the caller
         as_cycles_light: as_cycles,
+        medium,
     };
     Some(NextEvent { le: radiance, f, pdf_l: ls.pdf, weight, event })
 }
@@ -799,17 +1031,23 @@ pub fn first_hit(scene: &Scene, cam: &CameraRay, hit: Option<TriHit>) -> FirstHi
     if cam.is_dead() {
         return out;
     }
-    let l = &mut out.very_direct;
     let tmax = hit.map_or(cam.tmax, |h| h.t);
-    scene.for_each_light_crossed(cam.origin, cam.origin, cam.dir, tmax, true, |_, _, le, _| *l += le);
+    // (a camera in a medium sees through it: its transmittance, and the light it emits)
+    let medium = scene.medium(&scene.camera_media());
+    let tr = |t: f32| medium.map_or(Spectrum::ONE, |m| m.transmittance(t));
+    let l = &mut out.very_direct;
+    scene.for_each_light_crossed(cam.origin, cam.origin, cam.dir, tmax, true, |_, t, le, _| *l += le * tr(t));
+    if let Some(m) = medium {
+        out.very_direct += m.emitted(tmax);
+    }
     match hit {
         None if scene.camera.film_transparent => {}
-        None => out.very_direct += scene.camera_background(cam.dir),
+        None => out.very_direct += scene.camera_background(cam.dir) * tr(f32::INFINITY),
         Some(h) if scene.is_holdout(h.prim) => {}
         Some(h) => {
             let si = SurfaceInteraction { camera: true, ..scene.interaction(&h, cam.dir) };
             if let Some((le, _)) = scene.surface_emission(&si, cam.origin, cam.dir) {
-                out.very_direct += le;
+                out.very_direct += le * tr(h.t);
             }
             out.albedo = scene.bsdf_at(&si).albedo();
             out.normal = si.frame.n;
@@ -829,7 +1067,12 @@ pub fn camera_transparency(scene: &Scene, cam: &CameraRay, hit: Option<TriHit>, 
     }
     let mut t = Spectrum::ONE;
     let mut hit = hit;
+    let mut media = scene.camera_media();
     for _ in 0..=max_crossings {
+        // (through media: their transmittance to the next surface, or to infinity)
+        if let Some(m) = scene.medium(&media) {
+            t *= m.transmittance(hit.map_or(f32::INFINITY, |h| h.t));
+        }
         let seen_through = (t.x + t.y + t.z) / 3.0;
         let Some(h) = hit else {
             return if scene.camera.film_transparent { seen_through } else { 0.0 };
@@ -842,6 +1085,7 @@ pub fn camera_transparency(scene: &Scene, cam: &CameraRay, hit: Option<TriHit>, 
         if !(t.max_element() > 0.0) {
             return 0.0;
         }
+        media = scene.media_towards(media, &si, cam.dir);
         hit = scene.intersect_camera(si.spawn_origin(cam.dir), cam.dir, 0.0, f32::INFINITY);
     }
     0.0 // past the transparent-bounce limit the path tracer stops too: opaque

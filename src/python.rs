@@ -233,6 +233,14 @@ fn material_dict<'py>(py: Python<'py>, m: &MaterialDesc) -> PyResult<Bound<'py, 
             md.set_item(key, r)?;
         }
     }
+    if let Some(v) = &m.volume {
+        let vd = PyDict::new(py);
+        vd.set_item("scattering", v.scattering)?;
+        vd.set_item("absorption", v.absorption)?;
+        vd.set_item("emission", v.emission)?;
+        vd.set_item("anisotropy", v.anisotropy)?;
+        md.set_item("volume", vd)?;
+    }
     if let Some(b) = &m.blend {
         md.set_item("blend", material_dict(py, b)?)?;
         if let Some(t) = m.blend_texture {
@@ -326,7 +334,27 @@ fn parse_material(d: &Bound<'_, PyDict>) -> PyResult<MaterialDesc> {
             }),
         },
         blend_ray_curve: get_or(d, "blend_ray_curve", Vec::new(), &ctx)?,
+        volume: match item(d, "volume")? {
+            Some(v) if !v.is_none() => Some(parse_volume(
+                v.cast::<PyDict>().map_err(|_| verr(format!("{ctx}: volume must be a dict")))?,
+                &ctx,
+            )?),
+            _ => None,
+        },
         name,
+    })
+}
+
+/// A material's medium: {"scattering": RGB, "absorption": RGB, "emission": RGB (per unit
+/// distance), "anisotropy": g} (each optional, default 0).
+fn parse_volume(d: &Bound<'_, PyDict>, ctx: &str) -> PyResult<scene::desc::VolumeDesc> {
+    let ctx = format!("{ctx}: volume");
+    let zero = [0.0f32; 3];
+    Ok(scene::desc::VolumeDesc {
+        scattering: rgb(d, "scattering", zero, &ctx)?,
+        absorption: rgb(d, "absorption", zero, &ctx)?,
+        emission: rgb(d, "emission", zero, &ctx)?,
+        anisotropy: get_or(d, "anisotropy", 0.0, &ctx)?,
     })
 }
 
@@ -879,6 +907,11 @@ impl Scene {
     fn instances(&self) -> usize {
         self.inner.report.instances
     }
+    /// Some material has a medium (a Volume output): light subpaths do not enter media yet.
+    #[getter]
+    fn has_media(&self) -> bool {
+        self.inner.has_media()
+    }
     #[getter]
     fn size(&self) -> (u32, u32) {
         (self.inner.camera.width, self.inner.camera.height)
@@ -910,7 +943,7 @@ fn numpy_to_image(obj: &Bound<'_, PyAny>) -> PyResult<Image> {
 /// the calling thread; if it returns True the render stops and keeps what it has. Every
 /// setting left out (or None) takes `RenderSettings::default()`'s value (`DEFAULT_SETTINGS`).
 #[pyfunction]
-#[pyo3(signature = (scene, method=None, spp=None, time_limit=None, max_bounces=None, nee=None, seed=None, threads=None, reconstruction=None, alpha_rec=None, large_step_probability=None, alpha_target=None, chains=None, progress=None, preview=None, diffuse_bounces=None, glossy_bounces=None, transmission_bounces=None, transparent_bounces=None, clamp_direct=None, clamp_indirect=None, data_passes=None, adaptive_threshold=None, adaptive_min_samples=None, guiding=None, bidirectional=None, predict_pt=None))]
+#[pyo3(signature = (scene, method=None, spp=None, time_limit=None, max_bounces=None, nee=None, seed=None, threads=None, reconstruction=None, alpha_rec=None, large_step_probability=None, alpha_target=None, chains=None, progress=None, preview=None, diffuse_bounces=None, glossy_bounces=None, transmission_bounces=None, volume_bounces=None, transparent_bounces=None, clamp_direct=None, clamp_indirect=None, data_passes=None, adaptive_threshold=None, adaptive_min_samples=None, guiding=None, bidirectional=None, predict_pt=None))]
 #[allow(clippy::too_many_arguments)]
 fn render<'py>(
     py: Python<'py>,
@@ -932,6 +965,7 @@ fn render<'py>(
     diffuse_bounces: Option<u32>,
     glossy_bounces: Option<u32>,
     transmission_bounces: Option<u32>,
+    volume_bounces: Option<u32>,
     transparent_bounces: Option<u32>,
     clamp_direct: Option<f32>,
     clamp_indirect: Option<f32>,
@@ -962,6 +996,7 @@ fn render<'py>(
             diffuse_bounces: diffuse_bounces.unwrap_or(d.path.diffuse_bounces),
             glossy_bounces: glossy_bounces.unwrap_or(d.path.glossy_bounces),
             transmission_bounces: transmission_bounces.unwrap_or(d.path.transmission_bounces),
+            volume_bounces: volume_bounces.unwrap_or(d.path.volume_bounces),
             transparent_bounces: transparent_bounces.unwrap_or(d.path.transparent_bounces),
             clamp_direct: clamp_direct.unwrap_or(d.path.clamp_direct),
             clamp_indirect: clamp_indirect.unwrap_or(d.path.clamp_indirect),
@@ -1108,6 +1143,7 @@ fn default_settings(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
     out.set_item("diffuse_bounces", d.path.diffuse_bounces)?;
     out.set_item("glossy_bounces", d.path.glossy_bounces)?;
     out.set_item("transmission_bounces", d.path.transmission_bounces)?;
+    out.set_item("volume_bounces", d.path.volume_bounces)?;
     out.set_item("transparent_bounces", d.path.transparent_bounces)?;
     out.set_item("clamp_direct", shortest(d.path.clamp_direct))?;
     out.set_item("clamp_indirect", shortest(d.path.clamp_indirect))?;

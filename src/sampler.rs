@@ -67,7 +67,7 @@ pub const PIXEL_DIMENSIONS: u32 = 4;
 /// and scrambled 4-D Sobol sequence over the pixel's samples, so each set is stratified
 /// whatever the others do. The sets follow what the path builder draws: {pixel position,
 /// lens}, then per vertex {light choice, light point (2), lobe} and {BSDF direction (2),
-/// roulette, unused}, so every 2-D pair it uses lies inside one set. Sample indices past
+/// roulette, free-flight distance}, so every 2-D pair it uses lies inside one set. Sample indices past
 /// 2^16 (the table's size) draw independent numbers instead.
 #[derive(Clone, Debug)]
 pub struct SobolSampler {
@@ -79,6 +79,8 @@ pub struct SobolSampler {
     set: u32,
     cache: [f32; 4],
     fallback: Option<IndependentSampler>,
+    /// Every even set after set 0 is 3 dimensions long (`for_subpaths`), not 4.
+    short_even_sets: bool,
 }
 
 impl SobolSampler {
@@ -93,7 +95,15 @@ impl SobolSampler {
             set: u32::MAX,
             cache: [0.0; 4],
             fallback,
+            short_even_sets: false,
         }
+    }
+
+    /// The stream `bdpt` draws its subpaths from: the sets of the path builder's layout
+    /// before its free-flight dimension (every even set after set 0 three dimensions long),
+    /// which bdpt's tests and measurements were made with.
+    pub fn for_subpaths(seed: u64, stream: u64, index: u32) -> Self {
+        SobolSampler { short_even_sets: true, ..Self::new(seed, stream, index) }
     }
 
     /// The 4-D set and its component that dimension `d` of the stream falls in (`next_1d`
@@ -115,10 +125,10 @@ impl Sampler for SobolSampler {
         if let Some(f) = &mut self.fallback {
             return f.next_1d();
         }
-        // `layout` followed incrementally: the sets come in order, set 0 and every odd set
-        // 4 dimensions long, every even set after 0 3 (a vertex's second set)
+        // `layout` followed incrementally: the sets come in order, each 4 dimensions long
+        // (`for_subpaths`: every even set after set 0 is 3)
         let mut k = self.in_set;
-        let len = if self.set != 0 && self.set.is_multiple_of(2) { 3 } else { 4 };
+        let len = if self.short_even_sets && self.set != 0 && self.set.is_multiple_of(2) { 3 } else { 4 };
         if k >= len {
             let set = self.set.wrapping_add(1);
             let set_seed = mix64(((self.seed as u64) << 32) | set as u64) as u32;

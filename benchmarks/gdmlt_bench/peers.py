@@ -409,7 +409,7 @@ def cycles_unbiased(scene, samples: int, seed: int, bounces: int, threads: int =
     """Cycles as an unbiased reference (docs/blender.md, "Cycles as a reference renderer"): no clamping, no glossy filter, no
     denoiser, no adaptive sampling, no light threshold, the default 1.5-pixel Blackman-Harris filter, caustics on,
     the same bounce limit for every kind — or, with `kinds` ({"diffuse", "glossy",
-    "transmission", "transparent"} → limit), those limits (GDMLT's Light Paths)."""
+    "transmission", "volume", "transparent"} → limit), those limits (GDMLT's Light Paths)."""
     scene.render.engine = "CYCLES"
     c = scene.cycles
     c.device = "CPU"
@@ -424,7 +424,7 @@ def cycles_unbiased(scene, samples: int, seed: int, bounces: int, threads: int =
     # Cycles' default pixel filter, which GDMLT's default now is too (pixel_filter.rs)
     c.pixel_filter_type = "BLACKMAN_HARRIS"
     c.filter_width = 1.5
-    c.max_bounces = c.diffuse_bounces = c.glossy_bounces = c.transmission_bounces = bounces
+    c.max_bounces = c.diffuse_bounces = c.glossy_bounces = c.transmission_bounces = c.volume_bounces = bounces
     c.transparent_max_bounces = 16  # as the core (path.rs MAX_TRANSPARENT_BOUNCES): crossings are not bounces
     for kind, limit in (kinds or {}).items():
         setattr(c, "transparent_max_bounces" if kind == "transparent" else f"{kind}_bounces", min(limit, 1024))

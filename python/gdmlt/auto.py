@@ -179,6 +179,9 @@ def _choose_in(scene, desc, settings, cancelled, denoise, candidates, sizes):
     import gdmlt
     from . import oidn
 
+    if scene.has_media:  # (bdpt renders media with pt: the core's fallback; no need to pilot it twice)
+        candidates = [m for m in candidates if m != "bdpt"] or candidates
+
     w, h, ww, wh = sizes  # (w, h: the frame, or its render region)
     frame_pixels = w * h
     limit = float(settings.get("time_limit") or 0.0)
@@ -189,7 +192,7 @@ def _choose_in(scene, desc, settings, cancelled, denoise, candidates, sizes):
     spp = settings.get("spp") or (None if limit else CORE["spp"])
     common = {k: settings[k] for k in ("max_bounces", "nee", "threads", "reconstruction", "alpha_rec",
                                        "large_step_probability", "alpha_target", "diffuse_bounces", "glossy_bounces",
-                                       "transmission_bounces", "transparent_bounces", "clamp_direct",
+                                       "transmission_bounces", "volume_bounces", "transparent_bounces", "clamp_direct",
                                        "clamp_indirect") if k in settings}
     seed = int(settings.get("seed", 0))
     t0 = time.perf_counter()

@@ -12,6 +12,7 @@ PROPERTY_OF = {"method": "method", "spp": "samples", "time_limit": "time_limit",
                "alpha_target": "alpha_target", "large_step_probability": "large_step_probability",
                "chains": "chains", "denoise": "use_denoising", "diffuse_bounces": "diffuse_bounces",
                "glossy_bounces": "glossy_bounces", "transmission_bounces": "transmission_bounces",
+               "volume_bounces": "volume_bounces",
                "transparent_bounces": "transparent_max_bounces", "clamp_direct": "clamp_direct",
                "clamp_indirect": "clamp_indirect", "adaptive_threshold": "adaptive_threshold",
                "adaptive_min_samples": "adaptive_min_samples"}

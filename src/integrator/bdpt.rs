@@ -953,8 +953,8 @@ fn sample_pixel(
 ) -> CameraResult {
     let w = ctx.scene.camera.width as usize;
     let pixel = y * w + x;
-    let mut cs = SobolSampler::new(settings.seed, pixel as u64, index);
-    let mut ls = SobolSampler::new(settings.seed ^ 0x9e37_79b9_7f4a_7c15, pixel as u64, index);
+    let mut cs = SobolSampler::for_subpaths(settings.seed, pixel as u64, index);
+    let mut ls = SobolSampler::for_subpaths(settings.seed ^ 0x9e37_79b9_7f4a_7c15, pixel as u64, index);
     let u_pixel = cs.next_2d();
     let mut streams = Streams { cam: &mut cs, light: Some(&mut ls) };
     let (sw, sh) = (splats.width, splats.height);

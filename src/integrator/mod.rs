@@ -145,6 +145,7 @@ impl RenderSettings {
             ("diffuse bounces", p.diffuse_bounces),
             ("glossy bounces", p.glossy_bounces),
             ("transmission bounces", p.transmission_bounces),
+            ("volume bounces", p.volume_bounces),
             ("transparent bounces", p.transparent_bounces),
         ] {
             if n > 1024 {
@@ -353,6 +354,24 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl)
         ));
         (unclamped.path.clamp_direct, unclamped.path.clamp_indirect) = (0.0, 0.0);
         &unclamped
+    } else {
+        settings
+    };
+    let mut without_light_paths = settings.clone();
+    let settings = if scene.has_media() && (settings.method == Method::Bdpt || settings.bidirectional) {
+        // light subpaths do not yet enter media (docs/limits.md): camera paths render the
+        // scene, every medium included
+        let instead = if settings.method == Method::Bdpt { "pt" } else { "camera-path Markov states" };
+        warnings.push(format!(
+            "{} does not trace light subpaths through media yet: the scene is rendered with {instead}",
+            if settings.method == Method::Bdpt { "bdpt" } else { "bidirectional pssmlt" }
+        ));
+        if without_light_paths.method == Method::Bdpt {
+            without_light_paths.method = Method::Pt;
+        }
+        without_light_paths.bidirectional = false;
+        without_light_paths.predict_pt = false;
+        &without_light_paths
     } else {
         settings
     };

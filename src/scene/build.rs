@@ -27,6 +27,8 @@ pub(super) struct Shading {
     pub pass_index: Vec<u32>,
     /// Inputs clamped into range (`material::range_warnings`), for the scene's report.
     pub warnings: Vec<String>,
+    /// Each material's medium (`MaterialDesc::volume`), None where it has none.
+    pub media: Vec<Option<crate::medium::Medium>>,
 }
 
 impl Shading {
@@ -64,7 +66,8 @@ impl Shading {
         let has_perturbed_normals = materials.iter().any(|m| m.normal_texture.is_some() || m.bump_texture.is_some());
         let pass_index = desc.materials.iter().map(|m| m.pass_index).collect();
         let warnings = desc.materials.iter().flat_map(super::material::range_warnings).collect();
-        Ok(Shading { textures, materials, has_transparency, has_perturbed_normals, pass_index, warnings })
+        let media = desc.materials.iter().map(super::material::medium_from_desc).collect::<Result<_, _>>()?;
+        Ok(Shading { textures, materials, has_transparency, has_perturbed_normals, pass_index, warnings, media })
     }
 }
 

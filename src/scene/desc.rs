@@ -199,6 +199,24 @@ pub struct MaterialDesc {
     /// on Layer Weight › Facing, say) as a table of the factor over the node's output at
     /// evenly spaced values on [0, 1], interpolated linearly; empty: the output itself.
     pub blend_ray_curve: Vec<f32>,
+    /// The medium inside the mesh (its Volume output; `None`: none). A material with a
+    /// volume and a clear Transparent surface is a bare boundary (Cycles' rule for a Volume
+    /// output without Surface); with another surface (glass), the medium fills what it holds.
+    pub volume: Option<VolumeDesc>,
+}
+
+/// A homogeneous medium (`crate::medium`): coefficients per unit world distance, as
+/// Cycles' volume closures take them (Principled Volume: scattering = Color × Density,
+/// absorption = (1 − Color)(1 − √Absorption Color) × Density; Volume Scatter: Color ×
+/// Density; Volume Absorption: (1 − Color) × Density).
+#[derive(Clone, Debug, PartialEq)]
+pub struct VolumeDesc {
+    pub scattering: [f32; 3],
+    pub absorption: [f32; 3],
+    /// Radiance emitted per unit distance (Emission Strength × Emission Color).
+    pub emission: [f32; 3],
+    /// The Henyey–Greenstein mean cosine g, in (−1, 1).
+    pub anisotropy: f32,
 }
 
 /// A Mix Shader factor computed from the ray arriving at the shading point, as Cycles' nodes
@@ -266,6 +284,7 @@ impl Default for MaterialDesc {
             blend_texture: None,
             blend_ray: None,
             blend_ray_curve: Vec::new(),
+            volume: None,
             translucency: 0.0,
             translucent_color: None,
             transparency: 0.0,

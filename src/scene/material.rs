@@ -121,6 +121,33 @@ pub fn range_warnings(d: &MaterialDesc) -> Vec<String> {
     out
 }
 
+/// The medium of a material's volume (None without one, or for a clear one), its
+/// coefficients checked: finite and not negative, the anisotropy within (−1, 1).
+pub fn medium_from_desc(d: &MaterialDesc) -> Result<Option<crate::medium::Medium>, SceneError> {
+    let Some(v) = &d.volume else { return Ok(None) };
+    let bad = |what: &str| SceneError::Material { material: d.name.clone(), what: format!("its volume: {what}") };
+    let all = v.scattering.iter().chain(&v.absorption).chain(&v.emission).chain([&v.anisotropy]);
+    if all.clone().any(|x| !x.is_finite()) {
+        return Err(bad("NaN or Inf coefficient"));
+    }
+    if v.scattering.iter().chain(&v.absorption).chain(&v.emission).any(|&x| x < 0.0) {
+        return Err(bad("negative coefficient"));
+    }
+    if v.emission.iter().chain(&v.scattering).chain(&v.absorption).any(|&x| x > MAX_RADIANCE) {
+        return Err(bad(&format!("coefficient above {MAX_RADIANCE:e}")));
+    }
+    if !(v.anisotropy > -1.0 && v.anisotropy < 1.0) {
+        return Err(bad(&format!("anisotropy {} is not inside (−1, 1)", v.anisotropy)));
+    }
+    let m = crate::medium::Medium {
+        sigma_s: Vec3::from_array(v.scattering),
+        sigma_a: Vec3::from_array(v.absorption),
+        emission: Vec3::from_array(v.emission),
+        phase: crate::medium::HenyeyGreenstein::new(v.anisotropy),
+    };
+    Ok((!m.is_vacuum()).then_some(m))
+}
+
 impl Material {
     pub fn from_desc(d: &MaterialDesc, textures: usize) -> Result<Material, SceneError> {
         let bad = |what: &str| SceneError::Material { material: d.name.clone(), what: what.to_string() };

@@ -27,6 +27,7 @@ use crate::bsdf::Bsdf;
 use crate::error::SceneError;
 use crate::instancing::{Instance, Instances};
 use crate::math::{ray_epsilon, square_to_triangle, Frame, Spectrum};
+use crate::medium::{Medium, MediumStack};
 use build::{Lighting, Shading, Triangles, RAY_CAMERA_INVISIBLE, RAY_HOLDOUT, RAY_SHADOW_INVISIBLE};
 use environment::Environment;
 use glam::{Vec2, Vec3, Vec4};
@@ -161,6 +162,11 @@ pub struct Scene {
     tri_light_set: Vec<u8>,
     tri_membership: Vec<u64>,
     light_membership: Vec<u64>,
+    /// Each material's medium (None: none; `crate::medium`), whether any material has one,
+    /// and the media the camera stands in (`media_around`).
+    media: Vec<Option<Medium>>,
+    has_media: bool,
+    camera_media: MediumStack,
     pub bounds_center: Vec3,
     pub bounds_radius: f32,
     pub report: SceneReport,
@@ -326,6 +332,9 @@ impl Scene {
             world_bounds,
             placement,
             instances,
+            media: Vec::new(),
+            has_media: false,
+            camera_media: MediumStack::default(),
             bounds_center,
             bounds_radius,
             report,
@@ -470,6 +479,9 @@ impl Scene {
         (self.has_transparency, self.has_perturbed_normals) = (shading.has_transparency, shading.has_perturbed_normals);
         self.has_holdout =
             self.materials.iter().any(|m| m.holdout) || self.ray_mask.iter().any(|m| m & RAY_HOLDOUT != 0);
+        self.media = shading.media;
+        self.has_media = self.media.iter().any(Option::is_some);
+        self.camera_media = self.media_around(self.camera.position());
     }
 
     /// Triangle `prim` is held out where the camera sees it (its object's Holdout, or a
@@ -629,7 +641,8 @@ impl Scene {
     /// grazing angle. (Flat triangles return before any arithmetic: most shadow rays.)
     fn terminator_lift(&self, si: &SurfaceInteraction, dir: Vec3) -> Vec3 {
         let t = si.prim as usize;
-        if self.normals[t].is_none() {
+        // (flat, or no triangle at all: a point in a medium)
+        if self.normals.get(t).is_none_or(Option::is_none) {
             return Vec3::ZERO;
         }
         let l = dir.normalize_or_zero();
@@ -696,7 +709,95 @@ impl Scene {
             return self.visible(si, ls).then_some((Spectrum::ONE, false));
         }
         let at_infinity = !ls.dist.is_finite();
-        self.transmittance_along(si, if at_infinity { ls.wi } else { ls.p }, at_infinity, RAY_SHADOW_INVISIBLE, true)
+        let target = if at_infinity { ls.wi } else { ls.p };
+        self.transmittance_along(si, target, at_infinity, RAY_SHADOW_INVISIBLE, true, None).map(|(t, c, _)| (t, c))
+    }
+
+    /// `transmittance` for a shadow ray that starts in the media `media` (the path's, on the
+    /// side of `si` the ray leaves to: `media_towards`), through the media it crosses
+    /// (`crate::medium`: their transmittance, the boundaries it passes entering and leaving
+    /// them); also whether any medium touched it (the shift fails on such light).
+    pub fn transmittance_in(
+        &self,
+        si: &SurfaceInteraction,
+        ls: &LightSample,
+        media: MediumStack,
+    ) -> Option<(Spectrum, bool, bool)> {
+        if !self.has_media {
+            return self.transmittance(si, ls).map(|(t, c)| (t, c, false));
+        }
+        let at_infinity = !ls.dist.is_finite();
+        let target = if at_infinity { ls.wi } else { ls.p };
+        self.transmittance_along(si, target, at_infinity, RAY_SHADOW_INVISIBLE, true, Some(media))
+    }
+
+    /// Whether some material has a medium (`crate::medium`).
+    #[inline]
+    pub fn has_media(&self) -> bool {
+        self.has_media
+    }
+
+    /// The media the camera stands in.
+    #[inline]
+    pub fn camera_media(&self) -> MediumStack {
+        self.camera_media
+    }
+
+    /// Material `m` has a medium inside its surfaces.
+    #[inline]
+    pub fn has_medium(&self, m: u32) -> bool {
+        self.media.get(m as usize).is_some_and(Option::is_some)
+    }
+
+    /// The medium a ray in `stack` runs through (None: none, or a clear one).
+    #[inline]
+    pub fn medium(&self, stack: &MediumStack) -> Option<Medium> {
+        if stack.is_empty() {
+            return None;
+        }
+        crate::medium::combined(stack, &self.media)
+    }
+
+    /// The media on the side of surface `si` that direction `dir` leaves to, for a ray that
+    /// arrived in `stack`: crossing the surface of a material with a medium enters it (from
+    /// the front) or leaves it.
+    #[inline]
+    pub fn media_towards(&self, stack: MediumStack, si: &SurfaceInteraction, dir: Vec3) -> MediumStack {
+        let mut s = stack;
+        if dir.dot(si.ng) < 0.0 && self.has_medium(si.material) {
+            s.cross(si.material, si.front);
+        }
+        s
+    }
+
+    /// The media enclosing point `p` (the camera's position): along a ray from `p` to
+    /// infinity, a medium boundary left (met from its back) that the ray did not enter
+    /// first holds `p`. (Cycles finds the camera's volume stack the same way.)
+    fn media_around(&self, p: Vec3) -> MediumStack {
+        let mut inside = MediumStack::default();
+        if !self.has_media {
+            return inside;
+        }
+        // an oblique direction, away from the axis-aligned edges of modelled boxes
+        let d = Vec3::new(0.377_964_5, 0.267_261_24, 0.886_405_9).normalize();
+        let mut entered = MediumStack::default();
+        let mut tmin = 0.0;
+        for _ in 0..256 {
+            let Some(hit) = self.intersect(p, d, tmin, f32::INFINITY) else { break };
+            let m = self.tri_material[hit.prim as usize];
+            if self.has_medium(m) {
+                let front = self.interaction(&hit, d).front;
+                if front {
+                    entered.enter(m);
+                } else if entered.ids().contains(&m) {
+                    entered.leave(m);
+                } else {
+                    inside.enter(m);
+                }
+            }
+            tmin = hit.t + ray_epsilon(p + d * hit.t).max(hit.t * 1e-6);
+        }
+        inside
     }
 
     /// Some object casts no shadow (its shadow ray visibility is off).
@@ -716,7 +817,7 @@ impl Scene {
         if !self.has_transparency && (skip == 0 || self.ray_mask.is_empty()) {
             return self.segment_clear(si, target, false).then_some(Spectrum::ONE);
         }
-        self.transmittance_along(si, target, false, skip, false).map(|(t, _)| t)
+        self.transmittance_along(si, target, false, skip, false, None).map(|(t, _, _)| t)
     }
 
     /// The walk of `transmittance` and `segment_transmittance` from `si` to `target` (a point,
@@ -733,20 +834,25 @@ impl Scene {
         at_infinity: bool,
         skip: u8,
         lift: bool,
-    ) -> Option<(Spectrum, bool)> {
+        mut media: Option<MediumStack>,
+    ) -> Option<(Spectrum, bool, bool)> {
         let mut t = Spectrum::ONE;
         let mut from = *si;
         let (mut crossed, mut invisible) = (0, 0);
+        let mut in_medium = false;
         while crossed <= crate::path::MAX_TRANSPARENT_BOUNCES && invisible < MAX_INVISIBLE_CROSSINGS {
             let first = lift && crossed == 0 && invisible == 0;
             let Some((o, d, tmax)) = self.shadow_ray_from(&from, target, at_infinity, first) else {
-                return Some((t, crossed > 0));
+                return Some((t, crossed > 0, in_medium));
             };
-            if tmax <= 0.0 {
-                return Some((t, crossed > 0));
+            let hit = if tmax <= 0.0 { None } else { self.intersect(o, d, 0.0, tmax) };
+            if let Some(m) = media.as_ref().and_then(|s| self.medium(s)) {
+                // (the medium's transmittance over the segment to the next surface or the end)
+                in_medium = true;
+                t *= m.transmittance(hit.map_or(tmax.max(0.0), |h| h.t));
             }
-            let Some(hit) = self.intersect(o, d, 0.0, tmax) else {
-                return Some((t, crossed > 0));
+            let Some(hit) = hit else {
+                return Some((t, crossed > 0, in_medium));
             };
             from = self.interaction(&hit, d);
             if skip != 0 && self.masked(hit.prim, skip) {
@@ -764,6 +870,9 @@ impl Scene {
                 return None;
             }
             t *= pass;
+            if let Some(s) = media.as_mut() {
+                *s = self.media_towards(*s, &from, d);
+            }
         }
         None
     }

@@ -341,7 +341,7 @@ def for_engine(scene, engine, spp, seed, method=None):
         g = scene.gdmlt  # (GDMLT's Light Paths: Cycles' defaults unless a test changes them)
         cycles_unbiased(scene, spp, seed, g.max_bounces, kinds={
             "diffuse": g.diffuse_bounces, "glossy": g.glossy_bounces, "transmission": g.transmission_bounces,
-            "transparent": g.transparent_max_bounces})
+            "volume": g.volume_bounces, "transparent": g.transparent_max_bounces})
     else:
         scene.render.engine = "GDMLT"
         scene.gdmlt.samples, scene.gdmlt.seed = spp, seed
