@@ -191,7 +191,7 @@ def build_parser():
 
 
 # Path length limits per kind of scattering besides the total (Cycles' Light Paths panel).
-BOUNCE_KINDS = ("diffuse", "glossy", "transmission", "transparent")
+BOUNCE_KINDS = ("diffuse", "glossy", "transmission", "volume", "transparent")
 
 
 def _settings(args):
