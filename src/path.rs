@@ -404,21 +404,34 @@ pub fn trace_path_guided<S: Sampler>(
         let mut crossed = Spectrum::ZERO;
         let (prev_p, o, d) = (st.prev_p, st.o, st.d);
         let medium = scene.medium(&st.media);
-        scene.for_each_light_crossed(prev_p, o, d, t_surface, camera_visibility, |li, t, le, pdf_light| {
-            if !scene.lights_receiver(li, st.prev_prim) {
-                return; // (light linking: it does not light the vertex the ray left)
-            }
-            let inf = !t.is_finite();
-            let z = if inf { d } else { o + d * t };
-            let pdf_light = if st.passed { scene.light_eval(li, prev_p, z).map_or(0.0, |x| x.1) } else { pdf_light };
-            // (in a medium: reached with T(t) where the free flight went past t, P(t))
-            let le = match medium {
-                Some(m) => le * m.transmittance(t) / m.pass_probability(t).max(1e-30),
-                None => le,
-            };
-            crossed += le * st.mis(pdf_light);
-            st.record_emission(&mut record, li, z, inf, le, pdf_light);
-        });
+        let from_medium = st.prev_in_medium;
+        scene.for_each_light_crossed_in(
+            prev_p,
+            from_medium,
+            o,
+            d,
+            t_surface,
+            camera_visibility,
+            |li, t, le, pdf_light| {
+                if !scene.lights_receiver(li, st.prev_prim) {
+                    return; // (light linking: it does not light the vertex the ray left)
+                }
+                let inf = !t.is_finite();
+                let z = if inf { d } else { o + d * t };
+                let pdf_light = if st.passed {
+                    scene.light_eval_in(li, prev_p, z, from_medium).map_or(0.0, |x| x.1)
+                } else {
+                    pdf_light
+                };
+                // (in a medium: reached with T(t) where the free flight went past t, P(t))
+                let le = match medium {
+                    Some(m) => le * m.transmittance(t) / m.pass_probability(t).max(1e-30),
+                    None => le,
+                };
+                crossed += le * st.mis(pdf_light);
+                st.record_emission(&mut record, li, z, inf, le, pdf_light);
+            },
+        );
         add(&mut out, &mut learn, cfg.clamp(st.beta * crossed, st.depth), camera_ray, st.direct_emission());
         st.beta *= pass_weight;
         if !(st.beta.max_element() > 0.0) {
@@ -600,6 +613,8 @@ struct PathState {
     /// (`Event::medium`).
     media: MediumStack,
     touched_medium: bool,
+    /// The last scattering vertex is in a medium (its light pdfs: `Scene::sample_light_in`).
+    prev_in_medium: bool,
 }
 
 impl PathState {
@@ -626,6 +641,7 @@ impl PathState {
             as_cycles_light: use_nee && as_cycles_light,
             media,
             touched_medium: false,
+            prev_in_medium: false,
         }
     }
 
@@ -760,6 +776,7 @@ impl PathState {
             self.prev_pdf = bs.pdf;
             self.prev_fcos = bs.weight * bs.pdf;
             self.prev_delta = bs.lobe == crate::bsdf::LobeKind::Specular;
+            self.prev_in_medium = false;
         }
         self.nvert += 1;
         self.media = scene.media_towards(self.media, si, wi_world);
@@ -870,7 +887,7 @@ impl PathState {
         }
         // 2. a light sample, through the media between
         if self.use_nee {
-            if let Some((li, ls)) = scene.sample_light(p, u.light_select, u.light) {
+            if let Some((li, ls)) = scene.sample_light_in(p, u.light_select, u.light, true) {
                 let f = m.phase.eval(wo, ls.wi);
                 let reach = if scene.casts_shadow(li) {
                     scene.transmittance_in(&at, &ls, self.media)
@@ -930,6 +947,7 @@ impl PathState {
         self.prev_pdf = pdf;
         self.prev_fcos = Spectrum::splat(pdf);
         self.prev_delta = false;
+        self.prev_in_medium = true;
         self.nvert += 1;
         self.o = p;
         self.d = wi;

@@ -1252,6 +1252,12 @@ impl Scene {
     /// Chooses a light for shading point `p` (light_select.rs) and samples a point on it
     /// (NEE). `pdf` of the result includes the selection probability.
     pub fn sample_light(&self, p: Vec3, u_select: f32, u: Vec2) -> Option<(u32, LightSample)> {
+        self.sample_light_in(p, u_select, u, false)
+    }
+
+    /// `sample_light` from `p`, a point in a medium where `in_medium` (soft-falloff sphere
+    /// lights are then the disk facing it: `light::FacingDisk`).
+    pub fn sample_light_in(&self, p: Vec3, u_select: f32, u: Vec2, in_medium: bool) -> Option<(u32, LightSample)> {
         let (li, pmf) = self.selector.sample(p, u_select)?;
         if li == self.lights.len() {
             let (wi, radiance, pdf) = self.env.sample(&self.textures, u)?;
@@ -1290,6 +1296,7 @@ impl Scene {
                     is_delta: false,
                 }
             }
+            _ if in_medium => light.sample_from_medium(p, u)?,
             _ => light.sample(p, u)?,
         };
         ls.pdf *= pmf;
@@ -1335,14 +1342,33 @@ impl Scene {
         d: Vec3,
         tmax: f32,
         camera_ray: bool,
+        f: impl FnMut(u32, f32, Spectrum, f32),
+    ) {
+        self.for_each_light_crossed_in(from, false, o, d, tmax, camera_ray, f)
+    }
+
+    /// `for_each_light_crossed` for a segment whose light pdfs are taken at `from`, a point
+    /// in a medium where `in_medium` (`sample_light_in`).
+    #[allow(clippy::too_many_arguments)]
+    pub fn for_each_light_crossed_in(
+        &self,
+        from: Vec3,
+        in_medium: bool,
+        o: Vec3,
+        d: Vec3,
+        tmax: f32,
+        camera_ray: bool,
         mut f: impl FnMut(u32, f32, Spectrum, f32),
     ) {
         for &li in &self.hittable_lights {
-            if camera_ray && !self.lights[li as usize].visible_camera {
+            let light = &self.lights[li as usize];
+            if camera_ray && !light.visible_camera {
                 continue;
             }
-            if let Some((t, le, pdf)) = self.light_crossed(li, from, o, d, tmax) {
-                f(li, t, le, pdf);
+            let crossed =
+                if in_medium { light.intersect_from_medium(from, o, d, tmax) } else { light.intersect(o, d, tmax) };
+            if let Some((t, le, pdf)) = crossed {
+                f(li, t, le, pdf * self.selector.pmf(li as usize, from));
             }
         }
     }
@@ -1401,11 +1427,20 @@ impl Scene {
     /// included; 1·selection for delta lights) of choosing that point. None if `z` does not
     /// face `from`. Used by the shift mapping to re-evaluate a light point from an offset path.
     pub fn light_eval(&self, li: u32, from: Vec3, z: Vec3) -> Option<(Spectrum, f32)> {
+        self.light_eval_in(li, from, z, false)
+    }
+
+    /// `light_eval` from `from`, a point in a medium where `in_medium` (`sample_light_in`).
+    pub fn light_eval_in(&self, li: u32, from: Vec3, z: Vec3, in_medium: bool) -> Option<(Spectrum, f32)> {
         if li == self.env_light() {
             return Some(self.world_eval(from, z));
         }
         let light = self.lights.get(li as usize)?;
         let pmf = self.selector.pmf(li as usize, from);
+        if let Some(disk) = light.facing_disk().filter(|_| in_medium) {
+            let (pdf, att) = disk.eval(from, z)?;
+            return (att > 0.0).then(|| (light.emission * att, pmf * pdf));
+        }
         match &light.shape {
             LightShape::Triangle { prim, area } => {
                 let n = self.geo_normal(*prim as usize);
