@@ -862,22 +862,7 @@ impl PathState {
         let p = self.o + self.d * t;
         let wo = -self.d;
         // (a point with no surface: no normal to offset rays along, no triangle)
-        let at = SurfaceInteraction {
-            p,
-            ng: Vec3::ZERO,
-            frame: Frame::from_normal(wo),
-            prim: u32::MAX,
-            inst: crate::accel::NO_INSTANCE,
-            material: u32::MAX,
-            t,
-            front: true,
-            tex: TexCoord::default(),
-            color: Spectrum::ZERO,
-            unmapped: Vec3::Z,
-            wo: Vec3::Z,
-            camera: false,
-            bary: Vec2::ZERO,
-        };
+        let at = SurfaceInteraction { t, ..Scene::medium_point(p, wo) };
         if let Some(rec) = record.as_deref_mut() {
             rec.vertices.push(Vertex::at(&at, wo, self.beta, self.prev_pdf, true));
         }

@@ -4,27 +4,9 @@
 
 use gdmlt::integrator::{render, Method, RenderControl, RenderSettings};
 use gdmlt::path::PathSettings;
-use gdmlt::scene::builtin::camera_looking_along_y;
+use gdmlt::scene::builtin::{camera_looking_along_y, closed_box};
 use gdmlt::scene::desc::VolumeDesc;
 use gdmlt::scene::{MaterialDesc, MeshDesc, Scene, SceneDesc};
-
-/// A closed axis-aligned box of material `mat`, its faces wound outwards (the medium inside).
-fn closed_box(name: &str, lo: [f32; 3], hi: [f32; 3], mat: u32) -> MeshDesc {
-    let p = |k: usize| [[lo[0], hi[0]][k & 1], [lo[1], hi[1]][(k >> 1) & 1], [lo[2], hi[2]][(k >> 2) & 1]];
-    let faces = [[0, 2, 3, 1], [4, 5, 7, 6], [0, 1, 5, 4], [2, 6, 7, 3], [0, 4, 6, 2], [1, 3, 7, 5]];
-    let mut indices = Vec::new();
-    for f in faces {
-        indices.push([f[0], f[1], f[2]]);
-        indices.push([f[0], f[2], f[3]]);
-    }
-    MeshDesc {
-        name: name.into(),
-        positions: (0..8).map(p).collect(),
-        material_ids: vec![mat; 12],
-        indices,
-        ..Default::default()
-    }
-}
 
 /// A boundary-only material (a Volume output without Surface) holding `volume`.
 fn medium(name: &str, volume: VolumeDesc) -> MaterialDesc {

@@ -179,9 +179,6 @@ def _choose_in(scene, desc, settings, cancelled, denoise, candidates, sizes):
     import gdmlt
     from . import oidn
 
-    if scene.has_media:  # (bdpt renders media with pt: the core's fallback; no need to pilot it twice)
-        candidates = [m for m in candidates if m != "bdpt"] or candidates
-
     w, h, ww, wh = sizes  # (w, h: the frame, or its render region)
     frame_pixels = w * h
     limit = float(settings.get("time_limit") or 0.0)

@@ -8,7 +8,7 @@ from pathlib import Path
 
 from .passes import CLI_NAMES as CLI_PASS_NAMES
 
-BUILTIN = ("cornell", "spheres", "gap", "furnace")
+BUILTIN = ("cornell", "spheres", "gap", "furnace", "fog")
 METHODS = ("pt", "bdpt", "gdpt", "pssmlt", "gdpssmlt")
 RENDER_METHODS = ("auto",) + METHODS  # auto: gdmlt/auto.py picks one of them per scene
 USD_SUFFIXES = (".usd", ".usda", ".usdc", ".usdz")

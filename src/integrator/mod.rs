@@ -357,24 +357,6 @@ pub fn render(scene: &Scene, settings: &RenderSettings, control: &RenderControl)
     } else {
         settings
     };
-    let mut without_light_paths = settings.clone();
-    let settings = if scene.has_media() && (settings.method == Method::Bdpt || settings.bidirectional) {
-        // light subpaths do not yet enter media (docs/limits.md): camera paths render the
-        // scene, every medium included
-        let instead = if settings.method == Method::Bdpt { "pt" } else { "camera-path Markov states" };
-        warnings.push(format!(
-            "{} does not trace light subpaths through media yet: the scene is rendered with {instead}",
-            if settings.method == Method::Bdpt { "bdpt" } else { "bidirectional pssmlt" }
-        ));
-        if without_light_paths.method == Method::Bdpt {
-            without_light_paths.method = Method::Pt;
-        }
-        without_light_paths.bidirectional = false;
-        without_light_paths.predict_pt = false;
-        &without_light_paths
-    } else {
-        settings
-    };
     if settings.bidirectional && settings.method != Method::Pssmlt {
         warnings.push(format!(
             "bidirectional Markov states apply to pssmlt only; {} renders without them",

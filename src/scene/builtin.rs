@@ -345,8 +345,43 @@ pub fn furnace_sphere(albedo: f32, emission: f32, width: u32, height: u32) -> Sc
     }
 }
 
+/// The Cornell box filled with a faint bluish haze (a homogeneous medium: scattering
+/// (0.35, 0.4, 0.45), absorption 0.05, Henyey–Greenstein g = 0.3 per unit length) in a box
+/// that reaches out of its open side towards the camera (which stays outside).
+pub fn cornell_fog(width: u32, height: u32) -> SceneDesc {
+    let mut d = cornell_box(width, height);
+    let m = d.materials.len() as u32;
+    d.materials.push(MaterialDesc {
+        name: "Haze".into(),
+        base_color: [0.0; 3],
+        transparency: 1.0,
+        transparent_color: [1.0; 3],
+        volume: Some(super::desc::VolumeDesc {
+            scattering: [0.35, 0.4, 0.45],
+            absorption: [0.05; 3],
+            emission: [0.0; 3],
+            anisotropy: 0.3,
+        }),
+        ..Default::default()
+    });
+    d.meshes.push(closed_box("Haze", [-0.98, -1.6, -0.98], [0.98, 0.98, 0.98], m));
+    d
+}
+
+/// A closed axis-aligned box, its faces wound outwards (what a medium's boundary needs).
+pub fn closed_box(name: &str, lo: [f32; 3], hi: [f32; 3], mat: u32) -> MeshDesc {
+    let p = |k: usize| [[lo[0], hi[0]][k & 1], [lo[1], hi[1]][(k >> 1) & 1], [lo[2], hi[2]][(k >> 2) & 1]];
+    let faces = [[0, 2, 3, 1], [4, 5, 7, 6], [0, 1, 5, 4], [2, 6, 7, 3], [0, 4, 6, 2], [1, 3, 7, 5]];
+    let mut indices = Vec::new();
+    for f in faces {
+        indices.push([f[0], f[1], f[2]]);
+        indices.push([f[0], f[2], f[3]]);
+    }
+    flat_mesh(name, (0..8).map(p).collect(), indices, mat)
+}
+
 /// Names accepted by `builtin`.
-pub const BUILTIN_SCENES: &[&str] = &["cornell", "spheres", "gap", "veil", "bulb", "lights", "furnace"];
+pub const BUILTIN_SCENES: &[&str] = &["cornell", "spheres", "gap", "veil", "bulb", "lights", "furnace", "fog"];
 
 pub fn builtin(name: &str, width: u32, height: u32) -> Option<SceneDesc> {
     match name {
@@ -357,6 +392,7 @@ pub fn builtin(name: &str, width: u32, height: u32) -> Option<SceneDesc> {
         "bulb" => Some(cornell_bulb(width, height)),
         "lights" => Some(cornell_mixed_lights(width, height)),
         "furnace" => Some(furnace_sphere(0.8, 1.0, width, height)),
+        "fog" => Some(cornell_fog(width, height)),
         _ => None,
     }
 }

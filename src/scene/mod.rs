@@ -167,6 +167,8 @@ pub struct Scene {
     media: Vec<Option<Medium>>,
     has_media: bool,
     camera_media: MediumStack,
+    /// The media each light stands in (`light_media`; empty without media).
+    light_media: Vec<MediumStack>,
     pub bounds_center: Vec3,
     pub bounds_radius: f32,
     pub report: SceneReport,
@@ -335,6 +337,7 @@ impl Scene {
             media: Vec::new(),
             has_media: false,
             camera_media: MediumStack::default(),
+            light_media: Vec::new(),
             bounds_center,
             bounds_radius,
             report,
@@ -482,6 +485,23 @@ impl Scene {
         self.media = shading.media;
         self.has_media = self.media.iter().any(Option::is_some);
         self.camera_media = self.media_around(self.camera.position());
+        self.light_media = if self.has_media {
+            (0..self.lights.len())
+                .map(|li| self.light_position(li).map_or_else(Default::default, |p| self.media_around(p)))
+                .collect()
+        } else {
+            Vec::new()
+        };
+    }
+
+    /// Where light `li` stands (a point of it), None for lights at infinity.
+    fn light_position(&self, li: usize) -> Option<Vec3> {
+        match &self.lights[li].shape {
+            LightShape::Sphere { center, .. } => Some(*center),
+            LightShape::Planar { center, .. } => Some(*center),
+            LightShape::Triangle { prim, .. } => Some(self.positions[*prim as usize].iter().sum::<Vec3>() / 3.0),
+            LightShape::Distant { .. } => None,
+        }
     }
 
     /// Triangle `prim` is held out where the camera sees it (its object's Holdout, or a
@@ -818,6 +838,57 @@ impl Scene {
             return self.segment_clear(si, target, false).then_some(Spectrum::ONE);
         }
         self.transmittance_along(si, target, false, skip, false, None).map(|(t, _, _)| t)
+    }
+
+    /// `segment_transmittance` for a segment that starts in the media `media` (on the side
+    /// of `si` towards `target`: `media_towards`): also through the media it crosses.
+    pub fn segment_transmittance_in(
+        &self,
+        si: &SurfaceInteraction,
+        target: Vec3,
+        camera: bool,
+        media: MediumStack,
+    ) -> Option<Spectrum> {
+        if !self.has_media {
+            return self.segment_transmittance(si, target, camera);
+        }
+        let skip = if camera { RAY_CAMERA_INVISIBLE } else { 0 };
+        self.transmittance_along(si, target, false, skip, false, Some(media)).map(|(t, _, _)| t)
+    }
+
+    /// Light `li` is a sphere light with Soft Falloff, which a point in a medium sees as a
+    /// disk facing it (`light::FacingDisk`).
+    #[inline]
+    pub fn sees_facing_disk(&self, li: u32) -> bool {
+        self.lights.get(li as usize).is_some_and(|l| l.facing_disk().is_some())
+    }
+
+    /// The media a light's subpaths start in (found from its position at build time; none
+    /// for lights at infinity, whose rays come from outside every mesh).
+    #[inline]
+    pub fn light_media(&self, li: u32) -> MediumStack {
+        self.light_media.get(li as usize).copied().unwrap_or_default()
+    }
+
+    /// A point `p` in a medium as a surface interaction with no surface (no normal to offset
+    /// rays along, no triangle): what shadow rays and joins start from there.
+    pub fn medium_point(p: Vec3, wo: Vec3) -> SurfaceInteraction {
+        SurfaceInteraction {
+            p,
+            ng: Vec3::ZERO,
+            frame: Frame::from_normal(wo),
+            prim: u32::MAX,
+            inst: NO_INSTANCE,
+            material: u32::MAX,
+            t: 0.0,
+            front: true,
+            tex: TexCoord::default(),
+            color: Spectrum::ZERO,
+            unmapped: Vec3::Z,
+            wo: Vec3::Z,
+            camera: false,
+            bary: Vec2::ZERO,
+        }
     }
 
     /// The walk of `transmittance` and `segment_transmittance` from `si` to `target` (a point,

