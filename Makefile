@@ -14,7 +14,7 @@ export PATH := $(abspath $(VENV))/bin:$(PATH)
 # Keep Blender's user config out of $HOME during demos and tests.
 export BLENDER_USER_RESOURCES := $(abspath out/blender-user)
 
-.PHONY: all setup build demo test lint test-rust test-rust-v3 test-python test-blender-versions examples addon bench bench-monastery bench-peers bench-lights bench-hard bench-denoise bench-scale scalebench skipbench raybench clean
+.PHONY: all setup build demo test lint test-rust test-rust-v3 test-python test-blender-versions examples addon bench bench-monastery bench-peers bench-lights bench-hard bench-media bench-denoise bench-scale scalebench skipbench raybench clean
 
 all: demo
 
@@ -150,6 +150,14 @@ bench-hard: build
 			--modes nee --max-bounces 12 --reference bdpt --reference-spp 4096 --peers cycles,cycles-guiding \
 			--denoise || exit 1; \
 	done
+
+# Media (issue 46): a fog-filled attic lit by a spot, every method against Cycles (raw and
+# with OIDN) at 2 and 10 s, reference Cycles at 4096 spp with its own noise measured.
+bench-media: build
+	$(PY) -m pip install -q -r requirements-bench.txt
+	$(PY) tools/make_bench_scenes.py out/bench
+	$(BENCH) bench --scene out/bench/attic.blend --budgets 2,10 --methods pt,bdpt,gdpt,gdpssmlt \
+		--modes nee --max-bounces 12 --reference-spp 4096 --peers cycles --denoise
 
 # As artists render, denoiser on (issue 16): every method, `auto` (the default) and Cycles,
 # raw and each after its own OIDN, at 1, 2, 4, 8 s; relMSE, SMAPE, block error and FLIP, and

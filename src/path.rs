@@ -985,7 +985,8 @@ fn next_event(
     if !(f.max_element() > 0.0) {
         return None;
     }
-    // (a light whose Cast Shadow is off reaches every point it faces; media still attenuate)
+    // (a light whose Cast Shadow is off reaches every point it faces, through media too: as
+    // Cycles, which traces no shadow ray for it)
     let media = scene.media_towards(media, si, ls.wi);
     let (tr, crossed_transparent, medium) =
         if scene.casts_shadow(li) { scene.transmittance_in(si, &ls, media)? } else { (Spectrum::ONE, false, false) };
@@ -1045,7 +1046,7 @@ pub fn first_hit(scene: &Scene, cam: &CameraRay, hit: Option<TriHit>) -> FirstHi
     }
     match hit {
         None if scene.camera.film_transparent => {}
-        None => out.very_direct += scene.camera_background(cam.dir) * tr(f32::INFINITY),
+        None => out.very_direct += scene.camera_background(cam.dir) * tr(cam.tmax),
         Some(h) if scene.is_holdout(h.prim) => {}
         Some(h) => {
             let si = SurfaceInteraction { camera: true, ..scene.interaction(&h, cam.dir) };
@@ -1071,11 +1072,15 @@ pub fn camera_transparency(scene: &Scene, cam: &CameraRay, hit: Option<TriHit>, 
     let mut t = Spectrum::ONE;
     let mut hit = hit;
     let mut media = scene.camera_media();
+    // (the camera ray ends at the clip end; its continuations through surfaces, as the path
+    // builder's, do not)
+    let mut tmax = cam.tmax;
     for _ in 0..=max_crossings {
-        // (through media: their transmittance to the next surface, or to infinity)
+        // (through media: their transmittance to the next surface, or to the ray's end)
         if let Some(m) = scene.medium(&media) {
-            t *= m.transmittance(hit.map_or(f32::INFINITY, |h| h.t));
+            t *= m.transmittance(hit.map_or(tmax, |h| h.t));
         }
+        tmax = f32::INFINITY;
         let seen_through = (t.x + t.y + t.z) / 3.0;
         let Some(h) = hit else {
             return if scene.camera.film_transparent { seen_through } else { 0.0 };

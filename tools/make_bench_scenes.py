@@ -15,6 +15,7 @@ Scenes (128², 4 bounces, saved with engine GDMLT):
   by an area light (the hard-light case; 8 bounces)
 - glass_box: a Cornell-style box lit by an area light under its ceiling, with a glass ball and
   a mirror ball (caustics and specular paths; 8 bounces)
+- attic: a closed room filled with fog around the camera, a spot's beam through it (media)
 """
 
 import math
@@ -398,6 +399,38 @@ def lampshade(bpy):
     return scene
 
 
+def attic(bpy):
+    """Media, the fog kind: a dusty attic (a closed 4 × 4 × 2.6 m room, no world light) filled
+    with fog — a box just inside the walls whose material has only a Principled Volume
+    (density 0.12, colour 0.8, anisotropy 0.3) — around the camera, lit by a spot (radius
+    5 cm, 35°, soft falloff on) whose beam crosses the room onto the floor by a crate."""
+    scene = _reset(bpy)
+    plaster = _material(bpy, "Plaster", (0.7, 0.66, 0.6), "DIFFUSE")
+    floor = _material(bpy, "Boards", (0.45, 0.32, 0.2), roughness=0.6)
+    _room(bpy, scene, plaster, floor)
+    _box(bpy, scene, "Crate", (0.6, 0.5, 0.3), (0.6, 0.6, 0.6), _material(bpy, "Wood", (0.5, 0.36, 0.2), "DIFFUSE"),
+         rot_z=0.4)
+    _box(bpy, scene, "Fog", (0, 0, 1.3), (3.96, 3.96, 2.56), _fog(bpy, "Fog", 0.12, 0.3))
+    _light(bpy, scene, "SPOT", "Spot", (-1.5, 1.5, 2.4), (-40, 0, -135), energy=600.0, shadow_soft_size=0.05,
+           spot_size=math.radians(35), spot_blend=0.2)
+    _camera(bpy, scene, (1.2, -1.8, 1.3), (88, 0, 25), lens=20)
+    _settings(scene, size=128, bounces=12)
+    return scene
+
+
+def _fog(bpy, name, density, anisotropy, color=(0.8, 0.8, 0.8)):
+    """A material with only a Principled Volume: the mesh is the boundary of a medium."""
+    from make_test_scenes import empty_material
+
+    mat, nt, out = empty_material(bpy, name)
+    vol = nt.nodes.new("ShaderNodeVolumePrincipled")
+    vol.inputs["Color"].default_value = (*color, 1)
+    vol.inputs["Density"].default_value = density
+    vol.inputs["Anisotropy"].default_value = anisotropy
+    nt.links.new(vol.outputs[0], out.inputs["Volume"])
+    return mat
+
+
 def main(argv):
     out = Path(argv[0] if argv else "out/bench").resolve()
     out.mkdir(parents=True, exist_ok=True)
@@ -417,6 +450,8 @@ def main(argv):
     bpy.ops.wm.save_as_mainfile(filepath=str(out / "door_ajar.blend"))
     glass_box(bpy)
     bpy.ops.wm.save_as_mainfile(filepath=str(out / "glass_box.blend"))
+    attic(bpy)
+    bpy.ops.wm.save_as_mainfile(filepath=str(out / "attic.blend"))
     caustics(bpy)
     bpy.ops.wm.save_as_mainfile(filepath=str(out / "caustics.blend"))
     window(bpy)

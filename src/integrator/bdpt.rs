@@ -360,6 +360,10 @@ fn random_walk<S: Sampler + ?Sized>(
     let mut surfaces = 0usize;
     let mut guide = Some(Spectrum::ONE);
     let mut first_light_hit = !radiance;
+    // a scattering past a per-kind bounce limit (pt's path stops there: the segments after it
+    // gather no emission in a medium)
+    let limits = [cfg.diffuse_bounces, cfg.glossy_bounces, cfg.transmission_bounces, cfg.volume_bounces];
+    let (mut kinds, mut past_limits) = ([0u32; 4], false);
     // Russian roulette on the throughput relative to the first vertex's (a light subpath
     // carries the light's power)
     let mut beta_ref = Spectrum::ONE;
@@ -378,7 +382,7 @@ fn random_walk<S: Sampler + ?Sized>(
         let (mut scatter_at, mut pass) = (None, Spectrum::ONE);
         if let Some(m) = medium {
             let e = m.emitted(t_surface) * beta;
-            if radiance && e.max_element() > 0.0 {
+            if radiance && !past_limits && e.max_element() > 0.0 {
                 out.radiance += e;
                 if camera_ray {
                     out.very_direct += e;
@@ -421,15 +425,16 @@ fn random_walk<S: Sampler + ?Sized>(
                 break;
             }
             let p = o + d * t;
+            // a soft-falloff sphere light is a disk facing a point in a medium, which light
+            // subpaths do not start from (`Context::mis_weight`: disk paths) — also after
+            // the transparent boundaries crossed on the way
+            if prev.kind == Kind::Light && scene.sees_facing_disk(prev.light) {
+                break;
+            }
             if first_light_hit {
-                // the light's radiance as this point receives it (as at a surface, below); a
-                // soft-falloff sphere light is a disk facing a point in a medium, which light
-                // subpaths do not start from (`Context::mis_weight`: disk paths)
+                // the light's radiance as this point receives it (as at a surface, below)
                 first_light_hit = false;
                 let l0 = &path[0];
-                if scene.sees_facing_disk(l0.light) {
-                    break;
-                }
                 let z = if l0.infinite { l0.dir } else { l0.p };
                 let Some((le, _)) = scene.light_eval_in(l0.light, p, z, true) else { break };
                 let factor = if l0.infinite {
@@ -457,6 +462,8 @@ fn random_walk<S: Sampler + ?Sized>(
             v.phase = Some(m.phase);
             v.label = VOLUME_LABEL;
             path.push(v);
+            past_limits |= kinds.iter().zip(&limits).any(|(n, max)| n > max);
+            kinds[VOLUME_LABEL as usize] += 1;
             surfaces += 1;
             scattered = true;
             let before = last;
@@ -637,6 +644,8 @@ fn random_walk<S: Sampler + ?Sized>(
                 Scatter::Glossy => 1,
                 _ => 2,
             };
+            past_limits |= kinds.iter().zip(&limits).any(|(n, max)| n > max);
+            kinds[v.label as usize] += 1;
         }
         if radiance {
             beta *= bs.weight;
@@ -1001,7 +1010,7 @@ impl Context<'_> {
             x
         };
         let own = p(own_k);
-        if !(own > 0.0) || !own.is_finite() {
+        if !(own > 0.0) || !own.is_finite() || own_k >= 2 && disk_path {
             return Weight::own(0.0);
         }
         let (mut sum, mut r_pt) = (0.0f64, [0.0f64; 2]);
@@ -1762,6 +1771,32 @@ mod tests {
             let (z, at) = worst_z(&desc, PathSettings::new(4, true), 64, spp, 6, k, false);
             assert!(z < 4.5, "strategy {k:?} alone through the haze: {z:.1}σ at {at}");
         }
+        // a soft-falloff lamp above a lower haze: fog sees it as the disk facing each point,
+        // which only camera-side strategies make — also where its light subpath first
+        // crossed the haze's boundary (before, light tracing and joins added those paths
+        // again: the haze too bright)
+        let mut lamp = builtin::cornell_fog(16, 16);
+        let haze = lamp.meshes.len() - 1;
+        lamp.meshes[haze] = builtin::closed_box("Haze", [-0.98, -1.6, -0.98], [0.98, 0.98, 0.2], 4);
+        lamp.lights.push(crate::scene::LightDesc::Point {
+            name: "Lamp".into(),
+            position: [0.2, 0.1, 0.55],
+            radius: 0.15,
+            power: [40.0, 30.0, 20.0],
+            soft_falloff: true,
+            visible_camera: false,
+            cast_shadow: true,
+        });
+        let (z, at) = worst_z(&lamp, PathSettings::new(4, true), 64, 32, 6, None, false);
+        assert!(z < 4.5, "a soft lamp above the haze: {z:.1}σ at {at}");
+        // a glowing haze under Blender's default Volume bounces (0): light it emits reaches
+        // the camera after one scattering in it at most, as pt's paths end past the limit
+        // (before, bdpt's camera walks gathered it further: the image too bright)
+        let mut glow = builtin::cornell_fog(16, 16);
+        glow.materials[4].volume.as_mut().unwrap().emission = [0.3, 0.2, 0.1];
+        let cfg = PathSettings { volume_bounces: 0, ..PathSettings::new(4, true) };
+        let (z, at) = worst_z(&glow, cfg, 64, 32, 6, None, false);
+        assert!(z < 4.5, "a glowing haze, volume bounces 0: {z:.1}σ at {at}");
     }
 
     /// Every strategy alone, unweighted, renders `pt`'s image (`Context::only`): camera paths

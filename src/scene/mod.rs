@@ -928,6 +928,9 @@ impl Scene {
             from = self.interaction(&hit, d);
             if skip != 0 && self.masked(hit.prim, skip) {
                 invisible += 1; // (not a crossing of a transparent surface)
+                if let Some(s) = media.as_mut() {
+                    *s = self.media_towards(*s, &from, d); // (a hidden medium's boundary is still crossed)
+                }
                 continue;
             }
             crossed += 1;
