@@ -591,8 +591,17 @@ def _volume_leaves(node, weight, acc, g_weighted, warnings, what, seen):
         strength = max(float(value("Emission Strength", 0.0)), 0.0)
         if strength > 0.0:
             add("emission", colour("Emission Color"), strength)
-        if float(value("Blackbody Intensity", 0.0)) > 1e-3:
-            warnings.append(f"{what}: the blackbody emission of '{node.name}' is not rendered yet (left out)")
+        blackbody = float(value("Blackbody Intensity", 0.0))
+        if blackbody > 1e-3:
+            # Cycles' blackbody emission: tint × σ·mix(1, T⁴, intensity) × the blackbody colour
+            # of T (Stefan–Boltzmann's σ scaled by 10⁻⁶/π, as Cycles' closure)
+            from .blackbody import colour as blackbody_colour
+
+            t = max(float(value("Temperature", 1000.0)), 0.0)
+            sigma = 5.670373e-8 * 1e-6 / math.pi
+            rgb = blackbody_colour([t])[0]
+            tint = colour("Blackbody Tint")
+            add("emission", [a * float(c) for a, c in zip(tint, rgb)], sigma * (1.0 + (t ** 4 - 1.0) * blackbody))
         for attr in ("Density Attribute", "Color Attribute", "Temperature Attribute"):
             sock = node.inputs.get(attr)
             if sock is not None and sock.is_linked:

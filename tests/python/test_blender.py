@@ -1033,6 +1033,36 @@ def test_fog_and_a_glass_of_liquid_agree_with_cycles(bpy_mod, tmp_out, method, n
     assert_agrees_with_cycles(bpy_mod, build, tmp_out, f"fog{method}{nee}")
 
 
+@pytest.mark.parametrize("method", ["PT", "BDPT"])
+def test_a_blackbody_puff_agrees_with_cycles(bpy_mod, tmp_out, method):
+    """Issue 46: a Principled Volume's blackbody emission was left out (warned). A puff of
+    fire (density 0.6, Blackbody Intensity 1, 3000 K, an orange tint) lit only by itself,
+    beside the card, against Cycles: the emission is Cycles' tint × σ·T⁴ × the blackbody
+    colour."""
+    def build(bpy, engine, spp, seed):
+        scene = open_scene(bpy, "lights", engine, spp, seed, keep=set())
+        puff = _medium(bpy, "Puff", 0.8, (0.6, -0.4, 0.6), 0.6, (0.5, 0.5, 0.5), 0.0)
+        vol = next(n for n in puff.data.materials[0].node_tree.nodes if n.type == "PRINCIPLED_VOLUME")
+        vol.inputs["Blackbody Intensity"].default_value = 1.0
+        vol.inputs["Temperature"].default_value = 3000.0
+        vol.inputs["Blackbody Tint"].default_value = (1.0, 0.8, 0.6, 1.0)
+        scene.gdmlt.volume_bounces = 1
+        if engine == "GDMLT":
+            scene.gdmlt.method = method
+        else:
+            scene.cycles.volume_bounces = 1
+        return scene
+
+    from gdmlt_blender import export
+
+    build(bpy_mod, "GDMLT", 4, 1)
+    desc, warnings = export.export_scene(bpy_mod.context.evaluated_depsgraph_get())
+    assert not [w for w in warnings if "lackbody" in w], warnings
+    puff = next(m for m in desc["materials"] if m["name"] == "Puff")
+    assert max(puff["volume"]["emission"]) > 0.0
+    assert_agrees_with_cycles(bpy_mod, build, tmp_out, f"blackbody{method}")
+
+
 @pytest.mark.parametrize("method", [pytest.param("PT", marks=pytest.mark.compat), "BDPT", "GDPT", "PSSMLT"])
 def test_light_linking_agrees_with_cycles(bpy_mod, tmp_out, method):
     """Issue 47: light linking was not rendered (every light lit every object: a rim light
