@@ -872,7 +872,7 @@ impl Scene {
     /// rebuilt: for the viewport, whose view moves while the scene stays.
     fn set_camera(&mut self, camera: &Bound<'_, PyDict>) -> PyResult<()> {
         let camera = scene::Camera::new(&parse_camera(camera)?).map_err(|e| verr(e.to_string()))?;
-        self.exclusive()?.camera = camera;
+        self.exclusive()?.set_camera(camera);
         Ok(())
     }
     /// Places the instanced meshes by the transforms of `desc` (a scene dict of the same

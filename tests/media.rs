@@ -123,3 +123,35 @@ fn an_absorbing_slab_transmits_exp_minus_sigma_d() {
         }
     }
 }
+
+/// A camera moved into a medium (the viewport's view, `Scene::set_camera`) stands in it: the
+/// image is the one of a scene built with the camera there (before, the media were found
+/// once at build: the camera moved inside the slab saw the wall through only part of it).
+#[test]
+fn a_camera_moved_into_a_medium_stands_in_it() {
+    let slab = medium(
+        "Slab",
+        VolumeDesc { scattering: [0.2; 3], absorption: [0.5, 1.0, 2.0], emission: [0.0; 3], anisotropy: 0.0 },
+    );
+    let wall = MaterialDesc { name: "Wall".into(), base_color: [0.5; 3], emission: [1.0; 3], ..Default::default() };
+    let mut desc = scene(
+        vec![
+            closed_box("Slab", [-20.0, 1.0, -20.0], [20.0, 2.5, 20.0], 1),
+            closed_box("Wall", [-20.0, 5.0, -20.0], [20.0, 6.0, 20.0], 0),
+        ],
+        vec![wall, slab],
+        [0.0; 3],
+        8,
+    );
+    let outside = desc.camera.clone();
+    desc.camera = camera_looking_along_y([0.0, 1.5, 0.0], 25.0, 8, 8);
+    let inside = desc.camera.clone();
+    let fresh = Scene::build(&desc).unwrap();
+    desc.camera = outside;
+    let mut moved = Scene::build(&desc).unwrap();
+    moved.set_camera(gdmlt::scene::Camera::new(&inside).unwrap());
+    let settings = RenderSettings { method: Method::Pt, spp: 4, seed: 9, threads: 1, ..Default::default() };
+    let image =
+        |s: &Scene| render(s, &settings, &RenderControl::new(0.0)).unwrap().layer("Combined").unwrap().data.clone();
+    assert_eq!(image(&fresh), image(&moved));
+}

@@ -751,6 +751,13 @@ impl Scene {
         self.transmittance_along(si, target, at_infinity, RAY_SHADOW_INVISIBLE, true, Some(media))
     }
 
+    /// Replaces the camera (the viewport's view, the pilot's window), keeping everything
+    /// else; the media it stands in are found again from its position.
+    pub fn set_camera(&mut self, camera: Camera) {
+        self.camera = camera;
+        self.camera_media = self.media_around(self.camera.position());
+    }
+
     /// Whether some material has a medium (`crate::medium`).
     #[inline]
     pub fn has_media(&self) -> bool {
