@@ -995,6 +995,21 @@ def _medium(bpy, name, size, location, density, color, anisotropy, emission=0.0,
     return ob
 
 
+def _volume_bounces(scene, engine, n):
+    """Volume bounces `n` for GDMLT, and for the Cycles reference (set from GDMLT's before)."""
+    scene.gdmlt.volume_bounces = n
+    if engine != "GDMLT":
+        scene.cycles.volume_bounces = n
+
+
+def _exported(bpy, build):
+    """The scene dict and warnings of `build`'s scene for GDMLT (4 spp, seed 1)."""
+    from gdmlt_blender import export
+
+    build(bpy, "GDMLT", 4, 1)
+    return export.export_scene(bpy.context.evaluated_depsgraph_get())
+
+
 @pytest.mark.parametrize("method,nee", [pytest.param("PT", True, marks=pytest.mark.compat), ("PT", False),
                                         ("GDPT", True), ("PSSMLT", True), ("GDPSSMLT", True),
                                         ("GDPSSMLT", False), ("BDPT", True)])
@@ -1013,17 +1028,12 @@ def test_fog_and_a_glass_of_liquid_agree_with_cycles(bpy_mod, tmp_out, method, n
         _medium(bpy, "Room", 16.0, (0, 0, 1.5), 0.12, (0.8, 0.8, 0.8), 0.3, emission=0.02)
         _medium(bpy, "Liquid", 0.8, (1.0, 0.3, 0.5), 2.0, (0.9, 0.5, 0.2), -0.2, absorption=(0.2, 0.6, 0.9),
                 glass=True)
-        scene.gdmlt.volume_bounces = 2
+        _volume_bounces(scene, engine, 2)
         if engine == "GDMLT":
             scene.gdmlt.method, scene.gdmlt.use_nee = method, nee
-        else:
-            scene.cycles.volume_bounces = 2
         return scene
 
-    from gdmlt_blender import export
-
-    build(bpy_mod, "GDMLT", 4, 1)
-    desc, warnings = export.export_scene(bpy_mod.context.evaluated_depsgraph_get())
+    desc, warnings = _exported(bpy_mod, build)
     assert not [w for w in warnings if "olume" in w], warnings
     liquid = next(m for m in desc["materials"] if m["name"] == "Liquid")
     # σa = (1 − Color)(1 − √Absorption Color) × density, as Cycles' Principled Volume
@@ -1046,17 +1056,12 @@ def test_a_blackbody_puff_agrees_with_cycles(bpy_mod, tmp_out, method):
         vol.inputs["Blackbody Intensity"].default_value = 1.0
         vol.inputs["Temperature"].default_value = 3000.0
         vol.inputs["Blackbody Tint"].default_value = (1.0, 0.8, 0.6, 1.0)
-        scene.gdmlt.volume_bounces = 1
+        _volume_bounces(scene, engine, 1)
         if engine == "GDMLT":
             scene.gdmlt.method = method
-        else:
-            scene.cycles.volume_bounces = 1
         return scene
 
-    from gdmlt_blender import export
-
-    build(bpy_mod, "GDMLT", 4, 1)
-    desc, warnings = export.export_scene(bpy_mod.context.evaluated_depsgraph_get())
+    desc, warnings = _exported(bpy_mod, build)
     assert not [w for w in warnings if "lackbody" in w], warnings
     puff = next(m for m in desc["materials"] if m["name"] == "Puff")
     assert max(puff["volume"]["emission"]) > 0.0
