@@ -800,6 +800,7 @@ def _node_params(node, textures, warnings, what):
             out["glass_reflection_tint"] = (1.0, 1.0, 1.0)
             out["glass_sqrt_tint"] = True
         _warn_unsupported_layers(node, warnings, what)
+        _subsurface(node, out, warnings, what)
         _specular_tint(node, out, warnings, what)
         _emission(node, "Emission Color", "Emission Strength", out, textures, warnings, what, (0, 0, 0, 1), 0.0)
         _coat(node, out, warnings, what)
@@ -811,6 +812,15 @@ def _node_params(node, textures, warnings, what):
             out["alpha_texture"], out["alpha"] = alpha_tex, 1.0
         else:
             out["alpha"] = min(max(_input_value(node, "Alpha", warnings, what, 1.0), 0.0), 1.0)
+    elif t == "SUBSURFACE_SCATTERING":
+        # a subsurface closure alone: Color the albedo, entering through an interface of the
+        # node's IOR and roughness (Cycles takes its Roughness as α, unsquared) without a
+        # specular layer reflecting
+        _color_or_texture(node, "Color", out, "base_color", textures, warnings, what, (0.8, 0.8, 0.8, 1))
+        out["specular_ior"] = max(float(_input_value(node, "IOR", warnings, what, 1.4)), 1.0)
+        out["specular"] = 0.0
+        out["roughness"] = math.sqrt(_unit(_input_value(node, "Roughness", warnings, what, 1.0)))
+        _subsurface(node, out, warnings, what, weight=1.0)
     elif t == "BSDF_TRANSLUCENT":
         # diffuse transmission towards the far side (its colour a constant)
         out["base_color"] = (0.0, 0.0, 0.0)
@@ -935,8 +945,7 @@ def _specular_layer_ior(ior, level):
 
 
 # Principled inputs whose layers the core does not render: (input, value that means "off").
-_UNSUPPORTED_LAYERS = (("Sheen Weight", 0.0), ("Subsurface Weight", 0.0),
-                       ("Anisotropic", 0.0), ("Thin Film Thickness", 0.0))
+_UNSUPPORTED_LAYERS = (("Sheen Weight", 0.0), ("Anisotropic", 0.0), ("Thin Film Thickness", 0.0))
 
 
 COAT_KEYS = ("coat", "coat_roughness", "coat_ior", "coat_tint")
@@ -960,6 +969,51 @@ def _coat(node, out, warnings, what):
                         f"the surface's normal")
     if max(out.get("emission", (0.0,))) > 0.0 or "emission_texture" in out:
         warnings.append(f"{what}: emission under the coat of '{node.name}' is not dimmed by the coat")
+
+
+def _subsurface_method(node, warnings, what):
+    """The core's walk for the node's Subsurface Method (its `falloff` on the Subsurface
+    Scattering node): Blender 5.3 renamed 4.x–5.2's Random Walk to Random Walk (Legacy) and
+    gave Random Walk a new model (`src/medium/subsurface.rs`); Christensen-Burley is rendered
+    as Random Walk (Legacy), with a warning."""
+    import bpy
+
+    method = getattr(node, "subsurface_method", None) or getattr(node, "falloff", "RANDOM_WALK")
+    if method == "RANDOM_WALK":
+        return "random_walk" if bpy.app.version >= (5, 3, 0) else "legacy"
+    if method == "RANDOM_WALK_SKIN":
+        return "skin"
+    if method == "BURLEY":
+        warnings.append(f"{what}: subsurface method Christensen-Burley of '{node.name}' is rendered as a random "
+                        f"walk (Random Walk (Legacy))")
+    return "legacy"
+
+
+def _subsurface(node, out, warnings, what, weight=None):
+    """Principled Subsurface (or the Subsurface Scattering node, `weight` 1): the share of the
+    diffuse base that walks beneath the surface, its mean free path Radius × Scale per channel,
+    Anisotropy and (Skin) IOR, as Cycles' `bssrdf_setup` takes them."""
+    import bpy
+
+    if weight is None:
+        weight = _unit(_input_value(node, "Subsurface Weight", warnings, what, 0.0))
+    if weight <= 0.0:
+        return
+    prefix = "Subsurface " if node.type == "BSDF_PRINCIPLED" else ""
+    radius = _input_value(node, prefix + "Radius", warnings, what, (1.0, 0.2, 0.1))
+    scale = float(_input_value(node, prefix + "Scale", warnings, what, 0.05))
+    g = float(_input_value(node, prefix + "Anisotropy", warnings, what, 0.0))
+    method = _subsurface_method(node, warnings, what)
+    if bpy.app.version < (5, 3, 0):
+        g = max(g, 0.0)  # (before 5.3 Cycles clamps the anisotropy to [0, 0.9])
+    ior_input = "Subsurface IOR" if node.type == "BSDF_PRINCIPLED" else "IOR"
+    out["subsurface"] = {
+        "weight": weight,
+        "radius": tuple(max(float(r) * scale, 0.0) for r in tuple(radius)[:3]),
+        "anisotropy": g,
+        "ior": float(_input_value(node, ior_input, warnings, what, 1.4)),
+        "method": method,
+    }
 
 
 def _unit(x):
@@ -1046,6 +1100,7 @@ class _Mixture:
     normals: list = field(default_factory=list)  # the leaves' normal and bump maps (NORMAL_KEYS)
     multiscatter: list = field(default_factory=list)  # the metal and glass leaves' distributions
     constant_fresnel: list = field(default_factory=list)  # the metal leaves': Glossy (True) or Principled
+    subsurface: list = field(default_factory=list)  # (diffuse weight, the leaf's subsurface)
     bsdf_leaves: int = 0
 
     @property
@@ -1085,6 +1140,7 @@ def _gather(leaves, warnings, what) -> _Mixture:
                 mix.rough.append((kind, wk, p["roughness"]))
         if w * (1 - m) * (1 - t) > 0:
             mix.rough.append(("d", w * (1 - m) * (1 - t), p.get("diffuse_roughness", 0.0)))
+            mix.subsurface.append((w * (1 - m) * (1 - t), p.get("subsurface")))
         if w * (1 - m) * t > 0:
             mix.iors.append(p["ior"])
         if "base_color_texture" in p:
@@ -1150,6 +1206,7 @@ def _combine(leaves, warnings, what):
             warnings.append(f"{what}: the mixed Principled specular layers have different IOR; "
                             f"{mix.layer_iors[0]:.3f} is used")
     _combined_roughness(mix, out, warnings, what)
+    _combined_subsurface(mix, out, warnings, what)
     if len(set(mix.iors)) > 1:
         warnings.append(f"{what}: the mixed glass lobes have different IOR; {mix.iors[0]} is used")
     _combined_textures(mix, out, colour, warnings, what)
@@ -1162,6 +1219,21 @@ def _combine(leaves, warnings, what):
         elif having:
             warnings.append(f"{what}: a Principled {name} inside a Mix/Add Shader is not rendered ({fallback})")
     return out
+
+
+def _combined_subsurface(mix, out, warnings, what):
+    """The diffuse lobes' subsurface shares add up (weight: their share of all diffuse weight);
+    they walk with the parameters of the heaviest."""
+    having = [(w, s) for w, s in mix.subsurface if s]
+    if not having:
+        return
+    total = sum(w for w, _ in mix.subsurface)
+    heaviest = max(having, key=lambda ws: ws[0] * ws[1]["weight"])[1]
+    out["subsurface"] = dict(heaviest, weight=min(sum(w * s["weight"] for w, s in having) / total, 1.0))
+    keys = ("radius", "anisotropy", "ior", "method")
+    if any(tuple(s[k] for k in keys) != tuple(heaviest[k] for k in keys) for _, s in having):
+        warnings.append(f"{what}: the mixed subsurface shaders differ; they walk with the radius, anisotropy "
+                        f"and method of the heaviest")
 
 
 def _combined_emission_texture(mix, out, warnings, what):

@@ -161,6 +161,9 @@ pub struct Vertex {
     pub delta_out: bool,
     pub eta_out: f32,
     pub rr: f32,
+    /// The path went beneath the surface here (`Scatter::Subsurface`): the next vertex is
+    /// where its walk left the object.
+    pub subsurface: bool,
 }
 
 impl Vertex {
@@ -190,6 +193,7 @@ impl Vertex {
             delta_out: false,
             eta_out: 1.0,
             rr: 1.0,
+            subsurface: false,
         }
     }
 
@@ -197,7 +201,7 @@ impl Vertex {
     /// a delta transmission with relative IOR exactly 1, see `BsdfSample::is_pass_through`).
     #[inline]
     pub fn passed_through(&self) -> bool {
-        self.delta_out && self.eta_out == 1.0 && self.wi.dot(self.ng) * self.wo.dot(self.ng) < 0.0
+        self.delta_out && self.eta_out == 1.0 && !self.subsurface && self.wi.dot(self.ng) * self.wo.dot(self.ng) < 0.0
     }
 }
 
@@ -364,153 +368,166 @@ pub fn trace_path_guided<S: Sampler>(
                                          // what the path brings back through its guidable vertices, for the guide's training
     let mut learn = guiding.filter(|g| g.record).map(|_| PathRecords::default());
     loop {
-        // 1. the segment, and the primary samples of the vertex it reaches
-        out.segments += 1;
-        let hit = match pending_hit.take() {
-            Some(h) => h,
-            // (what the camera sees through transparent surfaces, before any scattering)
-            None if st.depth == 0 => scene.intersect_camera(st.o, st.d, st.tmin, st.tmax),
-            None => scene.intersect(st.o, st.d, st.tmin, st.tmax),
-        };
-        let mut t_surface = hit.map_or(st.tmax, |h| h.t);
-        // the camera ray itself (very-direct light); lamps stay invisible to the camera
-        // through transparent surfaces too (depth counts scattering, not crossings)
-        let camera_ray = st.nvert == 0;
-        let camera_visibility = st.depth == 0;
-        let u = VertexSamples::draw(sampler);
-
-        // 2. the medium the segment runs through, if any: its emission, then a free flight
-        // that may end before the surface (the segment's light is attenuated by T/P)
-        let (mut in_medium, mut pass_weight) = (None, Spectrum::ONE);
-        if let Some(m) = scene.medium(&st.media) {
-            st.touched_medium = true;
-            let emitted = m.emitted(t_surface);
-            if emitted.max_element() > 0.0 {
-                let c = cfg.clamp(st.beta * emitted, st.depth);
-                add(&mut out, &mut learn, c, camera_ray, st.direct_emission());
-                st.record_medium_emission(&mut record, c);
+        // 0. where a walk beneath a surface left it (`PathState::walk_beneath`): a vertex no
+        // segment reached — a white Lambertian facing out, no emission, no holdout (Cycles'
+        // `subsurface_shader_data_setup`) — else the next segment and the vertex it reaches
+        let (si, bsdf, u) = if let Some((si, wo)) = st.exit.take() {
+            let bsdf = crate::bsdf::Bsdf::Lambert(crate::bsdf::Lambert::new(Spectrum::ONE));
+            if let Some(p) = record.as_deref_mut() {
+                p.vertices.push(Vertex::at(&si, wo, st.beta, 0.0, true));
             }
-            match m.sample_distance(u.distance, t_surface) {
-                crate::medium::FreeFlight::Scatter { t, weight } => {
-                    in_medium = Some((m, t, weight));
-                    t_surface = t;
+            (si, bsdf, VertexSamples::draw(sampler))
+        } else {
+            // 1. the segment, and the primary samples of the vertex it reaches
+            out.segments += 1;
+            let hit = match pending_hit.take() {
+                Some(h) => h,
+                // (what the camera sees through transparent surfaces, before any scattering)
+                None if st.depth == 0 => scene.intersect_camera(st.o, st.d, st.tmin, st.tmax),
+                None => scene.intersect(st.o, st.d, st.tmin, st.tmax),
+            };
+            let mut t_surface = hit.map_or(st.tmax, |h| h.t);
+            // the camera ray itself (very-direct light); lamps stay invisible to the camera
+            // through transparent surfaces too (depth counts scattering, not crossings)
+            let camera_ray = st.nvert == 0;
+            let camera_visibility = st.depth == 0;
+            let u = VertexSamples::draw(sampler);
+
+            // 2. the medium the segment runs through, if any: its emission, then a free flight
+            // that may end before the surface (the segment's light is attenuated by T/P)
+            let (mut in_medium, mut pass_weight) = (None, Spectrum::ONE);
+            if let Some(m) = scene.medium(&st.media) {
+                st.touched_medium = true;
+                let emitted = m.emitted(t_surface);
+                if emitted.max_element() > 0.0 {
+                    let c = cfg.clamp(st.beta * emitted, st.depth);
+                    add(&mut out, &mut learn, c, camera_ray, st.direct_emission());
+                    st.record_medium_emission(&mut record, c);
                 }
-                crate::medium::FreeFlight::Pass { weight } => pass_weight = weight,
+                match m.sample_distance(u.distance, t_surface) {
+                    crate::medium::FreeFlight::Scatter { t, weight } => {
+                        in_medium = Some((m, t, weight));
+                        t_surface = t;
+                    }
+                    crate::medium::FreeFlight::Pass { weight } => pass_weight = weight,
+                }
             }
-        }
 
-        // 3. analytic lights crossed before the surface (lights are transparent). After
-        // pass-throughs the light pdf is NEE's from the vertex the segment started at.
-        let mut crossed = Spectrum::ZERO;
-        let (prev_p, o, d) = (st.prev_p, st.o, st.d);
-        let medium = scene.medium(&st.media);
-        let from_medium = st.prev_in_medium;
-        scene.for_each_light_crossed_in(
-            prev_p,
-            from_medium,
-            o,
-            d,
-            t_surface,
-            camera_visibility,
-            |li, t, le, pdf_light| {
-                if !scene.lights_receiver(li, st.prev_prim) {
-                    return; // (light linking: it does not light the vertex the ray left)
+            // 3. analytic lights crossed before the surface (lights are transparent). After
+            // pass-throughs the light pdf is NEE's from the vertex the segment started at.
+            let mut crossed = Spectrum::ZERO;
+            let (prev_p, o, d) = (st.prev_p, st.o, st.d);
+            let medium = scene.medium(&st.media);
+            let from_medium = st.prev_in_medium;
+            scene.for_each_light_crossed_in(
+                prev_p,
+                from_medium,
+                o,
+                d,
+                t_surface,
+                camera_visibility,
+                |li, t, le, pdf_light| {
+                    if !scene.lights_receiver(li, st.prev_prim) {
+                        return; // (light linking: it does not light the vertex the ray left)
+                    }
+                    let inf = !t.is_finite();
+                    let z = if inf { d } else { o + d * t };
+                    let pdf_light = if st.passed {
+                        scene.light_eval_in(li, prev_p, z, from_medium).map_or(0.0, |x| x.1)
+                    } else {
+                        pdf_light
+                    };
+                    // (in a medium: reached with T(t) where the free flight went past t, P(t))
+                    let le = match medium {
+                        Some(m) => le * m.transmittance(t) / m.pass_probability(t).max(1e-30),
+                        None => le,
+                    };
+                    crossed += le * st.mis(pdf_light);
+                    st.record_emission(&mut record, li, z, inf, le, pdf_light);
+                },
+            );
+            add(&mut out, &mut learn, cfg.clamp(st.beta * crossed, st.depth), camera_ray, st.direct_emission());
+            st.beta *= pass_weight;
+            if !(st.beta.max_element() > 0.0) {
+                break; // (a medium absorbed every channel the path carried)
+            }
+
+            // 4. a scattering in the medium: a vertex of its own (light sample, phase function)
+            if let Some((m, t, weight)) = in_medium {
+                st.beta *= weight;
+                if !st.scatter_in_medium(scene, cfg, &m, t, &u, &mut out, &mut learn, record.as_deref_mut()) {
+                    break;
                 }
-                let inf = !t.is_finite();
-                let z = if inf { d } else { o + d * t };
-                let pdf_light = if st.passed {
-                    scene.light_eval_in(li, prev_p, z, from_medium).map_or(0.0, |x| x.1)
-                } else {
-                    pdf_light
-                };
-                // (in a medium: reached with T(t) where the free flight went past t, P(t))
-                let le = match medium {
-                    Some(m) => le * m.transmittance(t) / m.pass_probability(t).max(1e-30),
-                    None => le,
-                };
-                crossed += le * st.mis(pdf_light);
-                st.record_emission(&mut record, li, z, inf, le, pdf_light);
-            },
-        );
-        add(&mut out, &mut learn, cfg.clamp(st.beta * crossed, st.depth), camera_ray, st.direct_emission());
-        st.beta *= pass_weight;
-        if !(st.beta.max_element() > 0.0) {
-            break; // (a medium absorbed every channel the path carried)
-        }
+                continue;
+            }
 
-        // 4. a scattering in the medium: a vertex of its own (light sample, phase function)
-        if let Some((m, t, weight)) = in_medium {
-            st.beta *= weight;
-            if !st.scatter_in_medium(scene, cfg, &m, t, &u, &mut out, &mut learn, record.as_deref_mut()) {
+            // 5. a miss: the world, or the film's transparency
+            let Some(hit) = hit else {
+                if camera_visibility && scene.camera.film_transparent {
+                    // the world behind the camera ray (or behind the transparent surfaces it
+                    // crossed) is the film's transparency, not light
+                    out.transparent += (st.beta.x + st.beta.y + st.beta.z) / 3.0;
+                    break;
+                }
+                if let Some(backdrop) = scene.backdrop.as_ref().filter(|_| camera_visibility) {
+                    // what the camera sees instead of the world (no light sampling finds it)
+                    let le = backdrop.eval(&scene.textures, st.d);
+                    add(&mut out, &mut learn, cfg.clamp(st.beta * le, st.depth), camera_ray, st.direct_emission());
+                    st.record_emission(&mut record, scene.env_light(), st.d, true, le, 0.0);
+                    break;
+                }
+                let (le, pdf_light) = scene.world_eval(st.prev_p, st.d);
+                if le.max_element() > 0.0 {
+                    let c = cfg.clamp(st.beta * le * st.mis(pdf_light), st.depth);
+                    add(&mut out, &mut learn, c, camera_ray, st.direct_emission());
+                    st.record_emission(&mut record, scene.env_light(), st.d, true, le, pdf_light);
+                }
                 break;
-            }
-            continue;
-        }
+            };
 
-        // 5. a miss: the world, or the film's transparency
-        let Some(hit) = hit else {
-            if camera_visibility && scene.camera.film_transparent {
-                // the world behind the camera ray (or behind the transparent surfaces it
-                // crossed) is the film's transparency, not light
+            // 6. the surface: a holdout the camera sees ends the path as the film's transparency;
+            // else its emission, the vertex
+            if camera_visibility && scene.is_holdout(hit.prim) {
                 out.transparent += (st.beta.x + st.beta.y + st.beta.z) / 3.0;
                 break;
             }
-            if let Some(backdrop) = scene.backdrop.as_ref().filter(|_| camera_visibility) {
-                // what the camera sees instead of the world (no light sampling finds it)
-                let le = backdrop.eval(&scene.textures, st.d);
-                add(&mut out, &mut learn, cfg.clamp(st.beta * le, st.depth), camera_ray, st.direct_emission());
-                st.record_emission(&mut record, scene.env_light(), st.d, true, le, 0.0);
-                break;
+            let si = SurfaceInteraction { camera: camera_visibility, ..scene.interaction(&hit, st.d) };
+            let linked = |li: Option<u32>| li.is_none_or(|li| scene.lights_receiver(li, st.prev_prim));
+            let emission =
+                scene.surface_emission(&si, st.prev_p, st.d).filter(|_| linked(scene.triangle_light(si.prim)));
+            if let Some((le, pdf_light)) = emission {
+                add(
+                    &mut out,
+                    &mut learn,
+                    cfg.clamp(st.beta * le * st.mis(pdf_light), st.depth),
+                    camera_ray,
+                    st.direct_emission(),
+                );
+                let li = scene.triangle_light(si.prim).unwrap_or(u32::MAX);
+                st.record_emission(&mut record, li, si.p, false, le, pdf_light);
             }
-            let (le, pdf_light) = scene.world_eval(st.prev_p, st.d);
-            if le.max_element() > 0.0 {
-                let c = cfg.clamp(st.beta * le * st.mis(pdf_light), st.depth);
-                add(&mut out, &mut learn, c, camera_ray, st.direct_emission());
-                st.record_emission(&mut record, scene.env_light(), st.d, true, le, pdf_light);
-            }
-            break;
-        };
-
-        // 6. the surface: a holdout the camera sees ends the path as the film's transparency;
-        // else its emission, the vertex
-        if camera_visibility && scene.is_holdout(hit.prim) {
-            out.transparent += (st.beta.x + st.beta.y + st.beta.z) / 3.0;
-            break;
-        }
-        let si = SurfaceInteraction { camera: camera_visibility, ..scene.interaction(&hit, st.d) };
-        let linked = |li: Option<u32>| li.is_none_or(|li| scene.lights_receiver(li, st.prev_prim));
-        let emission = scene.surface_emission(&si, st.prev_p, st.d).filter(|_| linked(scene.triangle_light(si.prim)));
-        if let Some((le, pdf_light)) = emission {
-            add(
-                &mut out,
-                &mut learn,
-                cfg.clamp(st.beta * le * st.mis(pdf_light), st.depth),
-                camera_ray,
-                st.direct_emission(),
-            );
-            let li = scene.triangle_light(si.prim).unwrap_or(u32::MAX);
-            st.record_emission(&mut record, li, si.p, false, le, pdf_light);
-        }
-        // (a medium's boundary: the shift does not follow the path past it)
-        st.touched_medium |= scene.has_medium(si.material);
-        let bsdf = scene.bsdf_at(&si);
-        if let Some(t) = guide {
-            // the denoising guides: this surface, or through it if it is mirror-like
-            if camera_ray {
-                out.normal = si.frame.n; // kept if the guides find no surface further on
-            }
-            match bsdf.guide() {
-                Guide::Surface(albedo) => {
-                    out.albedo = t * albedo;
-                    out.normal = si.frame.n;
-                    guide = None;
+            // (a medium's boundary: the shift does not follow the path past it)
+            st.touched_medium |= scene.has_medium(si.material);
+            let bsdf = scene.bsdf_at(&si);
+            if let Some(t) = guide {
+                // the denoising guides: this surface, or through it if it is mirror-like
+                if camera_ray {
+                    out.normal = si.frame.n; // kept if the guides find no surface further on
                 }
-                Guide::Through(tint) => guide = Some(t * tint),
+                match bsdf.guide() {
+                    Guide::Surface(albedo) => {
+                        out.albedo = t * albedo;
+                        out.normal = si.frame.n;
+                        guide = None;
+                    }
+                    Guide::Through(tint) => guide = Some(t * tint),
+                }
             }
-        }
-        if let Some(p) = record.as_deref_mut() {
-            p.vertices.push(Vertex::at(&si, -st.d, st.beta, st.prev_pdf, bsdf.is_diffuse()));
-        }
+            if let Some(p) = record.as_deref_mut() {
+                p.vertices.push(Vertex::at(&si, -st.d, st.beta, st.prev_pdf, bsdf.is_diffuse()));
+            }
+            (si, bsdf, u)
+        };
         let VertexSamples {
             light_select: u_light_select, light: u_light, lobe: u_lobe, bsdf: u_bsdf, rr: u_rr, ..
         } = u;
@@ -553,10 +570,16 @@ pub fn trace_path_guided<S: Sampler>(
             }
         }
 
-        // 9. the BSDF sample that continues the path
+        // 9. the BSDF sample that continues the path (or beneath the surface)
         let Some(bs) = sampled else {
             break;
         };
+        if bs.scatter == Scatter::Subsurface {
+            if !st.walk_beneath(scene, &si, &bs, bsdf.subsurface(), &u, record.as_deref_mut()) {
+                break;
+            }
+            continue;
+        }
         if !st.scatter(scene, &si, wo, &bs, u_rr, cfg, record.as_deref_mut()) {
             break;
         }
@@ -615,6 +638,9 @@ struct PathState {
     touched_medium: bool,
     /// The last scattering vertex is in a medium (its light pdfs: `Scene::sample_light_in`).
     prev_in_medium: bool,
+    /// Where a walk beneath a surface left it, and the direction out (`walk_beneath`): the
+    /// next vertex.
+    exit: Option<(SurfaceInteraction, Vec3)>,
 }
 
 impl PathState {
@@ -642,6 +668,7 @@ impl PathState {
             media,
             touched_medium: false,
             prev_in_medium: false,
+            exit: None,
         }
     }
 
@@ -739,7 +766,7 @@ impl PathState {
                 Scatter::Diffuse => self.by_kind[0] += 1,
                 Scatter::Glossy => self.by_kind[1] += 1,
                 Scatter::Transmission => self.by_kind[2] += 1,
-                Scatter::Transparent => {}
+                Scatter::Transparent | Scatter::Subsurface => {}
             }
         }
         let q = if self.depth >= RR_START_DEPTH && !pass_through { survival_probability(self.beta) } else { 1.0 };
@@ -786,6 +813,88 @@ impl PathState {
         self.tmax = f32::INFINITY;
         true
     }
+}
+
+impl PathState {
+    /// The path enters the surface at `si` by the subsurface sample `bs` and walks beneath it
+    /// (`medium::subsurface`, the interior of `sss` = (parameters, albedo)) to where it leaves
+    /// the object — the first crossing of a surface of the same material — which becomes the
+    /// next vertex (`exit`). Entering is not a bounce; the walk draws its random numbers from
+    /// a generator seeded by the vertex's primary samples (its length varies: the primary
+    /// sample layout stays fixed). False when the light is lost inside, or the direction does
+    /// not enter. A path that walked is not shifted (`touched_medium`).
+    fn walk_beneath(
+        &mut self,
+        scene: &Scene,
+        si: &SurfaceInteraction,
+        bs: &crate::bsdf::BsdfSample,
+        sss: Option<(crate::medium::subsurface::Subsurface, Spectrum)>,
+        u: &VertexSamples,
+        record: Option<&mut Path>,
+    ) -> bool {
+        let Some((sss, albedo)) = sss else { return false };
+        let dir = si.frame.to_world(bs.wi);
+        if dir.dot(si.ng) >= 0.0 {
+            return false; // (the refraction left through the geometric surface)
+        }
+        self.beta *= bs.weight;
+        if let Some(v) = record.and_then(|p| p.vertices.last_mut()) {
+            v.wi = dir;
+            v.f_out = bs.weight * bs.pdf;
+            v.pdf_out = bs.pdf;
+            v.delta_out = true;
+            v.eta_out = 1.0;
+            v.subsurface = true;
+        }
+        self.nvert += 1;
+        self.touched_medium = true;
+        let seed = [u.light_select, u.light.x, u.light.y, u.lobe, u.bsdf.x, u.bsdf.y, u.rr, u.distance]
+            .iter()
+            .fold(0x5eed_5ab5_u64, |h, x| crate::sampler::mix64(h ^ x.to_bits() as u64));
+        let Some((out, exit_dir, weight, _)) = walk_beneath(scene, si, dir, sss, albedo, seed) else {
+            return false;
+        };
+        self.beta *= weight;
+        if !is_finite_spectrum(self.beta) || !(self.beta.max_element() > 0.0) {
+            return false;
+        }
+        self.passed = false;
+        self.pass_tint = Spectrum::ONE;
+        self.exit = Some((out, exit_dir));
+        true
+    }
+}
+
+/// The walk beneath the surface at `si` from direction `dir` (into it) through the interior of
+/// `sss` with surface albedo `albedo` (`medium::subsurface`), its random numbers from a
+/// generator seeded by `seed`, to the first crossing of a surface of the same material: the
+/// exit shaded as if reached from outside against the walk (its normals face out), the
+/// direction out, the walk's weight and the hit. None when the light is lost inside.
+pub fn walk_beneath(
+    scene: &Scene,
+    si: &SurfaceInteraction,
+    dir: Vec3,
+    sss: crate::medium::subsurface::Subsurface,
+    albedo: Spectrum,
+    seed: u64,
+) -> Option<(SurfaceInteraction, Vec3, Spectrum, TriHit)> {
+    let interior = sss.coefficients(albedo);
+    let mut rng = crate::sampler::IndependentSampler::new(seed, 0x55);
+    let material = si.material;
+    let exit = interior.walk(si.spawn_origin(dir), dir, &mut rng, |o, d, t_max| {
+        // the closest crossing of a surface of this material (others are not there)
+        let mut t_min = 0.0;
+        for _ in 0..64 {
+            let hit = scene.intersect(o, d, t_min, t_max)?;
+            if scene.triangle_material(hit.prim) == material {
+                return Some((hit.t, hit));
+            }
+            t_min = hit.t * (1.0 + 1e-5) + 1e-7;
+        }
+        None
+    })?;
+    let out = SurfaceInteraction { camera: false, ..scene.interaction(&exit.hit, -exit.dir) };
+    Some((out, exit.dir, exit.weight, exit.hit))
 }
 
 /// A vertex's primary samples (the module comment's order).

@@ -241,6 +241,15 @@ fn material_dict<'py>(py: Python<'py>, m: &MaterialDesc) -> PyResult<Bound<'py, 
         vd.set_item("anisotropy", v.anisotropy)?;
         md.set_item("volume", vd)?;
     }
+    if let Some(v) = &m.subsurface {
+        let sd = PyDict::new(py);
+        sd.set_item("weight", v.weight)?;
+        sd.set_item("radius", v.radius)?;
+        sd.set_item("anisotropy", v.anisotropy)?;
+        sd.set_item("ior", v.ior)?;
+        sd.set_item("method", &v.method)?;
+        md.set_item("subsurface", sd)?;
+    }
     if let Some(b) = &m.blend {
         md.set_item("blend", material_dict(py, b)?)?;
         if let Some(t) = m.blend_texture {
@@ -341,7 +350,27 @@ fn parse_material(d: &Bound<'_, PyDict>) -> PyResult<MaterialDesc> {
             )?),
             _ => None,
         },
+        subsurface: match item(d, "subsurface")? {
+            Some(v) if !v.is_none() => Some(parse_subsurface(
+                v.cast::<PyDict>().map_err(|_| verr(format!("{ctx}: subsurface must be a dict")))?,
+                &ctx,
+            )?),
+            _ => None,
+        },
         name,
+    })
+}
+
+/// A material's subsurface layer: {"weight": w, "radius": RGB (world units, Radius × Scale),
+/// "anisotropy": g, "ior": Subsurface IOR, "method": "random_walk" | "legacy" | "skin"}.
+fn parse_subsurface(d: &Bound<'_, PyDict>, ctx: &str) -> PyResult<scene::desc::SubsurfaceDesc> {
+    let ctx = format!("{ctx}: subsurface");
+    Ok(scene::desc::SubsurfaceDesc {
+        weight: get_or(d, "weight", 1.0, &ctx)?,
+        radius: rgb(d, "radius", [1.0, 0.2, 0.1], &ctx)?,
+        anisotropy: get_or(d, "anisotropy", 0.0, &ctx)?,
+        ior: get_or(d, "ior", 1.4, &ctx)?,
+        method: get_or(d, "method", "random_walk".to_string(), &ctx)?,
     })
 }
 

@@ -73,6 +73,13 @@ impl Bsdf {
             roughness: mean(da.roughness, s1, db.roughness, s2),
             coverage: if d1 + d2 > 0.0 { (s1 + s2) / (d1 + d2) } else { 0.0 },
             tint: mean(da.tint, s1, db.tint, s2),
+            // (the walk takes the parameters of the side that has one, the heavier if both)
+            subsurface: {
+                let (ssa, ssb) = (d1 * da.subsurface.weight, d2 * db.subsurface.weight);
+                let params = if ssa >= ssb { da.subsurface } else { db.subsurface };
+                let weight = if d1 + d2 > 0.0 { (ssa + ssb) / (d1 + d2) } else { 0.0 };
+                crate::medium::subsurface::Subsurface { weight, ..params }
+            },
         };
         let heavier = |x: bool, y: bool, wx: f32, wy: f32| if wx >= wy { x } else { y };
         let metal = Conductor {
@@ -122,7 +129,14 @@ mod tests {
     fn principled(base: Spectrum, metallic: f32, transmission: f32, pass: f32) -> Bsdf {
         let rest = 1.0 - pass;
         Bsdf::Principled {
-            diffuse: Layered { base: Lambert::new(base), eta: 1.5, roughness: 0.4, coverage: 1.0, tint: Spectrum::ONE },
+            diffuse: Layered {
+                base: Lambert::new(base),
+                eta: 1.5,
+                roughness: 0.4,
+                coverage: 1.0,
+                tint: Spectrum::ONE,
+                subsurface: crate::medium::subsurface::Subsurface::NONE,
+            },
             metal: Conductor { f0: base, roughness: 0.4, multiscatter: true, f82: Spectrum::ONE, constant: false },
             glass: Dielectric {
                 eta: 1.5,

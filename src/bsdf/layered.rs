@@ -16,6 +16,7 @@ use super::albedo::{ggx_albedo, specular_albedo};
 use super::microfacet::{fresnel_dielectric, reflect, Ggx};
 use super::{BsdfSample, Lambert, LobeKind, Scatter, SPECULAR_ROUGHNESS_THRESHOLD};
 use crate::math::{luminance, Spectrum};
+use crate::medium::subsurface::Subsurface;
 use glam::{Vec2, Vec3};
 
 #[derive(Clone, Copy, Debug)]
@@ -30,13 +31,18 @@ pub struct Layered {
     pub coverage: f32,
     /// Specular Tint (white: the plain dielectric layer).
     pub tint: Spectrum,
+    /// The share of the base that scatters beneath the surface (Subsurface Weight) and how
+    /// (`medium::subsurface`): a lobe of its own, not evaluable — sampling it returns the
+    /// direction into the surface (`Scatter::Subsurface`), from where the path builder walks.
+    /// The Lambertian keeps 1 − weight.
+    pub subsurface: Subsurface,
 }
 
 impl Layered {
     /// A Lambertian without a layer.
     #[inline]
     pub fn plain(base: Lambert) -> Layered {
-        Layered { base, eta: 1.0, roughness: 1.0, coverage: 0.0, tint: Spectrum::ONE }
+        Layered { base, eta: 1.0, roughness: 1.0, coverage: 0.0, tint: Spectrum::ONE, subsurface: Subsurface::NONE }
     }
 
     #[inline]
@@ -141,8 +147,9 @@ impl Layered {
         }
         let e_max = e.max_element();
         let ps = self.layer_probability(e_max);
-        let mut f = self.base.eval(wo, wi) * (1.0 - e_max);
-        let mut p = (1.0 - ps) * self.base.pdf(wo, wi);
+        let lambert = 1.0 - self.subsurface.weight;
+        let mut f = self.base.eval(wo, wi) * ((1.0 - e_max) * lambert);
+        let mut p = (1.0 - ps) * lambert * self.base.pdf(wo, wi);
         if e_max > 0.0 && !self.is_smooth() {
             let (fl, pl) = self.rough_layer(wo, wi);
             f += fl;
@@ -158,7 +165,9 @@ impl Layered {
         if wi.z <= 0.0 {
             return 0.0;
         }
-        (1.0 - self.layer_probability(self.layer_albedo(wo.z).max_element())) * self.base.pdf(wo, wi)
+        (1.0 - self.layer_probability(self.layer_albedo(wo.z).max_element()))
+            * (1.0 - self.subsurface.weight)
+            * self.base.pdf(wo, wi)
     }
 
     pub fn eval(&self, wo: Vec3, wi: Vec3) -> Spectrum {
@@ -189,6 +198,25 @@ impl Layered {
                 eta: 1.0,
                 scatter: Scatter::Glossy,
             });
+        }
+        let ss = self.subsurface.weight;
+        if u_lobe >= ps && ss > 0.0 {
+            // the base: beneath the surface with probability `ss`
+            let v = ((u_lobe - ps) / (1.0 - ps)).min(1.0);
+            if v < ss {
+                let wi = self.subsurface.entry(wo, self.eta, self.roughness, v / ss, u)?;
+                // the closure's weight (1 − e)·ss·albedo over its probability (1 − ps)·ss
+                let weight =
+                    self.base.albedo.clamp(Spectrum::ZERO, Spectrum::ONE) * ((1.0 - e.max_element()) / (1.0 - ps));
+                return Some(BsdfSample {
+                    wi,
+                    weight,
+                    pdf: (1.0 - ps) * ss,
+                    lobe: LobeKind::Specular,
+                    eta: 1.0,
+                    scatter: Scatter::Subsurface,
+                });
+            }
         }
         let wi = if u_lobe < ps {
             reflect(wo, Ggx::from_roughness(self.roughness).sample_visible(wo, u))
@@ -226,6 +254,7 @@ mod tests {
             roughness,
             coverage: 1.0,
             tint: Spectrum::ONE,
+            subsurface: Subsurface::NONE,
         })
     }
 
@@ -264,6 +293,7 @@ mod tests {
             roughness: 0.0,
             coverage: 1.0,
             tint: Spectrum::ONE,
+            subsurface: Subsurface::NONE,
         };
         let wo = Vec3::new(0.5, 0.1, 0.86).normalize();
         let (f, p, wi) = b.delta_eval(wo).unwrap();
@@ -299,7 +329,14 @@ mod tests {
         use crate::sampler::{IndependentSampler, Sampler};
         let tint = Spectrum::new(1.0, 0.5, 0.1);
         for r in [0.0f32, 0.3, 0.7] {
-            let b = Layered { base: Lambert::new(Spectrum::ZERO), eta: 1.5, roughness: r, coverage: 1.0, tint };
+            let b = Layered {
+                base: Lambert::new(Spectrum::ZERO),
+                eta: 1.5,
+                roughness: r,
+                coverage: 1.0,
+                tint,
+                subsurface: Subsurface::NONE,
+            };
             for wo in [Vec3::Z, Vec3::new(0.6, 0.0, 0.8), Vec3::new(0.95, 0.0, 0.31).normalize()] {
                 let mut s = IndependentSampler::new(17, 0);
                 let n = 400_000;

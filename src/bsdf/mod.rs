@@ -57,6 +57,10 @@ pub enum Scatter {
     Glossy,
     Transmission,
     Transparent,
+    /// Into the surface, where the path builder walks beneath it (`medium::subsurface`): not a
+    /// bounce by itself (the Lambertian scattering where the walk leaves is a diffuse one, as
+    /// in Cycles), and not evaluable (a discrete event for MIS).
+    Subsurface,
 }
 
 /// The result of importance-sampling a BSDF.
@@ -79,7 +83,10 @@ impl BsdfSample {
     /// with relative IOR exactly 1 — glass keeps its IOR off 1).
     #[inline]
     pub fn is_pass_through(&self, wo: Vec3) -> bool {
-        self.lobe == LobeKind::Specular && self.eta == 1.0 && self.wi.z * wo.z < 0.0
+        self.lobe == LobeKind::Specular
+            && self.eta == 1.0
+            && self.wi.z * wo.z < 0.0
+            && self.scatter != Scatter::Subsurface
     }
 }
 
@@ -598,6 +605,17 @@ impl Bsdf {
         }
     }
 
+    /// The subsurface lobe's parameters and the albedo it walks with, when it has one.
+    #[inline]
+    pub fn subsurface(&self) -> Option<(crate::medium::subsurface::Subsurface, Spectrum)> {
+        let l = match self {
+            Bsdf::Layered(l) => l,
+            Bsdf::Principled { diffuse, w, .. } if w[0] > 0.0 => diffuse,
+            _ => return None,
+        };
+        l.subsurface.is_some().then_some((l.subsurface, l.base.albedo))
+    }
+
     /// Diffuse-like albedo, written to the denoising albedo pass.
     pub fn albedo(&self) -> Spectrum {
         match self {
@@ -680,6 +698,7 @@ mod tests {
             roughness,
             coverage: 1.0,
             tint: Spectrum::ONE,
+            subsurface: crate::medium::subsurface::Subsurface::NONE,
         };
         let bsdfs = [
             Bsdf::Lambert(Lambert::new(Spectrum::splat(0.5))),
@@ -786,6 +805,7 @@ mod tests {
             roughness: 0.4,
             coverage: 1.0,
             tint: Spectrum::ONE,
+            subsurface: crate::medium::subsurface::Subsurface::NONE,
         };
         let mut mix = coated(
             Spectrum::splat(0.5),

@@ -140,6 +140,10 @@ pub fn sample_mixture(bsdf: &Bsdf, frame: &Frame, dist: &DTree, wo: Vec3, u_lobe
         let pdf = a * dist.pdf(frame.to_world(bs.wi)) + (1.0 - a) * bs.pdf;
         bs.weight *= bs.pdf / pdf;
         bs.pdf = pdf;
+    } else {
+        // a discrete lobe (beneath the surface) is chosen only when the guide is not
+        bs.weight /= 1.0 - a;
+        bs.pdf *= 1.0 - a;
     }
     Some(bs)
 }

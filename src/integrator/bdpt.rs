@@ -106,6 +106,13 @@ struct Vertex {
     media: MediumStack,
     /// A vertex in a medium: its phase function.
     phase: Option<HenyeyGreenstein>,
+    /// Where a camera subpath's walk beneath a surface left it (`path::walk_beneath`): the
+    /// vertex after it (towards the camera) is the entry, the walk between them a transition
+    /// only the camera side makes.
+    walk_exit: bool,
+    /// Walks beneath surfaces the camera subpath made up to here: its vertices count that
+    /// many fewer bounces (entering is not one, as in Cycles).
+    walks: u8,
 }
 
 impl Vertex {
@@ -131,6 +138,8 @@ impl Vertex {
             origin_nee: 0.0,
             media: MediumStack::default(),
             phase: None,
+            walk_exit: false,
+            walks: 0,
         }
     }
 
@@ -188,7 +197,9 @@ fn convert(pdf: f32, a: &Vertex, b: &Vertex) -> f32 {
 /// one — is evaluated with the surface built for a ray from there.
 fn facing(scene: &Scene, v: &Vertex, wo: Vec3) -> Option<(Bsdf, Frame)> {
     let (si, bsdf) = (v.si.as_ref()?, v.bsdf?);
-    if wo.dot(si.ng) >= 0.0 {
+    // (a walk's exit: its camera-side neighbour is the entry, reached beneath the surface —
+    // its white Lambertian faces out, whatever the direction between the two points)
+    if wo.dot(si.ng) >= 0.0 || v.walk_exit {
         return Some((bsdf, si.frame));
     }
     if !bsdf.transmits() {
@@ -368,197 +379,220 @@ fn random_walk<S: Sampler + ?Sized>(
     // carries the light's power)
     let mut beta_ref = Spectrum::ONE;
     let mut last = 0usize; // the last vertex the walk scattered at (not a branch)
+                           // where a camera walk beneath a surface left it (`path::walk_beneath`): the next vertex
+    let mut exit: Option<(SurfaceInteraction, TriHit)> = None;
     loop {
         let prev = path[last];
-        let camera_ray = radiance && !scattered;
-        // (light linking: the object of the vertex the ray left, none from the camera)
-        let receiver = prev.si.as_ref().map_or(u32::MAX, |s| s.prim);
-        let hit = if camera_ray { scene.intersect_camera(o, d, tmin, tmax) } else { scene.intersect(o, d, tmin, tmax) };
-        let mut t_surface = hit.map_or(tmax, |h| h.t);
-        // the medium the segment runs through (pt's free flight: path.rs): its emission (found
-        // by the camera alone), a scattering before the surface or the weight of passing
-        let u_dist = if has_media { sampler.next_1d() } else { 0.0 };
-        let medium = if has_media { scene.medium(&media) } else { None };
-        let (mut scatter_at, mut pass) = (None, Spectrum::ONE);
-        if let Some(m) = medium {
-            let e = m.emitted(t_surface) * beta;
-            if radiance && !past_limits && e.max_element() > 0.0 {
-                out.radiance += e;
-                if camera_ray {
-                    out.very_direct += e;
+        let exited = exit.is_some();
+        let (si, hit, camera_ray) = if let Some((si, hit)) = exit.take() {
+            (si, hit, false)
+        } else {
+            let camera_ray = radiance && !scattered;
+            // (light linking: the object of the vertex the ray left, none from the camera)
+            let receiver = prev.si.as_ref().map_or(u32::MAX, |s| s.prim);
+            let hit =
+                if camera_ray { scene.intersect_camera(o, d, tmin, tmax) } else { scene.intersect(o, d, tmin, tmax) };
+            let mut t_surface = hit.map_or(tmax, |h| h.t);
+            // the medium the segment runs through (pt's free flight: path.rs): its emission (found
+            // by the camera alone), a scattering before the surface or the weight of passing
+            let u_dist = if has_media { sampler.next_1d() } else { 0.0 };
+            let medium = if has_media { scene.medium(&media) } else { None };
+            let (mut scatter_at, mut pass) = (None, Spectrum::ONE);
+            if let Some(m) = medium {
+                let e = m.emitted(t_surface) * beta;
+                if radiance && !past_limits && e.max_element() > 0.0 {
+                    out.radiance += e;
+                    if camera_ray {
+                        out.very_direct += e;
+                    }
+                }
+                match m.sample_distance(u_dist, t_surface) {
+                    FreeFlight::Scatter { t, weight } => {
+                        scatter_at = Some((m, t, weight));
+                        t_surface = t;
+                    }
+                    FreeFlight::Pass { weight } => pass = weight,
                 }
             }
-            match m.sample_distance(u_dist, t_surface) {
-                FreeFlight::Scatter { t, weight } => {
-                    scatter_at = Some((m, t, weight));
-                    t_surface = t;
-                }
-                FreeFlight::Pass { weight } => pass = weight,
+            if let Some(ev) = events.as_deref_mut() {
+                // lights crossed (strategy s = 0), as a light sample from the vertex the ray left
+                // sees them (from a medium: `light::FacingDisk`), reached with T/P in a medium
+                let t = path.len();
+                let from_medium = prev.kind == Kind::Medium;
+                scene.for_each_light_crossed_in(
+                    prev.p,
+                    from_medium,
+                    o,
+                    d,
+                    t_surface,
+                    camera_ray,
+                    |li, tl, le, pdf_l| {
+                        if !scene.lights_receiver(li, receiver) {
+                            return; // (light linking: it does not light the vertex the ray left)
+                        }
+                        let le = medium.map_or(le, |m| le * m.transmittance(tl) / m.pass_probability(tl).max(1e-30));
+                        let inf = !tl.is_finite();
+                        let z = if inf { d } else { o + d * tl };
+                        let mut lv = Vertex::endpoint(Kind::Light, z);
+                        lv.light = li;
+                        lv.infinite = inf;
+                        lv.dir = d;
+                        lv.ng = scene.light_normal(li, z);
+                        lv.pdf_fwd = ctx.origin_pdf(&lv);
+                        let pdf_nee = ctx.nee_pdf_of(&lv, pdf_l, prev.p);
+                        ev.push(Emission { t, light: lv, value: beta * le, pdf_nee, alone: false });
+                    },
+                );
             }
-        }
-        if let Some(ev) = events.as_deref_mut() {
-            // lights crossed (strategy s = 0), as a light sample from the vertex the ray left
-            // sees them (from a medium: `light::FacingDisk`), reached with T/P in a medium
-            let t = path.len();
-            let from_medium = prev.kind == Kind::Medium;
-            scene.for_each_light_crossed_in(prev.p, from_medium, o, d, t_surface, camera_ray, |li, tl, le, pdf_l| {
-                if !scene.lights_receiver(li, receiver) {
-                    return; // (light linking: it does not light the vertex the ray left)
+            if let Some((m, t, weight)) = scatter_at {
+                // a scattering in the medium: a vertex of its own, the phase function's sample
+                beta *= weight;
+                if !(beta.max_element() > 0.0) {
+                    break;
                 }
-                let le = medium.map_or(le, |m| le * m.transmittance(tl) / m.pass_probability(tl).max(1e-30));
-                let inf = !tl.is_finite();
-                let z = if inf { d } else { o + d * tl };
-                let mut lv = Vertex::endpoint(Kind::Light, z);
-                lv.light = li;
-                lv.infinite = inf;
-                lv.dir = d;
-                lv.ng = scene.light_normal(li, z);
-                lv.pdf_fwd = ctx.origin_pdf(&lv);
-                let pdf_nee = ctx.nee_pdf_of(&lv, pdf_l, prev.p);
-                ev.push(Emission { t, light: lv, value: beta * le, pdf_nee, alone: false });
-            });
-        }
-        if let Some((m, t, weight)) = scatter_at {
-            // a scattering in the medium: a vertex of its own, the phase function's sample
-            beta *= weight;
+                let p = o + d * t;
+                // a soft-falloff sphere light is a disk facing a point in a medium, which light
+                // subpaths do not start from (`Context::mis_weight`: disk paths) — also after
+                // the transparent boundaries crossed on the way
+                if prev.kind == Kind::Light && scene.sees_facing_disk(prev.light) {
+                    break;
+                }
+                if first_light_hit {
+                    // the light's radiance as this point receives it (as at a surface, below)
+                    first_light_hit = false;
+                    let l0 = &path[0];
+                    let z = if l0.infinite { l0.dir } else { l0.p };
+                    let Some((le, _)) = scene.light_eval_in(l0.light, p, z, true) else { break };
+                    let factor = if l0.infinite {
+                        1.0
+                    } else if l0.ng == Vec3::ZERO {
+                        (p - l0.p).length_squared()
+                    } else {
+                        l0.ng.dot(d).abs()
+                    };
+                    beta *= le * factor;
+                    beta_ref = beta.max(Spectrum::splat(1e-30));
+                }
+                if surfaces >= max_surface {
+                    break; // (no pass-through in a medium)
+                }
+                let mut v = Vertex::endpoint(Kind::Medium, p);
+                if prev.kind == Kind::Light {
+                    let z = if prev.infinite { prev.dir } else { prev.p };
+                    let pdf = scene.light_eval_in(prev.light, p, z, true).map_or(0.0, |x| x.1);
+                    v.origin_nee = ctx.nee_pdf_of(&prev, pdf, p);
+                }
+                v.beta = beta;
+                v.pdf_fwd = convert(pdf_dir, &prev, &v);
+                v.media = media;
+                v.phase = Some(m.phase);
+                v.label = VOLUME_LABEL;
+                path.push(v);
+                past_limits |= kinds.iter().zip(&limits).any(|(n, max)| n > max);
+                kinds[VOLUME_LABEL as usize] += 1;
+                surfaces += 1;
+                scattered = true;
+                let before = last;
+                last = path.len() - 1;
+                let _u_lobe = sampler.next_1d();
+                let u_phase = sampler.next_2d();
+                let u_rr = sampler.next_1d();
+                let (wi, pdf) = m.phase.sample(-d, u_phase);
+                // (Henyey–Greenstein is symmetric: the reverse density is the forward one)
+                path[before].pdf_rev = convert(pdf, &path[last], &path[before]);
+                if surfaces as u32 >= RR_START_DEPTH {
+                    let q = survival_probability(beta / beta_ref);
+                    if !(q > 0.0) || u_rr >= q {
+                        break;
+                    }
+                    beta /= q;
+                }
+                if !is_finite_spectrum(beta) || !(beta.max_element() > 0.0) || !(pdf > 0.0) {
+                    break;
+                }
+                pdf_dir = pdf;
+                o = p;
+                d = wi;
+                tmin = 0.0;
+                tmax = f32::INFINITY;
+                continue;
+            }
+            beta *= pass;
             if !(beta.max_element() > 0.0) {
                 break;
             }
-            let p = o + d * t;
-            // a soft-falloff sphere light is a disk facing a point in a medium, which light
-            // subpaths do not start from (`Context::mis_weight`: disk paths) — also after
-            // the transparent boundaries crossed on the way
-            if prev.kind == Kind::Light && scene.sees_facing_disk(prev.light) {
+            let Some(hit) = hit else {
+                if let Some(ev) = events.as_deref_mut() {
+                    if camera_ray && scene.camera.film_transparent {
+                        out.transparent += (beta.x + beta.y + beta.z) / 3.0;
+                    } else if let Some(backdrop) = scene.backdrop.as_ref().filter(|_| camera_ray) {
+                        let le = backdrop.eval(&scene.textures, d);
+                        let lv = Vertex::endpoint(Kind::Light, Vec3::ZERO);
+                        ev.push(Emission { t: path.len(), light: lv, value: beta * le, pdf_nee: 0.0, alone: true });
+                    } else {
+                        let (le, pdf_l) = scene.world_eval(prev.p, d);
+                        if le.max_element() > 0.0 {
+                            let mut lv = Vertex::endpoint(Kind::Light, Vec3::ZERO);
+                            lv.light = scene.env_light();
+                            lv.infinite = true;
+                            lv.dir = d;
+                            lv.pdf_fwd = ctx.origin_pdf(&lv);
+                            ev.push(Emission {
+                                t: path.len(),
+                                light: lv,
+                                value: beta * le,
+                                pdf_nee: pdf_l,
+                                alone: false,
+                            });
+                        }
+                    }
+                }
+                break;
+            };
+            if camera_ray && scene.is_holdout(hit.prim) {
+                // a holdout the camera sees: the film's transparency, and no vertex to join
+                out.transparent += (beta.x + beta.y + beta.z) / 3.0;
                 break;
             }
+            let si = SurfaceInteraction { camera: camera_ray, ..scene.interaction(&hit, d) };
             if first_light_hit {
-                // the light's radiance as this point receives it (as at a surface, below)
+                // the light's radiance as this surface receives it (module comment of scene/emit.rs)
                 first_light_hit = false;
                 let l0 = &path[0];
+                if !scene.lights_receiver(l0.light, si.prim) {
+                    break; // (light linking: the light does not light what it meets first)
+                }
                 let z = if l0.infinite { l0.dir } else { l0.p };
-                let Some((le, _)) = scene.light_eval_in(l0.light, p, z, true) else { break };
+                let Some((le, pdf_nee)) = scene.light_eval(l0.light, si.p, z) else { break };
                 let factor = if l0.infinite {
                     1.0
                 } else if l0.ng == Vec3::ZERO {
-                    (p - l0.p).length_squared()
+                    (si.p - l0.p).length_squared() // a point light: light_eval divided by d²
                 } else {
                     l0.ng.dot(d).abs()
                 };
                 beta *= le * factor;
                 beta_ref = beta.max(Spectrum::splat(1e-30));
+                let _ = pdf_nee;
             }
-            if surfaces >= max_surface {
-                break; // (no pass-through in a medium)
-            }
-            let mut v = Vertex::endpoint(Kind::Medium, p);
-            if prev.kind == Kind::Light {
-                let z = if prev.infinite { prev.dir } else { prev.p };
-                let pdf = scene.light_eval_in(prev.light, p, z, true).map_or(0.0, |x| x.1);
-                v.origin_nee = ctx.nee_pdf_of(&prev, pdf, p);
-            }
-            v.beta = beta;
-            v.pdf_fwd = convert(pdf_dir, &prev, &v);
-            v.media = media;
-            v.phase = Some(m.phase);
-            v.label = VOLUME_LABEL;
-            path.push(v);
-            past_limits |= kinds.iter().zip(&limits).any(|(n, max)| n > max);
-            kinds[VOLUME_LABEL as usize] += 1;
-            surfaces += 1;
-            scattered = true;
-            let before = last;
-            last = path.len() - 1;
-            let _u_lobe = sampler.next_1d();
-            let u_phase = sampler.next_2d();
-            let u_rr = sampler.next_1d();
-            let (wi, pdf) = m.phase.sample(-d, u_phase);
-            // (Henyey–Greenstein is symmetric: the reverse density is the forward one)
-            path[before].pdf_rev = convert(pdf, &path[last], &path[before]);
-            if surfaces as u32 >= RR_START_DEPTH {
-                let q = survival_probability(beta / beta_ref);
-                if !(q > 0.0) || u_rr >= q {
-                    break;
-                }
-                beta /= q;
-            }
-            if !is_finite_spectrum(beta) || !(beta.max_element() > 0.0) || !(pdf > 0.0) {
-                break;
-            }
-            pdf_dir = pdf;
-            o = p;
-            d = wi;
-            tmin = 0.0;
-            tmax = f32::INFINITY;
-            continue;
-        }
-        beta *= pass;
-        if !(beta.max_element() > 0.0) {
-            break;
-        }
-        let Some(hit) = hit else {
             if let Some(ev) = events.as_deref_mut() {
-                if camera_ray && scene.camera.film_transparent {
-                    out.transparent += (beta.x + beta.y + beta.z) / 3.0;
-                } else if let Some(backdrop) = scene.backdrop.as_ref().filter(|_| camera_ray) {
-                    let le = backdrop.eval(&scene.textures, d);
-                    let lv = Vertex::endpoint(Kind::Light, Vec3::ZERO);
-                    ev.push(Emission { t: path.len(), light: lv, value: beta * le, pdf_nee: 0.0, alone: true });
-                } else {
-                    let (le, pdf_l) = scene.world_eval(prev.p, d);
-                    if le.max_element() > 0.0 {
-                        let mut lv = Vertex::endpoint(Kind::Light, Vec3::ZERO);
-                        lv.light = scene.env_light();
-                        lv.infinite = true;
-                        lv.dir = d;
+                let emission = scene
+                    .surface_emission(&si, prev.p, d)
+                    .filter(|_| scene.triangle_light(si.prim).is_none_or(|li| scene.lights_receiver(li, receiver)));
+                if let Some((le, pdf_l)) = emission {
+                    let li = scene.triangle_light(si.prim);
+                    let mut lv = Vertex::endpoint(Kind::Light, si.p);
+                    lv.ng = si.ng;
+                    lv.light = li.unwrap_or(u32::MAX);
+                    if li.is_some() {
                         lv.pdf_fwd = ctx.origin_pdf(&lv);
-                        ev.push(Emission { t: path.len(), light: lv, value: beta * le, pdf_nee: pdf_l, alone: false });
                     }
+                    let pdf_nee = if li.is_some() { ctx.nee_pdf_of(&lv, pdf_l, prev.p) } else { 0.0 };
+                    ev.push(Emission { t: path.len(), light: lv, value: beta * le, pdf_nee, alone: li.is_none() });
                 }
             }
-            break;
+            (si, hit, camera_ray)
         };
-        if camera_ray && scene.is_holdout(hit.prim) {
-            // a holdout the camera sees: the film's transparency, and no vertex to join
-            out.transparent += (beta.x + beta.y + beta.z) / 3.0;
-            break;
-        }
-        let si = SurfaceInteraction { camera: camera_ray, ..scene.interaction(&hit, d) };
-        if first_light_hit {
-            // the light's radiance as this surface receives it (module comment of scene/emit.rs)
-            first_light_hit = false;
-            let l0 = &path[0];
-            if !scene.lights_receiver(l0.light, si.prim) {
-                break; // (light linking: the light does not light what it meets first)
-            }
-            let z = if l0.infinite { l0.dir } else { l0.p };
-            let Some((le, pdf_nee)) = scene.light_eval(l0.light, si.p, z) else { break };
-            let factor = if l0.infinite {
-                1.0
-            } else if l0.ng == Vec3::ZERO {
-                (si.p - l0.p).length_squared() // a point light: light_eval divided by d²
-            } else {
-                l0.ng.dot(d).abs()
-            };
-            beta *= le * factor;
-            beta_ref = beta.max(Spectrum::splat(1e-30));
-            let _ = pdf_nee;
-        }
-        if let Some(ev) = events.as_deref_mut() {
-            let emission = scene
-                .surface_emission(&si, prev.p, d)
-                .filter(|_| scene.triangle_light(si.prim).is_none_or(|li| scene.lights_receiver(li, receiver)));
-            if let Some((le, pdf_l)) = emission {
-                let li = scene.triangle_light(si.prim);
-                let mut lv = Vertex::endpoint(Kind::Light, si.p);
-                lv.ng = si.ng;
-                lv.light = li.unwrap_or(u32::MAX);
-                if li.is_some() {
-                    lv.pdf_fwd = ctx.origin_pdf(&lv);
-                }
-                let pdf_nee = if li.is_some() { ctx.nee_pdf_of(&lv, pdf_l, prev.p) } else { 0.0 };
-                ev.push(Emission { t: path.len(), light: lv, value: beta * le, pdf_nee, alone: li.is_none() });
-            }
-        }
         if surfaces >= max_surface {
             // (the segment after the last vertex found its light; no vertex beyond.) A camera
             // path goes on through transparent surfaces to the light behind them, as Cycles'
@@ -575,7 +609,8 @@ fn random_walk<S: Sampler + ?Sized>(
             tmax = if tmax.is_finite() { (tmax - si.t).max(0.0) } else { f32::INFINITY };
             continue;
         }
-        let bsdf = scene.bsdf_at(&si);
+        // (the exit of a walk: a white Lambertian facing out, Cycles' subsurface exit)
+        let bsdf = if exited { Bsdf::Lambert(crate::bsdf::Lambert::new(Spectrum::ONE)) } else { scene.bsdf_at(&si) };
         if let (Some(t), true) = (guide, radiance) {
             if camera_ray {
                 out.normal = si.frame.n;
@@ -595,9 +630,41 @@ fn random_walk<S: Sampler + ?Sized>(
         let u_rr = sampler.next_1d();
         let Some(bs) = bsdf.sample(wo, u_lobe, u_bsdf) else {
             push_vertex(ctx, path, &si, &hit, bsdf, beta, pdf_dir, &prev, media);
+            path.last_mut().expect("pushed").walk_exit = exited;
             break;
         };
         let wi = si.frame.to_world(bs.wi);
+        if bs.scatter == Scatter::Subsurface {
+            // beneath the surface: an entry vertex (its other lobes join), then — camera
+            // subpaths only — the walk and its exit as the next vertex. The walk is a Dirac
+            // transition for MIS (entry `delta`, exit `walk_exit`): light subpaths never walk,
+            // so the strategies whose light side would are left out (`mis_weight`)
+            push_vertex(ctx, path, &si, &hit, bsdf, beta, pdf_dir, &prev, media);
+            if !radiance || wi.dot(si.ng) >= 0.0 {
+                break;
+            }
+            let entry = path.len() - 1;
+            path[last].pdf_rev = 0.0;
+            path[entry].delta = true;
+            last = entry;
+            scattered = true;
+            let Some((sss, albedo)) = bsdf.subsurface() else { break };
+            let seed = [u_lobe, u_bsdf.x, u_bsdf.y, u_rr]
+                .iter()
+                .fold(0x5eed_b0d7_u64, |h, x| crate::sampler::mix64(h ^ x.to_bits() as u64));
+            let Some((out, dir_out, weight, exit_hit)) = crate::path::walk_beneath(scene, &si, wi, sss, albedo, seed)
+            else {
+                break;
+            };
+            beta *= bs.weight * weight;
+            if !is_finite_spectrum(beta) || !(beta.max_element() > 0.0) {
+                break;
+            }
+            exit = Some((out, exit_hit));
+            d = -dir_out;
+            pdf_dir = 0.0;
+            continue;
+        }
         if bs.is_pass_through(wo) {
             // straight through a transparent surface: the segment goes on, and a branch
             // vertex here lets joins reach the surface's other lobes — as often as when they
@@ -618,6 +685,7 @@ fn random_walk<S: Sampler + ?Sized>(
             continue;
         }
         push_vertex(ctx, path, &si, &hit, bsdf, beta, pdf_dir, &prev, media);
+        path.last_mut().expect("pushed").walk_exit = exited;
         surfaces += 1;
         scattered = true;
         let before = last;
@@ -990,8 +1058,13 @@ impl Context<'_> {
         // a soft-falloff sphere light seen from a medium is the disk facing that point, which
         // only the camera side makes (`light::FacingDisk`): no light subpath starts there
         let disk_path = v(1).kind == Kind::Medium && self.scene.sees_facing_disk(v(0).light);
+        // a walk beneath a surface (exit j, entry j + 1) only the camera side makes: the
+        // strategies whose light subpath reaches past the exit are not made
+        let walk = (0..n).find(|&i| v(i).walk_exit);
         let valid = |k: usize| {
-            if k == 0 {
+            if walk.is_some_and(|j| k > j) {
+                false
+            } else if k == 0 {
                 light_hittable
             } else if k == 1 && !self.cfg.nee || k >= 2 && disk_path {
                 false
@@ -1010,7 +1083,7 @@ impl Context<'_> {
             x
         };
         let own = p(own_k);
-        if !(own > 0.0) || !own.is_finite() || own_k >= 2 && disk_path {
+        if !(own > 0.0) || !own.is_finite() || own_k >= 2 && disk_path || walk.is_some_and(|j| own_k > j) {
             return Weight::own(0.0);
         }
         let (mut sum, mut r_pt) = (0.0f64, [0.0f64; 2]);
@@ -1069,6 +1142,9 @@ fn label_u(seed: u64, jl: usize, jc: usize) -> f32 {
 fn join_label(scene: &Scene, v: &Vertex, wo: Vec3, wi: Vec3, u: f32) -> u8 {
     if v.kind == Kind::Medium {
         return VOLUME_LABEL;
+    }
+    if v.walk_exit {
+        return 0; // (a walk's exit scatters diffusely, as Cycles counts it)
     }
     let Some((b, frame)) = facing(scene, v, wo) else { return NO_LABEL };
     let (lo, li) = (frame.to_local(wo), frame.to_local(wi));
@@ -1220,6 +1296,11 @@ pub(crate) fn sample(
             &mut res.out,
             scene.camera_media(),
         );
+        let mut walks = 0u8;
+        for v in camera.iter_mut() {
+            walks = walks.saturating_add(v.walk_exit as u8);
+            v.walks = walks;
+        }
     }
     // 2. the light subpath
     scratch.light.clear();
@@ -1297,7 +1378,7 @@ pub(crate) fn sample(
         for jc in 1..camera.len() {
             let b = &camera[jc];
             let t = chain(cr, jc);
-            if t + 1 > max_n || !b.connectible {
+            if t + 1 > max_n + b.walks as usize || !b.connectible {
                 continue;
             }
             let (u_sel, u_l) = (streams.cam().next_1d(), streams.cam().next_2d());
@@ -1442,7 +1523,7 @@ pub(crate) fn sample(
             let b = &camera[jc];
             let t = chain(cr, jc);
             let u_label = label_u(label_seed, jl, jc);
-            if s + t > max_n || !b.connectible {
+            if s + t > max_n + b.walks as usize || !b.connectible {
                 continue;
             }
             let (w, d2) = direction(a, b);

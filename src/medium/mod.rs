@@ -18,6 +18,7 @@
 //! coefficients, as Cycles' volume stack does.
 
 pub mod phase;
+pub mod subsurface;
 
 pub use phase::HenyeyGreenstein;
 

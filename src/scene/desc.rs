@@ -203,6 +203,26 @@ pub struct MaterialDesc {
     /// volume and a clear Transparent surface is a bare boundary (Cycles' rule for a Volume
     /// output without Surface); with another surface (glass), the medium fills what it holds.
     pub volume: Option<VolumeDesc>,
+    /// Subsurface scattering of the diffuse base (Principled Subsurface; `None`: none).
+    pub subsurface: Option<SubsurfaceDesc>,
+}
+
+/// Principled BSDF's subsurface layer (`crate::medium::subsurface`): the share of the diffuse
+/// base that scatters beneath the surface, walking through an interior whose mean free path
+/// per channel is `radius` (Subsurface Radius × Subsurface Scale, world units) and whose
+/// albedo is the base colour.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SubsurfaceDesc {
+    /// Subsurface Weight in [0, 1].
+    pub weight: f32,
+    pub radius: [f32; 3],
+    /// Subsurface Anisotropy g.
+    pub anisotropy: f32,
+    /// Subsurface IOR (the Skin method's).
+    pub ior: f32,
+    /// "random_walk" (Blender 5.3's Random Walk), "legacy" (Blender 4.x–5.2's Random Walk,
+    /// 5.3's Random Walk (Legacy)) or "skin" (Random Walk (Skin)).
+    pub method: String,
 }
 
 /// A homogeneous medium (`crate::medium`): coefficients per unit world distance, as
@@ -285,6 +305,7 @@ impl Default for MaterialDesc {
             blend_ray: None,
             blend_ray_curve: Vec::new(),
             volume: None,
+            subsurface: None,
             translucency: 0.0,
             translucent_color: None,
             transparency: 0.0,

@@ -60,6 +60,8 @@ pub struct Material {
     pub metal_constant_fresnel: bool,
     /// Specular Tint of the dielectric layer over the base (white: untinted).
     pub specular_tint: Spectrum,
+    /// The diffuse base's subsurface layer (`MaterialDesc::subsurface`; weight 0: none).
+    pub subsurface: crate::medium::subsurface::Subsurface,
     /// Share of diffuse transmission among the lobes, and its colour (None: the base colour).
     pub translucency: f32,
     pub translucent_color: Option<Spectrum>,
@@ -102,6 +104,7 @@ pub fn range_warnings(d: &MaterialDesc) -> Vec<String> {
         ("coat roughness", d.coat_roughness),
         ("translucency", d.translucency),
         ("transparency", d.transparency),
+        ("subsurface weight", d.subsurface.as_ref().map_or(0.0, |s| s.weight)),
     ] {
         unit(what, x);
     }
@@ -119,6 +122,32 @@ pub fn range_warnings(d: &MaterialDesc) -> Vec<String> {
         out.push(format!("material '{}': IOR {} is not above 0; 1.5 is used", d.name, d.ior));
     }
     out
+}
+
+/// The subsurface layer of a material (`Subsurface::NONE` without one, or with weight 0 or
+/// every radius 0 — Cycles scatters a channel of radius below 1e-8 as a Lambertian), checked:
+/// finite, radius not negative, a known method; the weight clamped to [0, 1].
+pub fn subsurface_from_desc(d: &MaterialDesc) -> Result<crate::medium::subsurface::Subsurface, SceneError> {
+    use crate::medium::subsurface::{Subsurface, SubsurfaceMethod};
+    let Some(s) = &d.subsurface else { return Ok(Subsurface::NONE) };
+    let bad = |what: &str| SceneError::Material { material: d.name.clone(), what: format!("its subsurface: {what}") };
+    if s.radius.iter().chain([&s.weight, &s.anisotropy, &s.ior]).any(|x| !x.is_finite()) {
+        return Err(bad("NaN or Inf parameter"));
+    }
+    if s.radius.iter().any(|&r| r < 0.0) {
+        return Err(bad("negative radius"));
+    }
+    let method = match s.method.as_str() {
+        "random_walk" => SubsurfaceMethod::RandomWalk,
+        "legacy" => SubsurfaceMethod::Legacy,
+        "skin" => SubsurfaceMethod::Skin,
+        other => return Err(bad(&format!("unknown method '{other}' (random_walk, legacy or skin)"))),
+    };
+    let weight = s.weight.clamp(0.0, 1.0);
+    if weight <= 0.0 || s.radius.iter().all(|&r| r < 1e-8) {
+        return Ok(Subsurface::NONE);
+    }
+    Ok(Subsurface { weight, radius: Vec3::from_array(s.radius), anisotropy: s.anisotropy, ior: s.ior, method })
 }
 
 /// The medium of a material's volume (None without one, or for a clear one), its
@@ -233,7 +262,9 @@ impl Material {
                 d.emission.iter().fold(0.0f32, |a, &x| a.max(x))
             )));
         }
+        let subsurface = subsurface_from_desc(d)?;
         Ok(Material {
+            subsurface,
             name: d.name.clone(),
             // Albedo above 1 would add energy; Cycles clamps the base colour the same way.
             base_color: Vec3::from_array(d.base_color).clamp(Vec3::ZERO, Vec3::ONE),
@@ -370,6 +401,7 @@ impl Material {
             roughness,
             coverage: self.specular,
             tint: self.specular_tint,
+            subsurface: self.subsurface,
         };
         // a roughness texture drives every lobe; else each lobe may have its own
         let (rm, rg) = if self.roughness_texture.is_some() {
@@ -408,7 +440,7 @@ impl Material {
                 coat,
                 translucent,
             }
-        } else if w[1] <= 0.0 && w[2] <= 0.0 && !diffuse.has_layer() {
+        } else if w[1] <= 0.0 && w[2] <= 0.0 && !diffuse.has_layer() && !diffuse.subsurface.is_some() {
             Bsdf::Lambert(diffuse.base)
         } else if w[1] <= 0.0 && w[2] <= 0.0 {
             Bsdf::Layered(diffuse)

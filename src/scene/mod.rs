@@ -533,6 +533,12 @@ impl Scene {
         self.camera.film_transparent || self.has_holdout
     }
 
+    /// The material of triangle `prim`.
+    #[inline]
+    pub fn triangle_material(&self, prim: u32) -> u32 {
+        self.tri_material[prim as usize]
+    }
+
     /// The Pass Indices (object, material) of a triangle: Blender's IndexOB and IndexMA.
     pub fn pass_indices(&self, prim: u32) -> (u32, u32) {
         let material = self.tri_material[prim as usize] as usize;
