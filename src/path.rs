@@ -509,20 +509,7 @@ pub fn trace_path_guided<S: Sampler>(
             // (a medium's boundary: the shift does not follow the path past it)
             st.touched_medium |= scene.has_medium(si.material);
             let bsdf = scene.bsdf_at(&si);
-            if let Some(t) = guide {
-                // the denoising guides: this surface, or through it if it is mirror-like
-                if camera_ray {
-                    out.normal = si.frame.n; // kept if the guides find no surface further on
-                }
-                match bsdf.guide() {
-                    Guide::Surface(albedo) => {
-                        out.albedo = t * albedo;
-                        out.normal = si.frame.n;
-                        guide = None;
-                    }
-                    Guide::Through(tint) => guide = Some(t * tint),
-                }
-            }
+            denoising_guides(&mut out, &mut guide, &bsdf, si.frame.n, camera_ray);
             if let Some(p) = record.as_deref_mut() {
                 p.vertices.push(Vertex::at(&si, -st.d, st.beta, st.prev_pdf, bsdf.is_diffuse()));
             }
@@ -895,6 +882,32 @@ pub fn walk_beneath(
     })?;
     let out = SurfaceInteraction { camera: false, ..scene.interaction(&exit.hit, -exit.dir) };
     Some((out, exit.dir, exit.weight, exit.hit))
+}
+
+/// The denoising guides (`PathContribution::albedo`, `normal`) at a surface of BSDF `bsdf`
+/// and shading normal `n` that a path meets with guide throughput `guide` (None once they
+/// are written): this surface, or through it if it is mirror-like; a camera ray's first
+/// surface gives the normal even if the guides find no surface further on.
+#[inline]
+pub(crate) fn denoising_guides(
+    out: &mut PathContribution,
+    guide: &mut Option<Spectrum>,
+    bsdf: &crate::bsdf::Bsdf,
+    n: Vec3,
+    camera_ray: bool,
+) {
+    let Some(t) = *guide else { return };
+    if camera_ray {
+        out.normal = n;
+    }
+    match bsdf.guide() {
+        Guide::Surface(albedo) => {
+            out.albedo = t * albedo;
+            out.normal = n;
+            *guide = None;
+        }
+        Guide::Through(tint) => *guide = Some(t * tint),
+    }
 }
 
 /// A vertex's primary samples (the module comment's order).

@@ -36,7 +36,7 @@
 
 use super::{RenderControl, RenderOutput, RenderSettings, RenderStats};
 use crate::accel::TriHit;
-use crate::bsdf::{Bsdf, Guide, LobeKind, Scatter};
+use crate::bsdf::{Bsdf, LobeKind, Scatter};
 use crate::film::{Film, Image};
 use crate::math::Frame;
 use crate::math::{is_finite_spectrum, power_heuristic, Spectrum};
@@ -611,18 +611,8 @@ fn random_walk<S: Sampler + ?Sized>(
         }
         // (the exit of a walk: a white Lambertian facing out, Cycles' subsurface exit)
         let bsdf = if exited { Bsdf::Lambert(crate::bsdf::Lambert::new(Spectrum::ONE)) } else { scene.bsdf_at(&si) };
-        if let (Some(t), true) = (guide, radiance) {
-            if camera_ray {
-                out.normal = si.frame.n;
-            }
-            match bsdf.guide() {
-                Guide::Surface(albedo) => {
-                    out.albedo = t * albedo;
-                    out.normal = si.frame.n;
-                    guide = None;
-                }
-                Guide::Through(tint) => guide = Some(t * tint),
-            }
+        if radiance {
+            crate::path::denoising_guides(out, &mut guide, &bsdf, si.frame.n, camera_ray);
         }
         let wo = si.frame.to_local(-d);
         let u_lobe = sampler.next_1d();
