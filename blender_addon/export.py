@@ -491,7 +491,7 @@ def material_params(mat, warnings, textures=None):
     surface = node_out.inputs.get("Surface")
     volume = node_out.inputs.get("Volume")
     if volume is not None and volume.is_linked:
-        medium = _volume(volume.links[0].from_node, 1.0, warnings, what)
+        medium = _volume(volume.links[0].from_node, 1.0, warnings, what, textures)
         if medium is not None:
             out["volume"] = medium
     if (surface is None or not surface.is_linked) and volume is not None and volume.is_linked:
@@ -522,25 +522,55 @@ def material_params(mat, warnings, textures=None):
     return out
 
 
-def _volume(node, weight, warnings, what):
+def _volume(node, weight, warnings, what, textures=None):
     """The homogeneous medium of a Volume output's shader tree — Principled Volume, Volume
     Scatter and Volume Absorption, summed through Add Shader and weighted through Mix Shader —
     as the core's volume dict (coefficients per unit distance, as Cycles' volume closures:
     Principled Volume's scattering Color × Density and absorption (1 − Color)(1 − √Absorption
     Color) × Density; Volume Scatter's Color × Density; Volume Absorption's (1 − Color) ×
-    Density; emission Strength × Color). None when it holds nothing. A density or colour
-    from a texture is taken at its unlinked value (heterogeneous media are not rendered
-    yet), with a warning."""
+    Density; emission Strength × Color). None when it holds nothing.
+
+    A Density from a procedural texture graph (a Noise Texture, a Color Ramp or Math after it)
+    makes a heterogeneous medium (smoke): its coefficients per unit density and
+    "density": {"texture": index} — the object's coordinates are added per object
+    (`_density_coordinates`). One such density per material; other volume shaders beside
+    it, a second textured density and a colour from a texture are taken at their unlinked
+    values, with a warning."""
     acc = {"scattering": [0.0] * 3, "absorption": [0.0] * 3, "emission": [0.0] * 3}
     g_weighted = [0.0]
-    _volume_leaves(node, weight, acc, g_weighted, warnings, what, set())
+    field = {}
+    _volume_leaves(node, weight, acc, g_weighted, warnings, what, set(), textures, field)
+    if "texture" in field:
+        constant = [x for k in ("scattering", "absorption") for x in acc[k]]
+        if any(x > 0.0 for x in constant):
+            warnings.append(f"{what}: a volume beside a density from a texture is left out (one density field "
+                            f"per material)")
+        acc["scattering"], acc["absorption"] = field["scattering"], field["absorption"]
+        acc["emission"] = [a + b for a, b in zip(acc["emission"], field["emission"])]
     if not any(x > 0.0 for v in acc.values() for x in v):
         return None
     s = sum(acc["scattering"])
-    return {**{k: tuple(v) for k, v in acc.items()}, "anisotropy": g_weighted[0] / s if s > 0.0 else 0.0}
+    out = {**{k: tuple(v) for k, v in acc.items()}, "anisotropy": g_weighted[0] / s if s > 0.0 else 0.0}
+    if "texture" in field:
+        out["density"] = {"texture": field["texture"]}
+    return out
 
 
-def _volume_leaves(node, weight, acc, g_weighted, warnings, what, seen):
+def _density_coordinates(volume, ob, matrix_world):
+    """A heterogeneous medium's coordinates for object `ob` placed by `matrix_world`: world →
+    Object (the inverse transform, 3×4) and Object → Generated (its texture space, the bounding
+    box by default, to [0, 1]³ — Cycles' generated transform for volumes)."""
+    inv = np.linalg.inv(np.array(matrix_world, dtype=np.float64))[:3].reshape(12)
+    me = getattr(ob, "data", None)
+    loc = np.array(getattr(me, "texspace_location", (0.0, 0.0, 0.0))[:], np.float64)
+    size = np.array(getattr(me, "texspace_size", (1.0, 1.0, 1.0))[:], np.float64)
+    size = np.where(size != 0.0, size, 1.0)
+    scale = 1.0 / (2.0 * size)
+    volume["density"]["world_to_object"] = [float(x) for x in inv]
+    volume["density"]["generated"] = [float(x) for x in np.concatenate([scale, 0.5 - loc * scale])]
+
+
+def _volume_leaves(node, weight, acc, g_weighted, warnings, what, seen, textures=None, field=None):
     while node is not None and node.type == "REROUTE":
         node = node.inputs[0].links[0].from_node if node.inputs[0].is_linked else None
     if node is None or weight <= 0.0 or node.name in seen:
@@ -561,19 +591,24 @@ def _volume_leaves(node, weight, acc, g_weighted, warnings, what, seen):
     if node.type == "ADD_SHADER":
         for sock in node.inputs:
             if sock.is_linked:
-                _volume_leaves(sock.links[0].from_node, weight, acc, g_weighted, warnings, what, seen)
+                _volume_leaves(sock.links[0].from_node, weight, acc, g_weighted, warnings, what, seen, textures, field)
         return
     if node.type == "MIX_SHADER":
         f = min(max(float(value("Fac", 0.5)), 0.0), 1.0)
         shaders = [sock for sock in node.inputs if sock.type == "SHADER"]
         for sock, w in zip(shaders, (1.0 - f, f)):
             if sock.is_linked:
-                _volume_leaves(sock.links[0].from_node, weight * w, acc, g_weighted, warnings, what, seen)
+                _volume_leaves(sock.links[0].from_node, weight * w, acc, g_weighted, warnings, what, seen, textures,
+                               field)
         return
     if node.type not in ("PRINCIPLED_VOLUME", "VOLUME_SCATTER", "VOLUME_ABSORPTION"):
         warnings.append(f"{what}: volume shader node '{node.name}' ({node.type}) is not rendered (left out)")
         return
-    density = max(float(value("Density", 1.0)), 0.0)
+    density = _textured_density(node, weight, textures, field, warnings, what)
+    if density is None:
+        density = max(float(value("Density", 1.0)), 0.0)
+    else:
+        acc = field  # (this leaf's coefficients are per unit of the field's density)
     color = colour("Color")
     if node.type in ("PRINCIPLED_VOLUME", "VOLUME_SCATTER"):
         g = min(max(float(value("Anisotropy", 0.0)), -0.999), 0.999)
@@ -606,6 +641,29 @@ def _volume_leaves(node, weight, acc, g_weighted, warnings, what, seen):
             sock = node.inputs.get(attr)
             if sock is not None and sock.is_linked:
                 warnings.append(f"{what}: '{node.name}' reads {attr} from a grid; grids are not rendered yet")
+
+
+def _textured_density(node, weight, textures, field, warnings, what):
+    """1.0 when the leaf's Density comes from a procedural texture graph that becomes the
+    material's density field (`field["texture"]`; its coefficient sums start here), else
+    None (the density is the socket's value)."""
+    sock = node.inputs.get("Density")
+    if field is None or textures is None or sock is None or not sock.is_linked:
+        return None
+    tex = _socket_texture(sock, textures, warnings, what)
+    if not isinstance(tex, int) or isinstance(tex, bool):
+        return None
+    if "procedural" not in textures.items[tex]:
+        warnings.append(f"{what}: the density of '{node.name}' comes from an image, which a volume cannot read "
+                        f"(no UV map inside it); its mean is used")
+        return None
+    if "texture" in field and field["texture"] != tex:
+        warnings.append(f"{what}: a second density texture ('{node.name}') is taken at its unlinked value (one "
+                        f"density field per material)")
+        return None
+    if "texture" not in field:
+        field.update({"texture": tex, "scattering": [0.0] * 3, "absorption": [0.0] * 3, "emission": [0.0] * 3})
+    return 1.0
 
 
 def _leaves_material(leaves, mixed, warnings, what):
@@ -973,14 +1031,14 @@ def _coat(node, out, warnings, what):
 
 def _subsurface_method(node, warnings, what):
     """The core's walk for the node's Subsurface Method (its `falloff` on the Subsurface
-    Scattering node): Blender 5.3 renamed 4.x–5.2's Random Walk to Random Walk (Legacy) and
-    gave Random Walk a new model (`src/medium/subsurface.rs`); Christensen-Burley is rendered
-    as Random Walk (Legacy), with a warning."""
-    import bpy
-
-    method = getattr(node, "subsurface_method", None) or getattr(node, "falloff", "RANDOM_WALK")
+    Scattering node): Blender 5.2 renamed 4.x–5.1's Random Walk to Random Walk (Legacy) and
+    gave Random Walk a new model (`src/medium/subsurface.rs`) — told apart by the Legacy
+    choice being offered; Christensen-Burley is rendered as Random Walk (Legacy), with a
+    warning."""
+    prop = "subsurface_method" if node.type == "BSDF_PRINCIPLED" else "falloff"
+    method = getattr(node, prop, "RANDOM_WALK")
     if method == "RANDOM_WALK":
-        return "random_walk" if bpy.app.version >= (5, 3, 0) else "legacy"
+        return "random_walk" if _has_legacy_random_walk(node, prop) else "legacy"
     if method == "RANDOM_WALK_SKIN":
         return "skin"
     if method == "BURLEY":
@@ -989,12 +1047,19 @@ def _subsurface_method(node, warnings, what):
     return "legacy"
 
 
+def _has_legacy_random_walk(node, prop):
+    """Whether this Blender offers Random Walk (Legacy) (5.2 and later): its Random Walk is then
+    the new model."""
+    try:
+        return "RANDOM_WALK_LEGACY" in {e.identifier for e in node.bl_rna.properties[prop].enum_items}
+    except (KeyError, AttributeError):
+        return False
+
+
 def _subsurface(node, out, warnings, what, weight=None):
     """Principled Subsurface (or the Subsurface Scattering node, `weight` 1): the share of the
     diffuse base that walks beneath the surface, its mean free path Radius × Scale per channel,
     Anisotropy and (Skin) IOR, as Cycles' `bssrdf_setup` takes them."""
-    import bpy
-
     if weight is None:
         weight = _unit(_input_value(node, "Subsurface Weight", warnings, what, 0.0))
     if weight <= 0.0:
@@ -1004,8 +1069,8 @@ def _subsurface(node, out, warnings, what, weight=None):
     scale = float(_input_value(node, prefix + "Scale", warnings, what, 0.05))
     g = float(_input_value(node, prefix + "Anisotropy", warnings, what, 0.0))
     method = _subsurface_method(node, warnings, what)
-    if bpy.app.version < (5, 3, 0):
-        g = max(g, 0.0)  # (before 5.3 Cycles clamps the anisotropy to [0, 0.9])
+    if not _has_legacy_random_walk(node, "subsurface_method" if node.type == "BSDF_PRINCIPLED" else "falloff"):
+        g = max(g, 0.0)  # (before 5.2 Cycles clamps the anisotropy to [0, 0.9])
     ior_input = "Subsurface IOR" if node.type == "BSDF_PRINCIPLED" else "IOR"
     out["subsurface"] = {
         "weight": weight,
@@ -1966,6 +2031,10 @@ def export_scene(depsgraph, test_break=lambda: False, need_camera=True):
                 mat_index[key] = len(materials)
                 with texture_graph.object_info(info):
                     params = material_params(mat, warnings, textures)
+                if "density" in params.get("volume", {}):
+                    # (a density field reads this object's coordinates; other objects with the
+                    # material share them)
+                    _density_coordinates(params["volume"], ob, inst.matrix_world)
                 colour_layers[len(materials)] = params.pop("vertex_color_layer", None)
                 coordinates[len(materials)] = _mesh_coordinates(params, textures)
                 materials.append(params)

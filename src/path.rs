@@ -393,18 +393,25 @@ pub fn trace_path_guided<S: Sampler>(
             let camera_visibility = st.depth == 0;
             let u = VertexSamples::draw(sampler);
 
-            // 2. the medium the segment runs through, if any: its emission, then a free flight
-            // that may end before the surface (the segment's light is attenuated by T/P)
+            // 2. the medium the segment runs through, if any: the lights it crosses, its
+            // emission, then a free flight that may end before the surface (the lights
+            // crossed are attenuated by the flight's weight where it passed them)
             let (mut in_medium, mut pass_weight) = (None, Spectrum::ONE);
-            if let Some(m) = scene.medium(&st.media) {
+            let (prev_p, o, d) = (st.prev_p, st.o, st.d);
+            let medium = scene.medium(&st.media);
+            let from_medium = st.prev_in_medium;
+            let mut crossings = crate::medium::Crossings::default();
+            if let Some(m) = medium {
                 st.touched_medium = true;
-                let emitted = m.emitted(t_surface);
-                if emitted.max_element() > 0.0 {
-                    let c = cfg.clamp(st.beta * emitted, st.depth);
+                let push = |li, t, le, pdf| crossings.push(li, t, le, pdf);
+                scene.for_each_light_crossed_in(prev_p, from_medium, o, d, t_surface, camera_visibility, push);
+                let flight = scene.fly(&m, o, d, t_surface, u.distance, &mut crossings);
+                if flight.emitted.max_element() > 0.0 {
+                    let c = cfg.clamp(st.beta * flight.emitted, st.depth);
                     add(&mut out, &mut learn, c, camera_ray, st.direct_emission());
                     st.record_medium_emission(&mut record, c);
                 }
-                match m.sample_distance(u.distance, t_surface) {
+                match flight.free {
                     crate::medium::FreeFlight::Scatter { t, weight } => {
                         in_medium = Some((m, t, weight));
                         t_surface = t;
@@ -416,36 +423,29 @@ pub fn trace_path_guided<S: Sampler>(
             // 3. analytic lights crossed before the surface (lights are transparent). After
             // pass-throughs the light pdf is NEE's from the vertex the segment started at.
             let mut crossed = Spectrum::ZERO;
-            let (prev_p, o, d) = (st.prev_p, st.o, st.d);
-            let medium = scene.medium(&st.media);
-            let from_medium = st.prev_in_medium;
-            scene.for_each_light_crossed_in(
-                prev_p,
-                from_medium,
-                o,
-                d,
-                t_surface,
-                camera_visibility,
-                |li, t, le, pdf_light| {
-                    if !scene.lights_receiver(li, st.prev_prim) {
-                        return; // (light linking: it does not light the vertex the ray left)
-                    }
-                    let inf = !t.is_finite();
-                    let z = if inf { d } else { o + d * t };
-                    let pdf_light = if st.passed {
-                        scene.light_eval_in(li, prev_p, z, from_medium).map_or(0.0, |x| x.1)
-                    } else {
-                        pdf_light
-                    };
-                    // (in a medium: reached with T(t) where the free flight went past t, P(t))
-                    let le = match medium {
-                        Some(m) => le * m.transmittance(t) / m.pass_probability(t).max(1e-30),
-                        None => le,
-                    };
-                    crossed += le * st.mis(pdf_light);
-                    st.record_emission(&mut record, li, z, inf, le, pdf_light);
-                },
-            );
+            let mut light_crossed = |li: u32, t: f32, le: Spectrum, pdf_light: f32| {
+                if !scene.lights_receiver(li, st.prev_prim) {
+                    return; // (light linking: it does not light the vertex the ray left)
+                }
+                let inf = !t.is_finite();
+                let z = if inf { d } else { o + d * t };
+                let pdf_light = if st.passed {
+                    scene.light_eval_in(li, prev_p, z, from_medium).map_or(0.0, |x| x.1)
+                } else {
+                    pdf_light
+                };
+                crossed += le * st.mis(pdf_light);
+                st.record_emission(&mut record, li, z, inf, le, pdf_light);
+            };
+            if medium.is_some() {
+                // (in a medium: reached with the flight's weight where it passed t)
+                for i in (0..crossings.n).filter(|&i| crossings.weight[i].max_element() > 0.0) {
+                    let le = crossings.le[i] * crossings.weight[i];
+                    light_crossed(crossings.light[i], crossings.t[i], le, crossings.pdf[i]);
+                }
+            } else {
+                scene.for_each_light_crossed_in(prev_p, from_medium, o, d, t_surface, camera_visibility, light_crossed);
+            }
             add(&mut out, &mut learn, cfg.clamp(st.beta * crossed, st.depth), camera_ray, st.direct_emission());
             st.beta *= pass_weight;
             if !(st.beta.max_element() > 0.0) {
@@ -1160,11 +1160,17 @@ pub fn first_hit(scene: &Scene, cam: &CameraRay, hit: Option<TriHit>) -> FirstHi
     let tmax = hit.map_or(cam.tmax, |h| h.t);
     // (a camera in a medium sees through it: its transmittance, and the light it emits)
     let medium = scene.medium(&scene.camera_media());
-    let tr = |t: f32| medium.map_or(Spectrum::ONE, |m| m.transmittance(t));
+    let tr = |t: f32| medium.map_or(Spectrum::ONE, |m| scene.medium_transmittance(&m, cam.origin, cam.dir, t));
     let l = &mut out.very_direct;
     scene.for_each_light_crossed(cam.origin, cam.origin, cam.dir, tmax, true, |_, t, le, _| *l += le * tr(t));
     if let Some(m) = medium {
-        out.very_direct += m.emitted(tmax);
+        out.very_direct += if m.is_heterogeneous() {
+            // (the collision estimate of a flight, its numbers seeded by the ray)
+            let mut rng = crate::medium::heterogeneous::rng_from(cam.dir.x + 2.0 * cam.dir.y + 3.0 * cam.dir.z, 0xf1);
+            m.track(|p| scene.density_at(&m, p), (cam.origin, cam.dir), tmax, &mut rng, &[], &mut []).emitted
+        } else {
+            m.emitted(tmax)
+        };
     }
     match hit {
         None if scene.camera.film_transparent => {}
@@ -1197,10 +1203,11 @@ pub fn camera_transparency(scene: &Scene, cam: &CameraRay, hit: Option<TriHit>, 
     // (the camera ray ends at the clip end; its continuations through surfaces, as the path
     // builder's, do not)
     let mut tmax = cam.tmax;
+    let mut o = cam.origin;
     for _ in 0..=max_crossings {
         // (through media: their transmittance to the next surface, or to the ray's end)
         if let Some(m) = scene.medium(&media) {
-            t *= m.transmittance(hit.map_or(tmax, |h| h.t));
+            t *= scene.medium_transmittance(&m, o, cam.dir, hit.map_or(tmax, |h| h.t));
         }
         tmax = f32::INFINITY;
         let seen_through = (t.x + t.y + t.z) / 3.0;
@@ -1216,7 +1223,8 @@ pub fn camera_transparency(scene: &Scene, cam: &CameraRay, hit: Option<TriHit>, 
             return 0.0;
         }
         media = scene.media_towards(media, &si, cam.dir);
-        hit = scene.intersect_camera(si.spawn_origin(cam.dir), cam.dir, 0.0, f32::INFINITY);
+        o = si.spawn_origin(cam.dir);
+        hit = scene.intersect_camera(o, cam.dir, 0.0, f32::INFINITY);
     }
     0.0 // past the transparent-bounce limit the path tracer stops too: opaque
 }

@@ -239,6 +239,13 @@ fn material_dict<'py>(py: Python<'py>, m: &MaterialDesc) -> PyResult<Bound<'py, 
         vd.set_item("absorption", v.absorption)?;
         vd.set_item("emission", v.emission)?;
         vd.set_item("anisotropy", v.anisotropy)?;
+        if let Some(f) = &v.density {
+            let fd = PyDict::new(py);
+            fd.set_item("texture", f.texture)?;
+            fd.set_item("world_to_object", f.world_to_object.to_vec())?;
+            fd.set_item("generated", f.generated.to_vec())?;
+            vd.set_item("density", fd)?;
+        }
         md.set_item("volume", vd)?;
     }
     if let Some(v) = &m.subsurface {
@@ -384,6 +391,24 @@ fn parse_volume(d: &Bound<'_, PyDict>, ctx: &str) -> PyResult<scene::desc::Volum
         absorption: rgb(d, "absorption", zero, &ctx)?,
         emission: rgb(d, "emission", zero, &ctx)?,
         anisotropy: get_or(d, "anisotropy", 0.0, &ctx)?,
+        density: match item(d, "density")? {
+            Some(v) if !v.is_none() => {
+                let f = v.cast::<PyDict>().map_err(|_| verr(format!("{ctx}: density must be a dict")))?;
+                let dctx = format!("{ctx}: density");
+                let w2o: Vec<f32> = get(f, "world_to_object", &dctx)?.extract()?;
+                let gen: Vec<f32> = get_or(f, "generated", vec![1.0, 1.0, 1.0, 0.0, 0.0, 0.0], &dctx)?;
+                Some(scene::desc::DensityDesc {
+                    texture: get(f, "texture", &dctx)?.extract()?,
+                    world_to_object: w2o
+                        .try_into()
+                        .map_err(|_| verr(format!("{dctx}: world_to_object takes 12 numbers (3×4, row-major)")))?,
+                    generated: gen
+                        .try_into()
+                        .map_err(|_| verr(format!("{dctx}: generated takes 6 numbers (scale xyz, offset xyz)")))?,
+                })
+            }
+            _ => None,
+        },
     })
 }
 

@@ -68,7 +68,13 @@ const METHODS: [(Method, bool); 7] = [
 fn a_lossless_medium_in_a_white_furnace_stays_white() {
     let fog = medium(
         "Fog",
-        VolumeDesc { scattering: [0.9, 0.3, 2.5], absorption: [0.0; 3], emission: [0.0; 3], anisotropy: 0.6 },
+        VolumeDesc {
+            scattering: [0.9, 0.3, 2.5],
+            absorption: [0.0; 3],
+            emission: [0.0; 3],
+            anisotropy: 0.6,
+            density: None,
+        },
     );
     let desc = scene(vec![closed_box("Fog", [-2.0; 3], [2.0; 3], 0)], vec![fog], [1.0; 3], 16);
     assert!(Scene::build(&desc).unwrap().has_media());
@@ -94,8 +100,10 @@ fn a_lossless_medium_in_a_white_furnace_stays_white() {
 fn an_absorbing_slab_transmits_exp_minus_sigma_d() {
     let sigma = [0.5f32, 1.0, 2.0];
     let wall = MaterialDesc { name: "Wall".into(), base_color: [0.0; 3], emission: [1.0; 3], ..Default::default() };
-    let slab =
-        medium("Slab", VolumeDesc { scattering: [0.0; 3], absorption: sigma, emission: [0.0; 3], anisotropy: 0.0 });
+    let slab = medium(
+        "Slab",
+        VolumeDesc { scattering: [0.0; 3], absorption: sigma, emission: [0.0; 3], anisotropy: 0.0, density: None },
+    );
     for (lo, depth) in [(1.0f32, 1.5f32), (-1.0, 2.5)] {
         let mut desc = scene(
             vec![
@@ -131,7 +139,13 @@ fn an_absorbing_slab_transmits_exp_minus_sigma_d() {
 fn a_camera_moved_into_a_medium_stands_in_it() {
     let slab = medium(
         "Slab",
-        VolumeDesc { scattering: [0.2; 3], absorption: [0.5, 1.0, 2.0], emission: [0.0; 3], anisotropy: 0.0 },
+        VolumeDesc {
+            scattering: [0.2; 3],
+            absorption: [0.5, 1.0, 2.0],
+            emission: [0.0; 3],
+            anisotropy: 0.0,
+            density: None,
+        },
     );
     let wall = MaterialDesc { name: "Wall".into(), base_color: [0.5; 3], emission: [1.0; 3], ..Default::default() };
     let mut desc = scene(

@@ -398,15 +398,22 @@ fn random_walk<S: Sampler + ?Sized>(
             let u_dist = if has_media { sampler.next_1d() } else { 0.0 };
             let medium = if has_media { scene.medium(&media) } else { None };
             let (mut scatter_at, mut pass) = (None, Spectrum::ONE);
+            let from_medium = prev.kind == Kind::Medium;
+            let mut crossings = crate::medium::Crossings::default();
             if let Some(m) = medium {
-                let e = m.emitted(t_surface) * beta;
+                if events.is_some() {
+                    let push = |li, t, le, pdf| crossings.push(li, t, le, pdf);
+                    scene.for_each_light_crossed_in(prev.p, from_medium, o, d, t_surface, camera_ray, push);
+                }
+                let flight = scene.fly(&m, o, d, t_surface, u_dist, &mut crossings);
+                let e = flight.emitted * beta;
                 if radiance && !past_limits && e.max_element() > 0.0 {
                     out.radiance += e;
                     if camera_ray {
                         out.very_direct += e;
                     }
                 }
-                match m.sample_distance(u_dist, t_surface) {
+                match flight.free {
                     FreeFlight::Scatter { t, weight } => {
                         scatter_at = Some((m, t, weight));
                         t_surface = t;
@@ -416,33 +423,32 @@ fn random_walk<S: Sampler + ?Sized>(
             }
             if let Some(ev) = events.as_deref_mut() {
                 // lights crossed (strategy s = 0), as a light sample from the vertex the ray left
-                // sees them (from a medium: `light::FacingDisk`), reached with T/P in a medium
+                // sees them (from a medium: `light::FacingDisk`), reached in a medium with the
+                // flight's weight where it passed them
                 let t = path.len();
-                let from_medium = prev.kind == Kind::Medium;
-                scene.for_each_light_crossed_in(
-                    prev.p,
-                    from_medium,
-                    o,
-                    d,
-                    t_surface,
-                    camera_ray,
-                    |li, tl, le, pdf_l| {
-                        if !scene.lights_receiver(li, receiver) {
-                            return; // (light linking: it does not light the vertex the ray left)
-                        }
-                        let le = medium.map_or(le, |m| le * m.transmittance(tl) / m.pass_probability(tl).max(1e-30));
-                        let inf = !tl.is_finite();
-                        let z = if inf { d } else { o + d * tl };
-                        let mut lv = Vertex::endpoint(Kind::Light, z);
-                        lv.light = li;
-                        lv.infinite = inf;
-                        lv.dir = d;
-                        lv.ng = scene.light_normal(li, z);
-                        lv.pdf_fwd = ctx.origin_pdf(&lv);
-                        let pdf_nee = ctx.nee_pdf_of(&lv, pdf_l, prev.p);
-                        ev.push(Emission { t, light: lv, value: beta * le, pdf_nee, alone: false });
-                    },
-                );
+                let mut light_crossed = |li: u32, tl: f32, le: Spectrum, pdf_l: f32| {
+                    if !scene.lights_receiver(li, receiver) {
+                        return; // (light linking: it does not light the vertex the ray left)
+                    }
+                    let inf = !tl.is_finite();
+                    let z = if inf { d } else { o + d * tl };
+                    let mut lv = Vertex::endpoint(Kind::Light, z);
+                    lv.light = li;
+                    lv.infinite = inf;
+                    lv.dir = d;
+                    lv.ng = scene.light_normal(li, z);
+                    lv.pdf_fwd = ctx.origin_pdf(&lv);
+                    let pdf_nee = ctx.nee_pdf_of(&lv, pdf_l, prev.p);
+                    ev.push(Emission { t, light: lv, value: beta * le, pdf_nee, alone: false });
+                };
+                if medium.is_some() {
+                    for i in (0..crossings.n).filter(|&i| crossings.weight[i].max_element() > 0.0) {
+                        let le = crossings.le[i] * crossings.weight[i];
+                        light_crossed(crossings.light[i], crossings.t[i], le, crossings.pdf[i]);
+                    }
+                } else {
+                    scene.for_each_light_crossed_in(prev.p, from_medium, o, d, t_surface, camera_ray, light_crossed);
+                }
             }
             if let Some((m, t, weight)) = scatter_at {
                 // a scattering in the medium: a vertex of its own, the phase function's sample

@@ -13,16 +13,22 @@
 //!   scattering event at t < d weighs σs T(t) / p(t), passing the segment weighs
 //!   T(d) / P(t ≥ d) with P = ⅓ Σ_c T_c(d) — exact (weight σs/σt, 1) for a grey medium.
 //!
+//! A medium may also have a heterogeneous part (`Field`): coefficients per unit density
+//! scaled by a density field (a procedural texture read at the point's Generated or Object
+//! coordinates), tracked by `heterogeneous.rs` (delta and ratio tracking under a majorant).
+//!
 //! Which media a ray is in is a [`MediumStack`]: the materials whose boundaries it entered
 //! (through the front of the surface) and has not left; overlapping media add their
 //! coefficients, as Cycles' volume stack does.
 
+pub mod heterogeneous;
 pub mod phase;
 pub mod subsurface;
 
 pub use phase::HenyeyGreenstein;
 
 use crate::math::Spectrum;
+use glam::Vec3;
 
 /// A homogeneous medium's coefficients (per unit world distance) and phase function.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -32,6 +38,44 @@ pub struct Medium {
     /// Emission coefficient ε: radiance added per unit distance.
     pub emission: Spectrum,
     pub phase: HenyeyGreenstein,
+    /// The heterogeneous part, added to the constant coefficients above (None: homogeneous).
+    pub field: Option<Field>,
+}
+
+/// Coefficients per unit density, scaled at each point by a density field.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Field {
+    pub density: Density,
+    pub sigma_s: Spectrum,
+    pub sigma_a: Spectrum,
+}
+
+/// A density field: texture `texture` (a procedural pattern and the graph after it) read at a
+/// point's coordinates — Object (`world_to_object`, row-major 3×4) and Generated (the object
+/// point scaled and offset per axis, `generated`: scale xyz, offset xyz: the texture space) —,
+/// its value's first channel; `max` bounds it from above (the majorant's factor; values
+/// below 0 count as 0).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Density {
+    pub texture: u32,
+    pub world_to_object: [f32; 12],
+    pub generated: [f32; 6],
+    pub max: f32,
+}
+
+impl Density {
+    /// (Object, Generated) coordinates of world point `p`.
+    #[inline]
+    pub fn coordinates(&self, p: Vec3) -> (Vec3, Vec3) {
+        let m = &self.world_to_object;
+        let o = Vec3::new(
+            m[0] * p.x + m[1] * p.y + m[2] * p.z + m[3],
+            m[4] * p.x + m[5] * p.y + m[6] * p.z + m[7],
+            m[8] * p.x + m[9] * p.y + m[10] * p.z + m[11],
+        );
+        let g = &self.generated;
+        (o, Vec3::new(o.x * g[0] + g[3], o.y * g[1] + g[4], o.z * g[2] + g[5]))
+    }
 }
 
 /// The outcome of free-flight sampling along a segment.
@@ -53,7 +97,31 @@ impl Medium {
     /// Whether light along a segment is touched at all (extinction or emission).
     #[inline]
     pub fn is_vacuum(&self) -> bool {
-        self.sigma_t().max_element() <= 0.0 && self.emission.max_element() <= 0.0
+        self.sigma_t().max_element() <= 0.0
+            && self.emission.max_element() <= 0.0
+            && self.field.is_none_or(|f| (f.sigma_s + f.sigma_a).max_element() <= 0.0 || f.density.max <= 0.0)
+    }
+
+    /// The coefficients vary from point to point (`field`).
+    #[inline]
+    pub fn is_heterogeneous(&self) -> bool {
+        self.field.is_some()
+    }
+
+    /// (σs, σa) where the density field is `d`.
+    #[inline]
+    pub fn coefficients_at(&self, d: f32) -> (Spectrum, Spectrum) {
+        match &self.field {
+            Some(f) => (self.sigma_s + f.sigma_s * d.max(0.0), self.sigma_a + f.sigma_a * d.max(0.0)),
+            None => (self.sigma_s, self.sigma_a),
+        }
+    }
+
+    /// The majorant μ: a bound of σt over every channel and point.
+    #[inline]
+    pub fn majorant(&self) -> f32 {
+        let (s, a) = self.coefficients_at(self.field.map_or(0.0, |f| f.density.max));
+        (s + a).max_element()
     }
 
     /// Transmittance over distance `d` (per channel; 0 over an infinite distance in an
@@ -132,6 +200,39 @@ fn tr(sigma: f32, d: f32) -> f32 {
     }
 }
 
+/// Analytic lights a segment in a medium crosses (at most `MAX_CROSSINGS`; more are left
+/// out), and the flight's throughput where it passed each (`Scene::fly`).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Crossings {
+    pub n: usize,
+    pub light: [u32; MAX_CROSSINGS],
+    pub t: [f32; MAX_CROSSINGS],
+    pub le: [Spectrum; MAX_CROSSINGS],
+    pub pdf: [f32; MAX_CROSSINGS],
+    pub weight: [Spectrum; MAX_CROSSINGS],
+}
+
+/// Lights crossed along one segment in a medium that are counted.
+pub const MAX_CROSSINGS: usize = 8;
+
+impl Crossings {
+    #[inline]
+    pub fn push(&mut self, light: u32, t: f32, le: Spectrum, pdf: f32) {
+        if self.n < MAX_CROSSINGS {
+            (self.light[self.n], self.t[self.n], self.le[self.n], self.pdf[self.n]) = (light, t, le, pdf);
+            self.n += 1;
+        }
+    }
+}
+
+/// A free flight through a segment's medium (`Scene::fly`): where it ends, and the emission
+/// gathered (throughput-weighted).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Flight {
+    pub free: FreeFlight,
+    pub emitted: Spectrum,
+}
+
 /// The most media a ray may be inside at once; entering one more leaves it out (with the
 /// nested glass-liquid-ice of real scenes far below).
 pub const MAX_NESTED_MEDIA: usize = 4;
@@ -193,14 +294,25 @@ pub fn combined(stack: &MediumStack, media: &[Option<Medium>]) -> Option<Medium>
     let mut it = stack.ids().iter().filter_map(|&m| media.get(m as usize).copied().flatten());
     let first = it.next()?;
     let mut sum = first;
-    let mut g_weight = first.sigma_s.element_sum() * first.phase.g;
+    let scattering = |m: &Medium| m.sigma_s.element_sum() + m.field.map_or(0.0, |f| f.sigma_s.element_sum());
+    let mut g_weight = scattering(&first) * first.phase.g;
     for m in it {
         sum.sigma_s += m.sigma_s;
         sum.sigma_a += m.sigma_a;
         sum.emission += m.emission;
-        g_weight += m.sigma_s.element_sum() * m.phase.g;
+        g_weight += scattering(&m) * m.phase.g;
+        // (one density field per ray: a second one overlapping it counts at its bound, too
+        // dense — docs/limits.md)
+        match (sum.field, m.field) {
+            (None, f) => sum.field = f,
+            (Some(_), Some(f)) => {
+                sum.sigma_s += f.sigma_s * f.density.max;
+                sum.sigma_a += f.sigma_a * f.density.max;
+            }
+            _ => {}
+        }
     }
-    let s = sum.sigma_s.element_sum();
+    let s = sum.sigma_s.element_sum() + sum.field.map_or(0.0, |f| f.sigma_s.element_sum());
     sum.phase = HenyeyGreenstein::new(if s > 0.0 { g_weight / s } else { 0.0 });
     (!sum.is_vacuum()).then_some(sum)
 }
@@ -216,6 +328,7 @@ mod tests {
             sigma_a: Spectrum::new(0.1, 0.4, 0.9),
             emission: Spectrum::new(0.5, 0.0, 2.0),
             phase: HenyeyGreenstein::new(0.3),
+            field: None,
         }
     }
 

@@ -20,13 +20,13 @@
 //!   lost, as in Cycles).
 //!
 //! The methods (Principled BSDF's Subsurface Method, Cycles' `bssrdf_setup`):
-//! * [`SubsurfaceMethod::RandomWalk`] (Blender 5.3's "Random Walk"): σt = 1/d, α from the
+//! * [`SubsurfaceMethod::RandomWalk`] (Blender 5.2's and later "Random Walk"): σt = 1/d, α from the
 //!   van de Hulst relation for a half-space, s² = (4.20863A − √(9.59217 + 41.6808A +
 //!   17.7126A²) + 4.09712)², α = (1 − s²)/(1 − g s²); g within ±0.99; it enters through the
 //!   specular layer's rough interface (a GGX microfacet refraction of IOR `ior`).
-//! * [`SubsurfaceMethod::Legacy`] (Blender 4.x–5.2's "Random Walk", 5.3's "Random Walk
+//! * [`SubsurfaceMethod::Legacy`] (Blender 4.x–5.1's "Random Walk", 5.2's "Random Walk
 //!   (Legacy)"): d/(4π) as the mean free path, σt = 1/(d(1 − g)), α from Cycles' fit in g of
-//!   the Christensen–Burley inversion; g within [−0.99, 0.9] (Blender before 5.3: [0, 0.9],
+//!   the Christensen–Burley inversion; g within [−0.99, 0.9] (Blender before 5.2: [0, 0.9],
 //!   the exporter's clamp), a negative g taking the van de Hulst α and σt = 1/d; the same
 //!   entry.
 //! * [`SubsurfaceMethod::Skin`] ("Random Walk (Skin)"): the Legacy walk with `d` rescaled by
@@ -315,7 +315,7 @@ fn fitted_alpha(a: f32, g: f32) -> f32 {
 }
 
 /// The single-scattering albedo for surface albedo `a` and anisotropy g by the van de Hulst
-/// relation for a half-space (the Random Walk method of Blender 5.3).
+/// relation for a half-space (the Random Walk method of Blender 5.2 and later).
 fn van_de_hulst_alpha(a: f32, g: f32) -> f32 {
     let s = 4.208_63 * a - (9.592_17 + 41.680_8 * a + 17.712_6 * a * a).sqrt() + 4.097_12;
     let s2 = s * s;

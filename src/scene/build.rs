@@ -66,7 +66,8 @@ impl Shading {
         let has_perturbed_normals = materials.iter().any(|m| m.normal_texture.is_some() || m.bump_texture.is_some());
         let pass_index = desc.materials.iter().map(|m| m.pass_index).collect();
         let warnings = desc.materials.iter().flat_map(super::material::range_warnings).collect();
-        let media = desc.materials.iter().map(super::material::medium_from_desc).collect::<Result<_, _>>()?;
+        let media =
+            desc.materials.iter().map(|m| super::material::medium_from_desc(m, &textures)).collect::<Result<_, _>>()?;
         Ok(Shading { textures, materials, has_transparency, has_perturbed_normals, pass_index, warnings, media })
     }
 }

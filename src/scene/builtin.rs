@@ -361,6 +361,7 @@ pub fn cornell_fog(width: u32, height: u32) -> SceneDesc {
             absorption: [0.05; 3],
             emission: [0.0; 3],
             anisotropy: 0.3,
+            density: None,
         }),
         ..Default::default()
     });

@@ -237,6 +237,19 @@ pub struct VolumeDesc {
     pub emission: [f32; 3],
     /// The Henyey–Greenstein mean cosine g, in (−1, 1).
     pub anisotropy: f32,
+    /// A density field scaling `scattering` and `absorption` (then given per unit density)
+    /// point by point — smoke (`crate::medium::Density`); None: homogeneous.
+    pub density: Option<DensityDesc>,
+}
+
+/// A medium's density field: texture `texture` (a procedural pattern, the graph after it
+/// tabulated) read at the point's Object coordinates (`world_to_object`, row-major 3×4) or
+/// Generated ones (those scaled and offset per axis: `generated` = scale xyz, offset xyz).
+#[derive(Clone, Debug, PartialEq)]
+pub struct DensityDesc {
+    pub texture: u32,
+    pub world_to_object: [f32; 12],
+    pub generated: [f32; 6],
 }
 
 /// A Mix Shader factor computed from the ray arriving at the shading point, as Cycles' nodes

@@ -152,7 +152,10 @@ pub fn subsurface_from_desc(d: &MaterialDesc) -> Result<crate::medium::subsurfac
 
 /// The medium of a material's volume (None without one, or for a clear one), its
 /// coefficients checked: finite and not negative, the anisotropy within (−1, 1).
-pub fn medium_from_desc(d: &MaterialDesc) -> Result<Option<crate::medium::Medium>, SceneError> {
+pub fn medium_from_desc(
+    d: &MaterialDesc,
+    textures: &[super::texture::Texture],
+) -> Result<Option<crate::medium::Medium>, SceneError> {
     let Some(v) = &d.volume else { return Ok(None) };
     let bad = |what: &str| SceneError::Material { material: d.name.clone(), what: format!("its volume: {what}") };
     let all = v.scattering.iter().chain(&v.absorption).chain(&v.emission).chain([&v.anisotropy]);
@@ -168,11 +171,40 @@ pub fn medium_from_desc(d: &MaterialDesc) -> Result<Option<crate::medium::Medium
     if !(v.anisotropy > -1.0 && v.anisotropy < 1.0) {
         return Err(bad(&format!("anisotropy {} is not inside (−1, 1)", v.anisotropy)));
     }
-    let m = crate::medium::Medium {
-        sigma_s: Vec3::from_array(v.scattering),
-        sigma_a: Vec3::from_array(v.absorption),
-        emission: Vec3::from_array(v.emission),
-        phase: crate::medium::HenyeyGreenstein::new(v.anisotropy),
+    let (sigma_s, sigma_a) = (Vec3::from_array(v.scattering), Vec3::from_array(v.absorption));
+    let field = match &v.density {
+        None => None,
+        Some(f) => {
+            let Some(t) = textures.get(f.texture as usize) else {
+                return Err(bad(&format!("density texture {} but the scene has {}", f.texture, textures.len())));
+            };
+            if f.world_to_object.iter().chain(&f.generated).any(|x| !x.is_finite()) {
+                return Err(bad("NaN or Inf in its density's coordinates"));
+            }
+            let density = crate::medium::Density {
+                texture: f.texture,
+                world_to_object: f.world_to_object,
+                generated: f.generated,
+                max: t.max_value().max(0.0),
+            };
+            Some(crate::medium::Field { density, sigma_s, sigma_a })
+        }
+    };
+    let m = match field {
+        Some(_) => crate::medium::Medium {
+            sigma_s: Vec3::ZERO,
+            sigma_a: Vec3::ZERO,
+            emission: Vec3::from_array(v.emission),
+            phase: crate::medium::HenyeyGreenstein::new(v.anisotropy),
+            field,
+        },
+        None => crate::medium::Medium {
+            sigma_s,
+            sigma_a,
+            emission: Vec3::from_array(v.emission),
+            phase: crate::medium::HenyeyGreenstein::new(v.anisotropy),
+            field: None,
+        },
     };
     Ok((!m.is_vacuum()).then_some(m))
 }

@@ -27,7 +27,7 @@ use crate::bsdf::Bsdf;
 use crate::error::SceneError;
 use crate::instancing::{Instance, Instances};
 use crate::math::{ray_epsilon, square_to_triangle, Frame, Spectrum};
-use crate::medium::{Medium, MediumStack};
+use crate::medium::{Crossings, Flight, FreeFlight, Medium, MediumStack};
 use build::{Lighting, Shading, Triangles, RAY_CAMERA_INVISIBLE, RAY_HOLDOUT, RAY_SHADOW_INVISIBLE};
 use environment::Environment;
 use glam::{Vec2, Vec3, Vec4};
@@ -533,6 +533,65 @@ impl Scene {
         self.camera.film_transparent || self.has_holdout
     }
 
+    /// The density field of medium `m` at world point `p` (1 for a homogeneous one).
+    #[inline]
+    pub fn density_at(&self, m: &Medium, p: Vec3) -> f32 {
+        match &m.field {
+            Some(f) => {
+                let (object, generated) = f.density.coordinates(p);
+                self.textures[f.density.texture as usize].at_point(object, generated).x
+            }
+            None => 1.0,
+        }
+    }
+
+    /// The transmittance of medium `m` along o + t·d over [0, len]: in closed form, or (a
+    /// heterogeneous one) by ratio tracking, its numbers drawn from a generator seeded by the
+    /// segment itself.
+    pub fn medium_transmittance(&self, m: &Medium, o: Vec3, d: Vec3, len: f32) -> Spectrum {
+        if !m.is_heterogeneous() {
+            return m.transmittance(len);
+        }
+        let seed = crate::sampler::mix64(
+            (o.x.to_bits() as u64) << 32
+                ^ (o.y.to_bits() as u64) << 16
+                ^ o.z.to_bits() as u64
+                ^ (d.x.to_bits() as u64) << 7,
+        ) ^ (d.y.to_bits() as u64) << 24
+            ^ (d.z.to_bits() as u64);
+        let mut rng = crate::sampler::IndependentSampler::new(seed, 0x7a7a);
+        m.ratio_tracking(|p| self.density_at(m, p), o, d, len, &mut rng)
+    }
+
+    /// A free flight through medium `m` along o + t·d, t ∈ [0, t_max), from primary sample
+    /// `u` (`Medium::sample_distance`; a heterogeneous medium tracks with a generator seeded
+    /// by it, `medium::heterogeneous`), and the flight's weight at the lights it crosses
+    /// (`crossings`: T/P where the flight passed them, 0 past its end).
+    pub fn fly(&self, m: &Medium, o: Vec3, d: Vec3, t_max: f32, u: f32, crossings: &mut Crossings) -> Flight {
+        let n = crossings.n;
+        if m.is_heterogeneous() {
+            let mut rng = crate::medium::heterogeneous::rng_from(u, 0xf1e);
+            let at = crossings.t;
+            let tr = m.track(|p| self.density_at(m, p), (o, d), t_max, &mut rng, &at[..n], &mut crossings.weight[..n]);
+            let free = match tr.scatter {
+                Some(t) => FreeFlight::Scatter { t, weight: tr.weight },
+                None => FreeFlight::Pass { weight: tr.weight },
+            };
+            return Flight { free, emitted: tr.emitted };
+        }
+        let free = m.sample_distance(u, t_max);
+        let end = match free {
+            FreeFlight::Scatter { t, .. } => t,
+            FreeFlight::Pass { .. } => f32::INFINITY,
+        };
+        for i in 0..n {
+            let t = crossings.t[i];
+            crossings.weight[i] =
+                if t < end { m.transmittance(t) / m.pass_probability(t).max(1e-30) } else { Spectrum::ZERO };
+        }
+        Flight { free, emitted: m.emitted(t_max) }
+    }
+
     /// The material of triangle `prim`.
     #[inline]
     pub fn triangle_material(&self, prim: u32) -> u32 {
@@ -933,7 +992,7 @@ impl Scene {
             if let Some(m) = media.as_ref().and_then(|s| self.medium(s)) {
                 // (the medium's transmittance over the segment to the next surface or the end)
                 in_medium = true;
-                t *= m.transmittance(hit.map_or(tmax.max(0.0), |h| h.t));
+                t *= self.medium_transmittance(&m, o, d, hit.map_or(tmax.max(0.0), |h| h.t));
             }
             let Some(hit) = hit else {
                 return Some((t, crossed > 0, in_medium));

@@ -199,6 +199,19 @@ impl Texture {
         Spectrum::new(channel(0), channel(1), channel(2))
     }
 
+    /// The largest value of any channel the texture gives (its table's, for a procedural
+    /// pattern: an upper bound wherever the pattern stays within the table's domain).
+    pub fn max_value(&self) -> f32 {
+        self.pixels.iter().fold(0.0f32, |m, p| m.max(p.max_element()))
+    }
+
+    /// The value of a procedural texture at the Object coordinates `object` and Generated
+    /// `generated` of a point (a medium's density field; an image reads its UV (0, 0)).
+    #[inline]
+    pub fn at_point(&self, object: Vec3, generated: Vec3) -> Spectrum {
+        self.at(TexCoord { uv: Vec2::ZERO, generated, object })
+    }
+
     /// The coordinates a procedural texture reads; None for an image (its UV map's).
     pub fn procedural_space(&self) -> Option<Space> {
         self.procedural.as_ref().map(|p| p.space)
