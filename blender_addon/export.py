@@ -1818,7 +1818,7 @@ def _world(scene, warnings, textures):
     node_out = _output_node(world.node_tree, warnings, what)
     if node_out is None:
         return tuple(world.color[:3]), None, None, None
-    _warn_unrendered_outputs(node_out, warnings, what)
+    _warn_unrendered_outputs(node_out, warnings, what, skip=("Volume",))
     surface = node_out.inputs.get("Surface")
     if surface is None or not surface.is_linked:
         return (*black, None)
@@ -1881,6 +1881,21 @@ def _background(node, warnings, what, textures):
         return tuple(sum(b[0][k] * w for b, w in sides) for k in range(3)), None, None
     warnings.append(f"{what}: node '{node.name}' ({node.type}) is not supported; world is black")
     return black
+
+
+def _world_volume(scene, warnings):
+    """The World's Volume output as a homogeneous medium filling all space (`_volume`), or
+    None. Cycles' world volume: beneath every mesh's medium, and light from the sun and the
+    world does not get through an infinite extent of it."""
+    world = scene.world
+    if world is None:
+        return None
+    what = f"world '{world.name}'"
+    node_out = _output_node(world.node_tree, None, what)
+    sock = node_out.inputs.get("Volume") if node_out is not None else None
+    if sock is None or not sock.is_linked:
+        return None
+    return _volume(sock.links[0].from_node, 1.0, warnings, what)
 
 
 def _warn_unrendered_outputs(node_out, warnings, what, skip=()):
@@ -2115,6 +2130,9 @@ def export_scene(depsgraph, test_break=lambda: False, need_camera=True):
             "world": world, "world_texture": world_texture}
     if world_rotation is not None:
         desc["world_rotation"] = world_rotation
+    world_volume = _world_volume(scene, warnings)
+    if world_volume is not None:
+        desc["world_volume"] = world_volume
     desc.update({k: True for k, older in _cycles_release_choices().items() if older})
     _light_linking(meshes, lights, sources, desc, warnings)
     if need_camera:

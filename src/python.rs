@@ -801,6 +801,13 @@ fn parse_scene(d: &Bound<'_, PyDict>) -> PyResult<SceneDesc> {
         )?,
         world: get_or(d, "world", [0.0; 3], "scene")?,
         world_texture: get_or(d, "world_texture", None, "scene")?,
+        world_volume: match item(d, "world_volume")? {
+            Some(v) if !v.is_none() => Some(parse_volume(
+                v.cast::<PyDict>().map_err(|_| verr("scene: world_volume must be a dict"))?,
+                "world",
+            )?),
+            _ => None,
+        },
         general_paths: get_or(d, "general_paths", false, "scene")?,
         oren_nayar_rho_cubed: get_or(d, "oren_nayar_rho_cubed", false, "scene")?,
         normal_map_unnormalized_base: get_or(d, "normal_map_unnormalized_base", false, "scene")?,

@@ -169,3 +169,42 @@ fn a_camera_moved_into_a_medium_stands_in_it() {
         |s: &Scene| render(s, &settings, &RenderControl::new(0.0)).unwrap().layer("Combined").unwrap().data.clone();
     assert_eq!(image(&fresh), image(&moved));
 }
+
+/// The World's Volume fills all space: an emitting wall seen by an orthographic camera
+/// through a world of absorption σa shows exp(−σa·d) per channel (d the camera's distance to
+/// the wall), every method, NEE and naive; and light from infinitely far — the world
+/// background behind the wall's gaps — does not get through it (the image is the wall's
+/// attenuated light alone, as Cycles renders it).
+#[test]
+fn a_world_volume_fills_all_space() {
+    let sigma = [0.2f32, 0.4, 0.8];
+    let wall = MaterialDesc { name: "Wall".into(), base_color: [0.0; 3], emission: [1.0; 3], ..Default::default() };
+    let mut desc = scene(vec![closed_box("Wall", [-20.0, 3.0, -20.0], [20.0, 4.0, 20.0], 0)], vec![wall], [5.0; 3], 8);
+    desc.camera.projection = gdmlt::scene::desc::Projection::Orthographic;
+    desc.camera.ortho_scale = 4.0;
+    desc.world_volume = Some(VolumeDesc {
+        scattering: [0.0; 3],
+        absorption: sigma,
+        emission: [0.0; 3],
+        anisotropy: 0.0,
+        density: None,
+    });
+    for (method, nee) in METHODS {
+        let (m, e) = mean_and_error(&desc, method, nee, 16, 5);
+        let slack = if matches!(method, Method::Pssmlt | Method::Gdpssmlt) { 0.02 } else { 0.0 };
+        for c in 0..3 {
+            let want = (-(sigma[c] * 3.0) as f64).exp();
+            assert!(
+                (m[c] - want).abs() < 5.0 * e[c] + slack * want + 1e-4,
+                "{method:?} nee={nee}: channel {c} {:.4} ± {:.4}, want {want:.4}",
+                m[c],
+                e[c]
+            );
+        }
+    }
+    // the sky alone (the wall moved out of sight) is extinguished: black, where it is 5
+    // without the volume
+    desc.meshes = vec![closed_box("Wall", [30.0, -1.0, -1.0], [31.0, 1.0, 1.0], 0)];
+    let (m, _) = mean_and_error(&desc, Method::Pt, true, 4, 1);
+    assert!(m.iter().all(|&x| x == 0.0), "{m:?}");
+}

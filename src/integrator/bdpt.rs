@@ -1302,7 +1302,9 @@ pub(crate) fn sample(
     scratch.light.clear();
     let u_sel = streams.light().next_1d();
     let (u_pos, u_dir) = (streams.light().next_2d(), streams.light().next_2d());
-    if let Some(o) = scene.sample_light_origin(&ctx.emitters, u_sel, u_pos, u_dir) {
+    let origin = scene.sample_light_origin(&ctx.emitters, u_sel, u_pos, u_dir);
+    // (from infinitely far through an extinguishing world medium, no light arrives)
+    if let Some(o) = origin.filter(|o| !(o.infinite && scene.world_medium_extinguishes())) {
         let mut l0 = Vertex::endpoint(Kind::Light, o.p);
         l0.light = o.light;
         l0.ng = o.n;

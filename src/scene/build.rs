@@ -66,8 +66,19 @@ impl Shading {
         let has_perturbed_normals = materials.iter().any(|m| m.normal_texture.is_some() || m.bump_texture.is_some());
         let pass_index = desc.materials.iter().map(|m| m.pass_index).collect();
         let warnings = desc.materials.iter().flat_map(super::material::range_warnings).collect();
-        let media =
+        let mut media: Vec<_> =
             desc.materials.iter().map(|m| super::material::medium_from_desc(m, &textures)).collect::<Result<_, _>>()?;
+        if let Some(v) = &desc.world_volume {
+            // (the world's medium: the entry past the materials', at the bottom of every stack)
+            if v.density.is_some() {
+                return Err(SceneError::Material {
+                    material: "world".into(),
+                    what: "its volume: a density field (the world's volume is homogeneous)".into(),
+                });
+            }
+            let world = MaterialDesc { name: "world".into(), volume: Some(v.clone()), ..Default::default() };
+            media.push(super::material::medium_from_desc(&world, &textures)?);
+        }
         Ok(Shading { textures, materials, has_transparency, has_perturbed_normals, pass_index, warnings, media })
     }
 }

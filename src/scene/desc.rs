@@ -525,6 +525,10 @@ pub struct SceneDesc {
     pub world: [f32; 3],
     /// Equirectangular environment texture (index into `textures`) for the background.
     pub world_texture: Option<u32>,
+    /// The World's Volume output: a homogeneous medium filling all space, beneath the media
+    /// of meshes (Cycles' world volume; its `density` must be None). Light from lights at
+    /// infinity — the sun, the world — does not cross an infinite extinguishing medium.
+    pub world_volume: Option<VolumeDesc>,
     /// Rotation (row-major 3×3) from world directions to the texture's frame (Blender's
     /// Z-up equirectangular mapping); None = identity.
     pub world_rotation: Option<[[f32; 3]; 3]>,

@@ -166,6 +166,9 @@ pub struct Scene {
     /// and the media the camera stands in (`media_around`).
     media: Vec<Option<Medium>>,
     has_media: bool,
+    /// The world's medium (`SceneDesc::world_volume`): its index in `media`, past the
+    /// materials', at the bottom of every stack.
+    world_medium: Option<u32>,
     camera_media: MediumStack,
     /// The media each light stands in (`light_media`; empty without media).
     light_media: Vec<MediumStack>,
@@ -336,6 +339,7 @@ impl Scene {
             instances,
             media: Vec::new(),
             has_media: false,
+            world_medium: None,
             camera_media: MediumStack::default(),
             light_media: Vec::new(),
             bounds_center,
@@ -484,10 +488,12 @@ impl Scene {
             self.materials.iter().any(|m| m.holdout) || self.ray_mask.iter().any(|m| m & RAY_HOLDOUT != 0);
         self.media = shading.media;
         self.has_media = self.media.iter().any(Option::is_some);
+        let n = self.materials.len();
+        self.world_medium = self.media.get(n).is_some_and(Option::is_some).then_some(n as u32);
         self.camera_media = self.media_around(self.camera.position());
         self.light_media = if self.has_media {
             (0..self.lights.len())
-                .map(|li| self.light_position(li).map_or_else(Default::default, |p| self.media_around(p)))
+                .map(|li| self.light_position(li).map_or_else(|| self.world_stack(), |p| self.media_around(p)))
                 .collect()
         } else {
             Vec::new()
@@ -866,7 +872,7 @@ impl Scene {
     /// infinity, a medium boundary left (met from its back) that the ray did not enter
     /// first holds `p`. (Cycles finds the camera's volume stack the same way.)
     fn media_around(&self, p: Vec3) -> MediumStack {
-        let mut inside = MediumStack::default();
+        let mut inside = self.world_stack();
         if !self.has_media {
             return inside;
         }
@@ -890,6 +896,24 @@ impl Scene {
             tmin = hit.t + ray_epsilon(p + d * hit.t).max(hit.t * 1e-6);
         }
         inside
+    }
+
+    /// The stack of a point outside every mesh's medium: the world's medium, if any.
+    #[inline]
+    fn world_stack(&self) -> MediumStack {
+        let mut s = MediumStack::default();
+        if let Some(w) = self.world_medium {
+            s.enter(w);
+        }
+        s
+    }
+
+    /// Light from infinitely far (the sun, the world) is extinguished before it arrives: the
+    /// world's medium absorbs or scatters in some channel (its transmittance over an infinite
+    /// distance is 0). Light subpaths from such lights are then not traced (they carry nothing).
+    #[inline]
+    pub fn world_medium_extinguishes(&self) -> bool {
+        self.world_medium.and_then(|w| self.media[w as usize]).is_some_and(|m| m.sigma_t().min_element() > 0.0)
     }
 
     /// Some object casts no shadow (its shadow ray visibility is off).

@@ -1127,6 +1127,36 @@ def test_smoke_from_a_noise_texture_agrees_with_cycles(bpy_mod, tmp_out, method,
         assert off > 5 * noise, (off, noise)
 
 
+@pytest.mark.parametrize("method,nee", [pytest.param("PT", True, marks=pytest.mark.compat), ("PT", False),
+                                        ("BDPT", True), ("GDPSSMLT", True)])
+def test_a_world_volume_agrees_with_cycles(bpy_mod, tmp_out, method, nee):
+    """Issue 46: the World's Volume output was left out (warned). The lights scene under a grey
+    sky (the world's Background 0.3) with a World Volume of Principled Volume (density 0.08,
+    Anisotropy 0.4, a faint emission), Volume bounces 1, against Cycles in the same test:
+    the whole scene stands in haze, and the sky's light does not get through an infinite
+    extent of it (Cycles' rule) — the haze glows by the lamps alone."""
+    def build(bpy, engine, spp, seed):
+        scene = open_scene(bpy, "lights", engine, spp, seed, keep={"Area", "Point", "World"})
+        nt = scene.world.node_tree
+        bg = next(n for n in nt.nodes if n.type == "BACKGROUND")
+        bg.inputs["Color"].default_value = (0.3, 0.3, 0.3, 1.0)
+        vol = nt.nodes.new("ShaderNodeVolumePrincipled")
+        vol.inputs["Density"].default_value = 0.08
+        vol.inputs["Anisotropy"].default_value = 0.4
+        vol.inputs["Emission Strength"].default_value = 0.01
+        out = next(n for n in nt.nodes if n.type == "OUTPUT_WORLD")
+        nt.links.new(vol.outputs[0], out.inputs["Volume"])
+        _volume_bounces(scene, engine, 1)
+        if engine == "GDMLT":
+            scene.gdmlt.method, scene.gdmlt.use_nee = method, nee
+        return scene
+
+    desc, warnings = _exported(bpy_mod, build)
+    assert not [w for w in warnings if "olume" in w], warnings
+    assert abs(desc["world_volume"]["scattering"][0] - 0.04) < 1e-6, desc["world_volume"]  # (Color 0.5 × 0.08)
+    assert_agrees_with_cycles(bpy_mod, build, tmp_out, f"worldvol{method}{nee}")
+
+
 def _subsurface_object(bpy, name, kind, location, size, color, radius, scale, method="RANDOM_WALK",
                        anisotropy=0.0, weight=1.0, roughness=0.5):
     """A smooth UV sphere or a cube of a Principled BSDF with Subsurface Weight `weight`,
