@@ -129,8 +129,8 @@ def test_what_gdmlt_leaves_out_is_named_and_kept_in_the_last_render_panel(bpy_mo
                        ("Smoke", bpy.data.volumes.new("Smoke"))):
         scene.collection.objects.link(bpy.data.objects.new(kind, data))
     nt = bpy.data.materials["Red"].node_tree
-    vol = nt.nodes.new("ShaderNodeVolumePrincipled")  # (smoke from a texture: taken at its unlinked density)
-    nt.links.new(nt.nodes.new("ShaderNodeTexNoise").outputs["Fac"], vol.inputs["Density"])
+    vol = nt.nodes.new("ShaderNodeVolumePrincipled")  # (a smoke's colour from a texture: its unlinked value)
+    nt.links.new(nt.nodes.new("ShaderNodeTexNoise").outputs["Color"], vol.inputs["Color"])
     nt.links.new(vol.outputs[0], nt.get_output_node("CYCLES").inputs["Volume"])
     scene.render.use_motion_blur = True
     # Object › Visibility › Ray Visibility (holdout and camera are rendered), and a light's
@@ -151,7 +151,7 @@ def test_what_gdmlt_leaves_out_is_named_and_kept_in_the_last_render_panel(bpy_mo
     render_to_exr(bpy, scene, tmp_out / "dropped.exr")
     text = "\n".join(engine.last_warnings)
     for needle in ("object 'Hair': hair curves", "object 'Cloud': point clouds", "object 'Smoke': volumes",
-                   "material 'Red': input 'Density'", "motion blur", "object 'TallBlock': ray visibility (diffuse off)",
+                   "material 'Red': input 'Color'", "motion blur", "object 'TallBlock': ray visibility (diffuse off)",
                    "object 'ShortBlock': ray visibility (transmission off)",
                    "light 'Lamp': ray visibility (glossy off)", "light 'Fill': shadow linking"):
         assert needle in text, (needle, engine.last_warnings)
