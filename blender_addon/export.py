@@ -551,9 +551,26 @@ def _volume(node, weight, warnings, what, textures=None):
         return None
     s = sum(acc["scattering"])
     out = {**{k: tuple(v) for k, v in acc.items()}, "anisotropy": g_weighted[0] / s if s > 0.0 else 0.0}
+    # one scattering leaf of another phase function keeps it; mixed with others, the mixture is
+    # Henyey-Greenstein of their mean cosine
+    phased = g_weighted[1:]
+    if len(phased) == 1 and abs(phased[0][0] - s) <= 1e-6 * max(s, 1e-12):
+        out.update(phased[0][1])
+    elif phased:
+        warnings.append(f"{what}: volume scattering of several phase functions is rendered as Henyey-Greenstein "
+                        f"of their mean cosine")
     if "texture" in field:
         out["density"] = {"texture": field["texture"]}
     return out
+
+
+def _phase_mean_cosine(params):
+    """The mean cosine of a Rayleigh, Draine or Mie phase function (the core's `Phase`; Mie
+    by Cycles' fit in the diameter, for mixing)."""
+    from gdmlt import _core
+
+    return _core.phase_mean_cosine(params["phase"], params.get("anisotropy", 0.0), params.get("alpha", 0.0),
+                                   params.get("diameter", 0.0))
 
 
 def _density_coordinates(volume, ob, matrix_world):
@@ -613,11 +630,20 @@ def _volume_leaves(node, weight, acc, g_weighted, warnings, what, seen, textures
     if node.type in ("PRINCIPLED_VOLUME", "VOLUME_SCATTER"):
         g = min(max(float(value("Anisotropy", 0.0)), -0.999), 0.999)
         add("scattering", color, density)
-        g_weighted[0] += weight * density * sum(color) * g
-        phase = getattr(node, "phase", "HENYEY_GREENSTEIN")
-        if phase != "HENYEY_GREENSTEIN":
+        phase = getattr(node, "phase", "HENYEY_GREENSTEIN") if node.type == "VOLUME_SCATTER" else "HENYEY_GREENSTEIN"
+        share = weight * density * sum(color)
+        if phase in ("RAYLEIGH", "DRAINE", "MIE"):
+            params = {"phase": phase.lower(), "anisotropy": g}
+            if phase == "DRAINE":
+                params["alpha"] = max(float(value("Alpha", 0.5)), 0.0)
+            if phase == "MIE":
+                params["diameter"] = max(float(value("Diameter", 20.0)), 0.0)
+            g_weighted.append((share, params))
+            g = _phase_mean_cosine(params)
+        elif phase != "HENYEY_GREENSTEIN":
             warnings.append(f"{what}: the {phase.replace('_', '-').title()} phase function of '{node.name}' is "
                             f"rendered as Henyey-Greenstein with its anisotropy")
+        g_weighted[0] += share * g
     if node.type == "VOLUME_ABSORPTION":
         add("absorption", [max(1.0 - c, 0.0) for c in color], density)
     if node.type == "PRINCIPLED_VOLUME":

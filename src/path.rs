@@ -995,14 +995,14 @@ impl PathState {
         // 2. a light sample, through the media between
         if self.use_nee {
             if let Some((li, ls)) = scene.sample_light_in(p, u.light_select, u.light, true) {
-                let f = m.phase.eval(wo, ls.wi);
+                let (f, pdf_phase) = (m.phase.eval(wo, ls.wi), m.phase.pdf(wo, ls.wi));
                 let reach = if scene.casts_shadow(li) {
                     scene.transmittance_in(&at, &ls, self.media)
                 } else {
                     Some((Spectrum::ONE, false, false))
                 };
                 if let (true, Some((tr, crossed, _))) = (f > 0.0, reach) {
-                    let weight = if ls.is_delta { 1.0 } else { power_heuristic(ls.pdf, f) };
+                    let weight = if ls.is_delta { 1.0 } else { power_heuristic(ls.pdf, pdf_phase) };
                     let le = ls.radiance * tr;
                     let numerator = self.beta * f * le;
                     add(out, learn, cfg.clamp(numerator * (weight / ls.pdf), self.depth), false, self.depth == 0);
@@ -1017,7 +1017,7 @@ impl PathState {
                             delta: ls.is_delta,
                             le,
                             f: Spectrum::splat(f),
-                            pdf_b: if ls.is_delta { 0.0 } else { f },
+                            pdf_b: if ls.is_delta { 0.0 } else { pdf_phase },
                             pdf_l: ls.pdf,
                             numerator,
                             through_transparent: crossed,
@@ -1029,13 +1029,15 @@ impl PathState {
                 }
             }
         }
-        // 3. the phase function's sample (its weight is 1), Russian roulette
-        let (wi, pdf) = m.phase.sample(wo, u.bsdf);
+        // 3. the phase function's sample (its weight p/pdf: 1 for Henyey–Greenstein), Russian
+        // roulette
+        let (wi, pdf, w) = m.phase.sample(wo, u.bsdf);
+        self.beta *= w;
         self.depth += 1;
         self.by_kind[3] += 1;
         let q = if self.depth >= RR_START_DEPTH { survival_probability(self.beta) } else { 1.0 };
         if let Some(v) = record.and_then(|p| p.vertices.last_mut()) {
-            (v.wi, v.f_out, v.pdf_out, v.rr) = (wi, Spectrum::splat(pdf), pdf, q);
+            (v.wi, v.f_out, v.pdf_out, v.rr) = (wi, Spectrum::splat(pdf * w), pdf, q);
         }
         if q < 1.0 {
             if !(q > 0.0) || u.rr >= q {

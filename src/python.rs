@@ -239,6 +239,11 @@ fn material_dict<'py>(py: Python<'py>, m: &MaterialDesc) -> PyResult<Bound<'py, 
         vd.set_item("absorption", v.absorption)?;
         vd.set_item("emission", v.emission)?;
         vd.set_item("anisotropy", v.anisotropy)?;
+        if !v.phase.is_empty() && v.phase != "hg" {
+            vd.set_item("phase", &v.phase)?;
+            vd.set_item("alpha", v.alpha)?;
+            vd.set_item("diameter", v.diameter)?;
+        }
         if let Some(f) = &v.density {
             let fd = PyDict::new(py);
             fd.set_item("texture", f.texture)?;
@@ -391,6 +396,9 @@ fn parse_volume(d: &Bound<'_, PyDict>, ctx: &str) -> PyResult<scene::desc::Volum
         absorption: rgb(d, "absorption", zero, &ctx)?,
         emission: rgb(d, "emission", zero, &ctx)?,
         anisotropy: get_or(d, "anisotropy", 0.0, &ctx)?,
+        phase: get_or(d, "phase", "hg".to_string(), &ctx)?,
+        alpha: get_or(d, "alpha", 0.5, &ctx)?,
+        diameter: get_or(d, "diameter", 20.0, &ctx)?,
         density: match item(d, "density")? {
             Some(v) if !v.is_none() => {
                 let f = v.cast::<PyDict>().map_err(|_| verr(format!("{ctx}: density must be a dict")))?;
@@ -1216,6 +1224,20 @@ fn default_settings(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
     Ok(out)
 }
 
+/// The mean cosine of a phase function (`medium::Phase`): "hg", "rayleigh", "draine", "mie".
+#[pyfunction]
+fn phase_mean_cosine(kind: &str, anisotropy: f32, alpha: f32, diameter: f32) -> PyResult<f32> {
+    use crate::medium::Phase;
+    let p = match kind {
+        "hg" => Phase::hg(anisotropy),
+        "rayleigh" => Phase::Rayleigh,
+        "draine" => Phase::draine(anisotropy, alpha),
+        "mie" => Phase::mie(diameter),
+        other => return Err(verr(format!("unknown phase function '{other}' (hg, rayleigh, draine or mie)"))),
+    };
+    Ok(p.mean_cosine())
+}
+
 /// The range of a procedural texture's output (a texture dict's "procedural" entry, its
 /// domain ignored) over many points: the domain of the table the add-on builds for a pattern
 /// without closed-form bounds.
@@ -1453,6 +1475,7 @@ fn init_module(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(render, m)?)?;
     m.add_function(wrap_pyfunction!(builtin_scene, m)?)?;
     m.add_function(wrap_pyfunction!(procedural_range, m)?)?;
+    m.add_function(wrap_pyfunction!(phase_mean_cosine, m)?)?;
     m.add_function(wrap_pyfunction!(write_exr, m)?)?;
     m.add_function(wrap_pyfunction!(write_png, m)?)?;
     m.add_function(wrap_pyfunction!(reconstruct, m)?)?;

@@ -40,7 +40,7 @@ use crate::bsdf::{Bsdf, LobeKind, Scatter};
 use crate::film::{Film, Image};
 use crate::math::Frame;
 use crate::math::{is_finite_spectrum, power_heuristic, Spectrum};
-use crate::medium::{FreeFlight, HenyeyGreenstein, MediumStack};
+use crate::medium::{FreeFlight, MediumStack, Phase};
 use crate::path::{survival_probability, PathContribution, PathSettings, NO_KIND_LIMIT, RR_START_DEPTH};
 use crate::sampler::{Sampler, SobolSampler};
 use crate::scene::emit::EmitterSelection;
@@ -105,7 +105,7 @@ struct Vertex {
     /// The media the walk arrived here in (a surface's: on the side it arrived from).
     media: MediumStack,
     /// A vertex in a medium: its phase function.
-    phase: Option<HenyeyGreenstein>,
+    phase: Option<Phase>,
     /// Where a camera subpath's walk beneath a surface left it (`path::walk_beneath`): the
     /// vertex after it (towards the camera) is the entry, the walk between them a transition
     /// only the camera side makes.
@@ -262,7 +262,7 @@ impl Context<'_> {
             }
             Kind::Medium => {
                 let (Some(prev), Some(phase)) = (prev, a.phase) else { return 0.0 };
-                convert(phase.eval(direction(a, prev).0, direction(a, b).0), a, b)
+                convert(phase.pdf(direction(a, prev).0, direction(a, b).0), a, b)
             }
             Kind::Camera => self.camera_pdf(a, b),
             Kind::Light => {
@@ -503,8 +503,9 @@ fn random_walk<S: Sampler + ?Sized>(
                 let _u_lobe = sampler.next_1d();
                 let u_phase = sampler.next_2d();
                 let u_rr = sampler.next_1d();
-                let (wi, pdf) = m.phase.sample(-d, u_phase);
-                // (Henyey–Greenstein is symmetric: the reverse density is the forward one)
+                let (wi, pdf, w) = m.phase.sample(-d, u_phase);
+                beta *= w; // (p/pdf: 1 for Henyey–Greenstein; p is symmetric, so the adjoint too)
+                           // (the density depends on cos θ alone: the reverse density is the forward one)
                 path[before].pdf_rev = convert(pdf, &path[last], &path[before]);
                 if surfaces as u32 >= RR_START_DEPTH {
                     let q = survival_probability(beta / beta_ref);

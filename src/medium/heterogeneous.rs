@@ -138,7 +138,7 @@ impl Medium {
 
 #[cfg(test)]
 mod tests {
-    use super::super::{Density, Field, HenyeyGreenstein};
+    use super::super::{Density, Field, Phase};
     use super::*;
 
     /// A chromatic medium whose density falls linearly from 2 at t = 0 to 0 at t = 2 along
@@ -153,7 +153,7 @@ mod tests {
             sigma_s: Spectrum::new(0.05, 0.1, 0.0),
             sigma_a: Spectrum::new(0.0, 0.05, 0.1),
             emission: Spectrum::new(0.3, 0.0, 1.0),
-            phase: HenyeyGreenstein::new(0.0),
+            phase: Phase::hg(0.0),
             field: Some(field),
         };
         (m, |p: Vec3| (2.0 - p.x).clamp(0.0, 2.0))

@@ -25,7 +25,7 @@ pub mod heterogeneous;
 pub mod phase;
 pub mod subsurface;
 
-pub use phase::HenyeyGreenstein;
+pub use phase::{HenyeyGreenstein, Phase};
 
 use crate::math::Spectrum;
 use glam::Vec3;
@@ -37,7 +37,7 @@ pub struct Medium {
     pub sigma_a: Spectrum,
     /// Emission coefficient ε: radiance added per unit distance.
     pub emission: Spectrum,
-    pub phase: HenyeyGreenstein,
+    pub phase: Phase,
     /// The heterogeneous part, added to the constant coefficients above (None: homogeneous).
     pub field: Option<Field>,
 }
@@ -295,12 +295,17 @@ pub fn combined(stack: &MediumStack, media: &[Option<Medium>]) -> Option<Medium>
     let first = it.next()?;
     let mut sum = first;
     let scattering = |m: &Medium| m.sigma_s.element_sum() + m.field.map_or(0.0, |f| f.sigma_s.element_sum());
-    let mut g_weight = scattering(&first) * first.phase.g;
+    let mut g_weight = 0.0;
+    let mut several = false;
     for m in it {
+        if !several {
+            g_weight = scattering(&first) * first.phase.mean_cosine();
+            several = true;
+        }
         sum.sigma_s += m.sigma_s;
         sum.sigma_a += m.sigma_a;
         sum.emission += m.emission;
-        g_weight += scattering(&m) * m.phase.g;
+        g_weight += scattering(&m) * m.phase.mean_cosine();
         // (one density field per ray: a second one overlapping it counts at its bound, too
         // dense — docs/limits.md)
         match (sum.field, m.field) {
@@ -313,7 +318,10 @@ pub fn combined(stack: &MediumStack, media: &[Option<Medium>]) -> Option<Medium>
         }
     }
     let s = sum.sigma_s.element_sum() + sum.field.map_or(0.0, |f| f.sigma_s.element_sum());
-    sum.phase = HenyeyGreenstein::new(if s > 0.0 { g_weight / s } else { 0.0 });
+    if several {
+        // (overlapping media: Henyey–Greenstein of their scattering-weighted mean cosine)
+        sum.phase = Phase::hg(if s > 0.0 { g_weight / s } else { 0.0 });
+    }
     (!sum.is_vacuum()).then_some(sum)
 }
 
@@ -327,7 +335,7 @@ mod tests {
             sigma_s: Spectrum::new(0.8, 0.3, 0.05),
             sigma_a: Spectrum::new(0.1, 0.4, 0.9),
             emission: Spectrum::new(0.5, 0.0, 2.0),
-            phase: HenyeyGreenstein::new(0.3),
+            phase: Phase::hg(0.3),
             field: None,
         }
     }
@@ -417,7 +425,7 @@ mod tests {
         };
         let c = combined(&s, &media).unwrap();
         assert!((c.sigma_t() - 2.0 * chromatic().sigma_t()).abs().max_element() < 1e-6);
-        assert!((c.phase.g - 0.3).abs() < 1e-6);
+        assert!((c.phase.mean_cosine() - 0.3).abs() < 1e-6);
         assert!(combined(&MediumStack::default(), &media).is_none());
         for _ in 0..10 {
             s.enter(1); // past MAX_NESTED_MEDIA: left out, never a panic

@@ -364,6 +364,7 @@ pub fn cornell_fog(width: u32, height: u32) -> SceneDesc {
             emission: [0.0; 3],
             anisotropy: 0.3,
             density: None,
+            ..Default::default()
         }),
         ..Default::default()
     });

@@ -229,14 +229,19 @@ pub struct SubsurfaceDesc {
 /// Cycles' volume closures take them (Principled Volume: scattering = Color × Density,
 /// absorption = (1 − Color)(1 − √Absorption Color) × Density; Volume Scatter: Color ×
 /// Density; Volume Absorption: (1 − Color) × Density).
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, Default, PartialEq)]
 pub struct VolumeDesc {
     pub scattering: [f32; 3],
     pub absorption: [f32; 3],
     /// Radiance emitted per unit distance (Emission Strength × Emission Color).
     pub emission: [f32; 3],
-    /// The Henyey–Greenstein mean cosine g, in (−1, 1).
+    /// The Henyey–Greenstein mean cosine g, in (−1, 1) (also Draine's g).
     pub anisotropy: f32,
+    /// The phase function (`crate::medium::Phase`): "hg" (empty: the same), "rayleigh",
+    /// "draine" (`anisotropy`, `alpha`) or "mie" (`diameter`, micrometres).
+    pub phase: String,
+    pub alpha: f32,
+    pub diameter: f32,
     /// A density field scaling `scattering` and `absorption` (then given per unit density)
     /// point by point — smoke (`crate::medium::Density`); None: homogeneous.
     pub density: Option<DensityDesc>,

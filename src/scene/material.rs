@@ -172,6 +172,17 @@ pub fn medium_from_desc(
         return Err(bad(&format!("anisotropy {} is not inside (−1, 1)", v.anisotropy)));
     }
     let (sigma_s, sigma_a) = (Vec3::from_array(v.scattering), Vec3::from_array(v.absorption));
+    use crate::medium::Phase;
+    let phase = match v.phase.as_str() {
+        "" | "hg" | "henyey_greenstein" => Phase::hg(v.anisotropy),
+        "rayleigh" => Phase::Rayleigh,
+        "draine" => Phase::draine(v.anisotropy, v.alpha),
+        "mie" => Phase::mie(v.diameter),
+        other => return Err(bad(&format!("unknown phase function '{other}' (hg, rayleigh, draine or mie)"))),
+    };
+    if !(v.alpha.is_finite() && v.diameter.is_finite()) {
+        return Err(bad("NaN or Inf phase parameter"));
+    }
     let field = match &v.density {
         None => None,
         Some(f) => {
@@ -195,16 +206,10 @@ pub fn medium_from_desc(
             sigma_s: Vec3::ZERO,
             sigma_a: Vec3::ZERO,
             emission: Vec3::from_array(v.emission),
-            phase: crate::medium::HenyeyGreenstein::new(v.anisotropy),
+            phase,
             field,
         },
-        None => crate::medium::Medium {
-            sigma_s,
-            sigma_a,
-            emission: Vec3::from_array(v.emission),
-            phase: crate::medium::HenyeyGreenstein::new(v.anisotropy),
-            field: None,
-        },
+        None => crate::medium::Medium { sigma_s, sigma_a, emission: Vec3::from_array(v.emission), phase, field: None },
     };
     Ok((!m.is_vacuum()).then_some(m))
 }
