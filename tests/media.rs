@@ -218,9 +218,11 @@ fn a_world_volume_fills_all_space() {
             );
         }
     }
-    // the sky alone (the wall moved out of sight) is extinguished: black, where it is 5
-    // without the volume
-    desc.meshes = vec![closed_box("Wall", [30.0, -1.0, -1.0], [31.0, 1.0, 1.0], 0)];
+    // the sky alone (no mesh, no material: the default one is not a medium) is extinguished:
+    // black, where it is 5 without the volume (it was 5: the world's medium was taken for
+    // the default material's)
+    desc.meshes.clear();
+    desc.materials.clear();
     let (m, _) = mean_and_error(&desc, Method::Pt, true, 4, 1);
     assert!(m.iter().all(|&x| x == 0.0), "{m:?}");
 }

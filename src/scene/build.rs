@@ -68,6 +68,7 @@ impl Shading {
         let warnings = desc.materials.iter().flat_map(super::material::range_warnings).collect();
         let mut media: Vec<_> =
             desc.materials.iter().map(|m| super::material::medium_from_desc(m, &textures)).collect::<Result<_, _>>()?;
+        media.resize(materials.len(), None); // (the default material a scene without any gets)
         if let Some(v) = &desc.world_volume {
             // (the world's medium: the entry past the materials', at the bottom of every stack)
             if v.density.is_some() {
