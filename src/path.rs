@@ -371,7 +371,9 @@ pub fn trace_path_guided<S: Sampler>(
         // 0. where a walk beneath a surface left it (`PathState::walk_beneath`): a vertex no
         // segment reached — a white Lambertian facing out, no emission, no holdout (Cycles'
         // `subsurface_shader_data_setup`) — else the next segment and the vertex it reaches
-        let (si, bsdf, u) = if let Some((si, wo)) = st.exit.take() {
+        let (si, bsdf, u) = if let Some((hit, wo)) = st.exit.take() {
+            // (shaded as if reached from outside, against the walk: its normals face out)
+            let si = SurfaceInteraction { camera: false, ..scene.interaction(&hit, -wo) };
             let bsdf = crate::bsdf::Bsdf::Lambert(crate::bsdf::Lambert::new(Spectrum::ONE));
             if let Some(p) = record.as_deref_mut() {
                 p.vertices.push(Vertex::at(&si, wo, st.beta, 0.0, true));
@@ -400,12 +402,14 @@ pub fn trace_path_guided<S: Sampler>(
             let (prev_p, o, d) = (st.prev_p, st.o, st.d);
             let medium = scene.medium(&st.media);
             let from_medium = st.prev_in_medium;
-            let mut crossings = crate::medium::Crossings::default();
+            // (only built in a medium: it is a few hundred bytes)
+            let mut crossings = None;
             if let Some(m) = medium {
                 st.touched_medium = true;
+                let crossings = crossings.insert(crate::medium::Crossings::default());
                 let push = |li, t, le, pdf| crossings.push(li, t, le, pdf);
                 scene.for_each_light_crossed_in(prev_p, from_medium, o, d, t_surface, camera_visibility, push);
-                let flight = scene.fly(&m, o, d, t_surface, u.distance, &mut crossings);
+                let flight = scene.fly(&m, o, d, t_surface, u.distance, crossings);
                 if flight.emitted.max_element() > 0.0 {
                     let c = cfg.clamp(st.beta * flight.emitted, st.depth);
                     add(&mut out, &mut learn, c, camera_ray, st.direct_emission());
@@ -437,7 +441,7 @@ pub fn trace_path_guided<S: Sampler>(
                 crossed += le * st.mis(pdf_light);
                 st.record_emission(&mut record, li, z, inf, le, pdf_light);
             };
-            if medium.is_some() {
+            if let Some(crossings) = &crossings {
                 // (in a medium: reached with the flight's weight where it passed t)
                 for i in (0..crossings.n).filter(|&i| crossings.weight[i].max_element() > 0.0) {
                     let le = crossings.le[i] * crossings.weight[i];
@@ -627,7 +631,7 @@ struct PathState {
     prev_in_medium: bool,
     /// Where a walk beneath a surface left it, and the direction out (`walk_beneath`): the
     /// next vertex.
-    exit: Option<(SurfaceInteraction, Vec3)>,
+    exit: Option<(TriHit, Vec3)>,
 }
 
 impl PathState {
@@ -815,11 +819,12 @@ impl PathState {
         scene: &Scene,
         si: &SurfaceInteraction,
         bs: &crate::bsdf::BsdfSample,
-        sss: Option<(crate::medium::subsurface::Subsurface, Spectrum)>,
+        albedo: Option<Spectrum>,
         u: &VertexSamples,
         record: Option<&mut Path>,
     ) -> bool {
-        let Some((sss, albedo)) = sss else { return false };
+        let Some(albedo) = albedo else { return false };
+        let sss = scene.material(si).walk();
         let dir = si.frame.to_world(bs.wi);
         if dir.dot(si.ng) >= 0.0 {
             return false; // (the refraction left through the geometric surface)
@@ -838,7 +843,7 @@ impl PathState {
         let seed = [u.light_select, u.light.x, u.light.y, u.lobe, u.bsdf.x, u.bsdf.y, u.rr, u.distance]
             .iter()
             .fold(0x5eed_5ab5_u64, |h, x| crate::sampler::mix64(h ^ x.to_bits() as u64));
-        let Some((out, exit_dir, weight, _)) = walk_beneath(scene, si, dir, sss, albedo, seed) else {
+        let Some((_, exit_dir, weight, hit)) = walk_beneath(scene, si, dir, sss, albedo, seed) else {
             return false;
         };
         self.beta *= weight;
@@ -847,7 +852,7 @@ impl PathState {
         }
         self.passed = false;
         self.pass_tint = Spectrum::ONE;
-        self.exit = Some((out, exit_dir));
+        self.exit = Some((hit, exit_dir));
         true
     }
 }

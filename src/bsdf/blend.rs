@@ -74,11 +74,11 @@ impl Bsdf {
             coverage: if d1 + d2 > 0.0 { (s1 + s2) / (d1 + d2) } else { 0.0 },
             tint: mean(da.tint, s1, db.tint, s2),
             // (the walk takes the parameters of the side that has one, the heavier if both)
-            subsurface: {
-                let (ssa, ssb) = (d1 * da.subsurface.weight, d2 * db.subsurface.weight);
-                let params = if ssa >= ssb { da.subsurface } else { db.subsurface };
-                let weight = if d1 + d2 > 0.0 { (ssa + ssb) / (d1 + d2) } else { 0.0 };
-                crate::medium::subsurface::Subsurface { weight, ..params }
+            subsurface: if d1 + d2 > 0.0 { (d1 * da.subsurface + d2 * db.subsurface) / (d1 + d2) } else { 0.0 },
+            subsurface_ior: if d1 * da.subsurface >= d2 * db.subsurface {
+                da.subsurface_ior
+            } else {
+                db.subsurface_ior
             },
         };
         let heavier = |x: bool, y: bool, wx: f32, wy: f32| if wx >= wy { x } else { y };
@@ -135,7 +135,8 @@ mod tests {
                 roughness: 0.4,
                 coverage: 1.0,
                 tint: Spectrum::ONE,
-                subsurface: crate::medium::subsurface::Subsurface::NONE,
+                subsurface: 0.0,
+                subsurface_ior: 0.0,
             },
             metal: Conductor { f0: base, roughness: 0.4, multiscatter: true, f82: Spectrum::ONE, constant: false },
             glass: Dielectric {

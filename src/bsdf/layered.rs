@@ -16,7 +16,6 @@ use super::albedo::{ggx_albedo, specular_albedo};
 use super::microfacet::{fresnel_dielectric, reflect, Ggx};
 use super::{BsdfSample, Lambert, LobeKind, Scatter, SPECULAR_ROUGHNESS_THRESHOLD};
 use crate::math::{luminance, Spectrum};
-use crate::medium::subsurface::Subsurface;
 use glam::{Vec2, Vec3};
 
 #[derive(Clone, Copy, Debug)]
@@ -31,18 +30,28 @@ pub struct Layered {
     pub coverage: f32,
     /// Specular Tint (white: the plain dielectric layer).
     pub tint: Spectrum,
-    /// The share of the base that scatters beneath the surface (Subsurface Weight) and how
-    /// (`medium::subsurface`): a lobe of its own, not evaluable — sampling it returns the
-    /// direction into the surface (`Scatter::Subsurface`), from where the path builder walks.
-    /// The Lambertian keeps 1 − weight.
-    pub subsurface: Subsurface,
+    /// The share of the base that scatters beneath the surface (Subsurface Weight;
+    /// `medium::subsurface`): a lobe of its own, not evaluable — sampling it returns the
+    /// direction into the surface (`Scatter::Subsurface`), from where the path builder walks
+    /// with the material's parameters. The Lambertian keeps 1 − weight.
+    pub subsurface: f32,
+    /// The Subsurface IOR the Skin method enters with; 0: through the layer (the others).
+    pub subsurface_ior: f32,
 }
 
 impl Layered {
     /// A Lambertian without a layer.
     #[inline]
     pub fn plain(base: Lambert) -> Layered {
-        Layered { base, eta: 1.0, roughness: 1.0, coverage: 0.0, tint: Spectrum::ONE, subsurface: Subsurface::NONE }
+        Layered {
+            base,
+            eta: 1.0,
+            roughness: 1.0,
+            coverage: 0.0,
+            tint: Spectrum::ONE,
+            subsurface: 0.0,
+            subsurface_ior: 0.0,
+        }
     }
 
     #[inline]
@@ -147,7 +156,7 @@ impl Layered {
         }
         let e_max = e.max_element();
         let ps = self.layer_probability(e_max);
-        let lambert = 1.0 - self.subsurface.weight;
+        let lambert = 1.0 - self.subsurface;
         let mut f = self.base.eval(wo, wi) * ((1.0 - e_max) * lambert);
         let mut p = (1.0 - ps) * lambert * self.base.pdf(wo, wi);
         if e_max > 0.0 && !self.is_smooth() {
@@ -166,7 +175,7 @@ impl Layered {
             return 0.0;
         }
         (1.0 - self.layer_probability(self.layer_albedo(wo.z).max_element()))
-            * (1.0 - self.subsurface.weight)
+            * (1.0 - self.subsurface)
             * self.base.pdf(wo, wi)
     }
 
@@ -199,12 +208,13 @@ impl Layered {
                 scatter: Scatter::Glossy,
             });
         }
-        let ss = self.subsurface.weight;
+        let ss = self.subsurface;
         if u_lobe >= ps && ss > 0.0 {
             // the base: beneath the surface with probability `ss`
             let v = ((u_lobe - ps) / (1.0 - ps)).min(1.0);
             if v < ss {
-                let wi = self.subsurface.entry(wo, self.eta, self.roughness, v / ss, u)?;
+                let skin = (self.subsurface_ior > 0.0).then_some(self.subsurface_ior);
+                let wi = crate::medium::subsurface::entry(skin, wo, self.eta, self.roughness, v / ss, u)?;
                 // the closure's weight (1 − e)·ss·albedo over its probability (1 − ps)·ss
                 let weight =
                     self.base.albedo.clamp(Spectrum::ZERO, Spectrum::ONE) * ((1.0 - e.max_element()) / (1.0 - ps));
@@ -254,7 +264,8 @@ mod tests {
             roughness,
             coverage: 1.0,
             tint: Spectrum::ONE,
-            subsurface: Subsurface::NONE,
+            subsurface: 0.0,
+            subsurface_ior: 0.0,
         })
     }
 
@@ -293,7 +304,8 @@ mod tests {
             roughness: 0.0,
             coverage: 1.0,
             tint: Spectrum::ONE,
-            subsurface: Subsurface::NONE,
+            subsurface: 0.0,
+            subsurface_ior: 0.0,
         };
         let wo = Vec3::new(0.5, 0.1, 0.86).normalize();
         let (f, p, wi) = b.delta_eval(wo).unwrap();
@@ -335,7 +347,8 @@ mod tests {
                 roughness: r,
                 coverage: 1.0,
                 tint,
-                subsurface: Subsurface::NONE,
+                subsurface: 0.0,
+                subsurface_ior: 0.0,
             };
             for wo in [Vec3::Z, Vec3::new(0.6, 0.0, 0.8), Vec3::new(0.95, 0.0, 0.31).normalize()] {
                 let mut s = IndependentSampler::new(17, 0);

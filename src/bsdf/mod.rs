@@ -605,15 +605,16 @@ impl Bsdf {
         }
     }
 
-    /// The subsurface lobe's parameters and the albedo it walks with, when it has one.
+    /// The albedo a subsurface lobe walks with, when the BSDF has one (its other parameters
+    /// are the material's: `Material::subsurface`).
     #[inline]
-    pub fn subsurface(&self) -> Option<(crate::medium::subsurface::Subsurface, Spectrum)> {
+    pub fn subsurface(&self) -> Option<Spectrum> {
         let l = match self {
             Bsdf::Layered(l) => l,
             Bsdf::Principled { diffuse, w, .. } if w[0] > 0.0 => diffuse,
             _ => return None,
         };
-        l.subsurface.is_some().then_some((l.subsurface, l.base.albedo))
+        (l.subsurface > 0.0).then_some(l.base.albedo)
     }
 
     /// Diffuse-like albedo, written to the denoising albedo pass.
@@ -698,7 +699,8 @@ mod tests {
             roughness,
             coverage: 1.0,
             tint: Spectrum::ONE,
-            subsurface: crate::medium::subsurface::Subsurface::NONE,
+            subsurface: 0.0,
+            subsurface_ior: 0.0,
         };
         let bsdfs = [
             Bsdf::Lambert(Lambert::new(Spectrum::splat(0.5))),
@@ -805,7 +807,8 @@ mod tests {
             roughness: 0.4,
             coverage: 1.0,
             tint: Spectrum::ONE,
-            subsurface: crate::medium::subsurface::Subsurface::NONE,
+            subsurface: 0.0,
+            subsurface_ior: 0.0,
         };
         let mut mix = coated(
             Spectrum::splat(0.5),

@@ -399,13 +399,15 @@ fn random_walk<S: Sampler + ?Sized>(
             let medium = if has_media { scene.medium(&media) } else { None };
             let (mut scatter_at, mut pass) = (None, Spectrum::ONE);
             let from_medium = prev.kind == Kind::Medium;
-            let mut crossings = crate::medium::Crossings::default();
+            // (only built in a medium: it is a few hundred bytes)
+            let mut crossings = None;
             if let Some(m) = medium {
+                let crossings = crossings.insert(crate::medium::Crossings::default());
                 if events.is_some() {
                     let push = |li, t, le, pdf| crossings.push(li, t, le, pdf);
                     scene.for_each_light_crossed_in(prev.p, from_medium, o, d, t_surface, camera_ray, push);
                 }
-                let flight = scene.fly(&m, o, d, t_surface, u_dist, &mut crossings);
+                let flight = scene.fly(&m, o, d, t_surface, u_dist, crossings);
                 let e = flight.emitted * beta;
                 if radiance && !past_limits && e.max_element() > 0.0 {
                     out.radiance += e;
@@ -441,7 +443,7 @@ fn random_walk<S: Sampler + ?Sized>(
                     let pdf_nee = ctx.nee_pdf_of(&lv, pdf_l, prev.p);
                     ev.push(Emission { t, light: lv, value: beta * le, pdf_nee, alone: false });
                 };
-                if medium.is_some() {
+                if let Some(crossings) = &crossings {
                     for i in (0..crossings.n).filter(|&i| crossings.weight[i].max_element() > 0.0) {
                         let le = crossings.le[i] * crossings.weight[i];
                         light_crossed(crossings.light[i], crossings.t[i], le, crossings.pdf[i]);
@@ -645,7 +647,8 @@ fn random_walk<S: Sampler + ?Sized>(
             path[entry].delta = true;
             last = entry;
             scattered = true;
-            let Some((sss, albedo)) = bsdf.subsurface() else { break };
+            let Some(albedo) = bsdf.subsurface() else { break };
+            let sss = scene.material(&si).walk();
             let seed = [u_lobe, u_bsdf.x, u_bsdf.y, u_rr]
                 .iter()
                 .fold(0x5eed_b0d7_u64, |h, x| crate::sampler::mix64(h ^ x.to_bits() as u64));

@@ -136,16 +136,37 @@ impl Subsurface {
     /// below the shading hemisphere or the refraction fails (the light is then lost, as in
     /// Cycles). The entry's weight is 1.
     pub fn entry(&self, wo: Vec3, layer_ior: f32, layer_roughness: f32, u_choice: f32, u: Vec2) -> Option<Vec3> {
+        entry(self.skin_ior(), wo, layer_ior, layer_roughness, u_choice, u)
+    }
+
+    /// The Subsurface IOR the Skin method enters with (None for the other methods: the layer's).
+    #[inline]
+    pub fn skin_ior(&self) -> Option<f32> {
+        (self.method == SubsurfaceMethod::Skin).then_some(self.ior)
+    }
+}
+
+/// `Subsurface::entry` for a method that enters as Skin at `skin_ior`, or (None) through the
+/// layer: what a BSDF keeps of a subsurface to sample its entry.
+pub fn entry(
+    skin_ior: Option<f32>,
+    wo: Vec3,
+    layer_ior: f32,
+    layer_roughness: f32,
+    u_choice: f32,
+    u: Vec2,
+) -> Option<Vec3> {
+    {
         if wo.z <= 0.0 {
             return None;
         }
-        let (ior, roughness) = match self.method {
-            SubsurfaceMethod::Skin if u_choice < 0.5 => {
+        let (ior, roughness) = match skin_ior {
+            Some(_) if u_choice < 0.5 => {
                 let w = square_to_cosine_hemisphere(u);
                 return Some(Vec3::new(w.x, w.y, -w.z));
             }
-            SubsurfaceMethod::Skin => (self.ior, 1.0),
-            _ => (layer_ior, layer_roughness),
+            Some(ior) => (ior, 1.0),
+            None => (layer_ior, layer_roughness),
         };
         let ior = if ior.is_finite() { ior.clamp(1.01, 3.8) } else { 1.4 };
         let h = Ggx::from_roughness(roughness).sample_visible(wo, u);

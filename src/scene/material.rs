@@ -395,6 +395,16 @@ impl Material {
         self.bsdf_with(front, self.base_color, self.roughness, self.metallic, self.transparency)
     }
 
+    /// The parameters its surface walks beneath with: its own subsurface's, or (a blend into
+    /// a material that has one) the blended material's.
+    #[inline]
+    pub fn walk(&self) -> crate::medium::subsurface::Subsurface {
+        match &self.blend {
+            Some(b) if !self.subsurface.is_some() => b.subsurface,
+            _ => self.subsurface,
+        }
+    }
+
     /// May the surface let light straight through (a transparency, constant or textured)?
     #[inline]
     pub fn is_transparent(&self) -> bool {
@@ -438,7 +448,14 @@ impl Material {
             roughness,
             coverage: self.specular,
             tint: self.specular_tint,
-            subsurface: self.subsurface,
+            subsurface: self.subsurface.weight,
+            subsurface_ior: self.subsurface.skin_ior().map_or(0.0, |i| {
+                if i.is_finite() {
+                    i.clamp(1.01, 3.8)
+                } else {
+                    1.4
+                }
+            }),
         };
         // a roughness texture drives every lobe; else each lobe may have its own
         let (rm, rg) = if self.roughness_texture.is_some() {
@@ -477,7 +494,7 @@ impl Material {
                 coat,
                 translucent,
             }
-        } else if w[1] <= 0.0 && w[2] <= 0.0 && !diffuse.has_layer() && !diffuse.subsurface.is_some() {
+        } else if w[1] <= 0.0 && w[2] <= 0.0 && !diffuse.has_layer() && diffuse.subsurface <= 0.0 {
             Bsdf::Lambert(diffuse.base)
         } else if w[1] <= 0.0 && w[2] <= 0.0 {
             Bsdf::Layered(diffuse)
