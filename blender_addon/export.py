@@ -547,10 +547,12 @@ def _volume(node, weight, warnings, what, textures=None):
                             f"per material)")
         acc["scattering"], acc["absorption"] = field["scattering"], field["absorption"]
         acc["emission"] = [a + b for a, b in zip(acc["emission"], field["emission"])]
+        g_weighted = field.get("g_weighted", [0.0])
     if not any(x > 0.0 for v in acc.values() for x in v):
         return None
     s = sum(acc["scattering"])
-    out = {**{k: tuple(v) for k, v in acc.items()}, "anisotropy": g_weighted[0] / s if s > 0.0 else 0.0}
+    g = min(max(g_weighted[0] / s, -0.999), 0.999) if s > 0.0 else 0.0
+    out = {**{k: tuple(v) for k, v in acc.items()}, "anisotropy": g}
     # one scattering leaf of another phase function keeps it; mixed with others, the mixture is
     # Henyey-Greenstein of their mean cosine
     phased = g_weighted[1:]
@@ -625,7 +627,9 @@ def _volume_leaves(node, weight, acc, g_weighted, warnings, what, seen, textures
     if density is None:
         density = max(float(value("Density", 1.0)), 0.0)
     else:
-        acc = field  # (this leaf's coefficients are per unit of the field's density)
+        # (this leaf's coefficients are per unit of the field's density, and its phase
+        # function's weight too)
+        acc, g_weighted = field, field.setdefault("g_weighted", [0.0])
     color = colour("Color")
     if node.type in ("PRINCIPLED_VOLUME", "VOLUME_SCATTER"):
         g = min(max(float(value("Anisotropy", 0.0)), -0.999), 0.999)

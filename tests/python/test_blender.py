@@ -1090,6 +1090,34 @@ def _smoke(bpy, name, size, location, scale, color, anisotropy, rotation=(0.0, 0
     return ob
 
 
+def test_smoke_beside_a_constant_volume_exports_a_loadable_medium(bpy_mod):
+    """A textured density added to a dense Volume Scatter of anisotropy 0.5 in one material: the
+    constant one is left out (warned) and the medium's anisotropy is the field's own — the
+    dropped shader's weight made it 6.9 before, which the core refused (the scene failed to
+    load)."""
+    from gdmlt import _core
+
+    def build(bpy, engine, spp, seed):
+        scene = open_scene(bpy, "lights", engine, spp, seed, keep={"Area"})
+        ob = _smoke(bpy, "Smoke", 1.0, (0.0, -1.0, 0.6), 2.0, (0.9, 0.6, 0.3), 0.2)
+        nt = ob.data.materials[0].node_tree
+        vol = next(n for n in nt.nodes if n.type == "PRINCIPLED_VOLUME")
+        sc = nt.nodes.new("ShaderNodeVolumeScatter")
+        sc.inputs["Density"].default_value = 10.0
+        sc.inputs["Anisotropy"].default_value = 0.5
+        add = nt.nodes.new("ShaderNodeAddShader")
+        nt.links.new(vol.outputs[0], add.inputs[0])
+        nt.links.new(sc.outputs[0], add.inputs[1])
+        nt.links.new(add.outputs[0], next(n for n in nt.nodes if n.type == "OUTPUT_MATERIAL").inputs["Volume"])
+        return scene
+
+    desc, warnings = _exported(bpy_mod, build)
+    smoke = next(m for m in desc["materials"] if m["name"] == "Smoke")["volume"]
+    assert abs(smoke["anisotropy"] - 0.2) < 1e-5, smoke
+    assert [w for w in warnings if "left out (one density field" in w], warnings
+    _core.Scene(desc)  # (loads)
+
+
 @pytest.mark.parametrize("method,nee", [pytest.param("PT", True, marks=pytest.mark.compat), ("PT", False),
                                         ("BDPT", True), ("GDPT", True), ("PSSMLT", True), ("GDPSSMLT", True)])
 def test_smoke_from_a_noise_texture_agrees_with_cycles(bpy_mod, tmp_out, method, nee):
