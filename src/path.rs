@@ -853,6 +853,7 @@ impl PathState {
         self.passed = false;
         self.pass_tint = Spectrum::ONE;
         self.exit = Some((hit, exit_dir));
+        self.d = -exit_dir; // (the exit vertex is reached against the walk's last direction)
         true
     }
 }
@@ -1059,7 +1060,7 @@ impl PathState {
         self.prev_p = p;
         self.prev_prim = u32::MAX;
         self.prev_pdf = pdf;
-        self.prev_fcos = Spectrum::splat(pdf);
+        self.prev_fcos = Spectrum::splat(pdf * w); // (the phase function's value p)
         self.prev_delta = false;
         self.prev_in_medium = true;
         self.nvert += 1;

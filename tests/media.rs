@@ -20,6 +20,11 @@ fn medium(name: &str, volume: VolumeDesc) -> MaterialDesc {
     }
 }
 
+/// A purely absorbing homogeneous medium of coefficients `sigma`.
+fn absorber(sigma: [f32; 3]) -> VolumeDesc {
+    VolumeDesc { absorption: sigma, ..Default::default() }
+}
+
 fn scene(meshes: Vec<MeshDesc>, materials: Vec<MaterialDesc>, world: [f32; 3], size: u32) -> SceneDesc {
     SceneDesc {
         meshes,
@@ -107,17 +112,7 @@ fn a_lossless_medium_in_a_white_furnace_stays_white() {
 fn an_absorbing_slab_transmits_exp_minus_sigma_d() {
     let sigma = [0.5f32, 1.0, 2.0];
     let wall = MaterialDesc { name: "Wall".into(), base_color: [0.0; 3], emission: [1.0; 3], ..Default::default() };
-    let slab = medium(
-        "Slab",
-        VolumeDesc {
-            scattering: [0.0; 3],
-            absorption: sigma,
-            emission: [0.0; 3],
-            anisotropy: 0.0,
-            density: None,
-            ..Default::default()
-        },
-    );
+    let slab = medium("Slab", absorber(sigma));
     for (lo, depth) in [(1.0f32, 1.5f32), (-1.0, 2.5)] {
         let mut desc = scene(
             vec![
@@ -197,14 +192,7 @@ fn a_world_volume_fills_all_space() {
     let mut desc = scene(vec![closed_box("Wall", [-20.0, 3.0, -20.0], [20.0, 4.0, 20.0], 0)], vec![wall], [5.0; 3], 8);
     desc.camera.projection = gdmlt::scene::desc::Projection::Orthographic;
     desc.camera.ortho_scale = 4.0;
-    desc.world_volume = Some(VolumeDesc {
-        scattering: [0.0; 3],
-        absorption: sigma,
-        emission: [0.0; 3],
-        anisotropy: 0.0,
-        density: None,
-        ..Default::default()
-    });
+    desc.world_volume = Some(absorber(sigma));
     for (method, nee) in METHODS {
         let (m, e) = mean_and_error(&desc, method, nee, 16, 5);
         let slack = if matches!(method, Method::Pssmlt | Method::Gdpssmlt) { 0.02 } else { 0.0 };
